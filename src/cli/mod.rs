@@ -1,0 +1,118 @@
+//! Subcommands, one file each, and the input/output plumbing they share.
+
+mod demo;
+mod eval;
+mod info;
+mod level;
+mod matching;
+mod simulate;
+mod view;
+
+use anyhow::Context;
+use clap::{Parser, Subcommand};
+use indicatif::{ProgressBar, ProgressStyle};
+use std::fs::File;
+use std::io::{self, BufRead, BufReader, BufWriter, Read, Write};
+use std::path::{Path, PathBuf};
+
+/// Planar laser localization on uneven floors: simulate tilted scans, level them, match them.
+#[derive(Parser, Debug)]
+#[command(name = "levelscan", version, about, long_about = None)]
+pub struct Cli {
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+#[derive(Subcommand, Debug)]
+pub enum Command {
+    /// Run the whole system on a built-in example and write a report.
+    Demo(demo::Args),
+    /// Simulate multi-elevation laser scans from a floor plan (.wall).
+    Simulate(simulate::Args),
+    /// Estimate each pose's attitude and write one pseudo-level scan per pose.
+    Level(level::Args),
+    /// Match 2D scans pairwise or against a growing map; fills in `estimate`.
+    Match(matching::Args),
+    /// Parse a scan file and summarise it as one JSON object.
+    Info(info::Args),
+    /// Reproduce the paper's experiments.
+    #[command(subcommand)]
+    Eval(eval::EvalCommand),
+    /// Write a self-contained HTML page with a 3D view of scans, polygons and plans.
+    View(view::Args),
+}
+
+pub fn run(cli: Cli) -> anyhow::Result<()> {
+    match cli.command {
+        Command::Demo(a) => demo::run(a),
+        Command::Simulate(a) => simulate::run(a),
+        Command::Level(a) => level::run(a),
+        Command::Match(a) => matching::run(a),
+        Command::Info(a) => info::run(a),
+        Command::Eval(c) => eval::run(c),
+        Command::View(a) => view::run(a),
+    }
+}
+
+/// True when the error is a closed output pipe (e.g. `levelscan simulate ... | head`).
+pub fn is_broken_pipe(e: &anyhow::Error) -> bool {
+    e.chain().any(|c| {
+        c.downcast_ref::<io::Error>()
+            .is_some_and(|io| io.kind() == io::ErrorKind::BrokenPipe)
+    })
+}
+
+/// An opened input: its display name (for `FILE:LINE:` messages) and a buffered reader.
+pub struct Input {
+    pub name: String,
+    pub reader: Box<dyn BufRead + Send>,
+}
+
+/// Opens a file argument, or standard input for `None` or `-`. Gzip files (by their magic
+/// bytes) are decompressed on the fly, so CARMEN `.log.gz` files can be read as they are.
+pub fn open_input(path: Option<&Path>) -> anyhow::Result<Input> {
+    let (name, raw): (String, Box<dyn Read + Send>) = match path {
+        None => ("<stdin>".to_string(), Box::new(io::stdin())),
+        Some(p) if p == Path::new("-") => ("<stdin>".to_string(), Box::new(io::stdin())),
+        Some(p) => {
+            let f = File::open(p).with_context(|| format!("{}: cannot open", p.display()))?;
+            (p.display().to_string(), Box::new(f))
+        }
+    };
+    let mut buffered = BufReader::with_capacity(1 << 16, raw);
+    let is_gzip = buffered
+        .fill_buf()
+        .with_context(|| format!("{name}: cannot read"))?
+        .starts_with(&[0x1f, 0x8b]);
+    let reader: Box<dyn BufRead + Send> = if is_gzip {
+        Box::new(BufReader::with_capacity(
+            1 << 16,
+            flate2::read::MultiGzDecoder::new(buffered),
+        ))
+    } else {
+        Box::new(buffered)
+    };
+    Ok(Input { name, reader })
+}
+
+/// Standard output, buffered; or a file when `path` is given and not `-`.
+pub fn open_output(path: Option<&PathBuf>) -> anyhow::Result<Box<dyn Write>> {
+    Ok(match path {
+        Some(p) if p.as_os_str() != "-" => Box::new(BufWriter::new(
+            File::create(p).with_context(|| format!("{}: cannot create", p.display()))?,
+        )),
+        _ => Box::new(BufWriter::with_capacity(1 << 16, io::stdout().lock())),
+    })
+}
+
+/// A progress bar on standard error; indicatif hides it when standard error is not a terminal.
+pub fn progress_bar(len: u64, what: &str) -> ProgressBar {
+    let bar = ProgressBar::new(len);
+    bar.set_style(
+        ProgressStyle::with_template("{msg:>12} [{bar:40}] {pos}/{len} ({eta})")
+            .expect("static template")
+            .progress_chars("=> "),
+    );
+    bar.set_message(what.to_string());
+    bar
+}

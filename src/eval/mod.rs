@@ -1,0 +1,1 @@
+//! The paper's experiments (sect. 8) and trajectory metrics.

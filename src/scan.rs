@@ -1,0 +1,189 @@
+//! One laser scan: the paper's `Laser_data` (its Fig. 13), on CSM's laser_data layout.
+//!
+//! A plain type with no I/O; `formats::scan_jsonl` reads and writes it.
+
+use crate::geometry::{Pose, reading_in_robot};
+use nalgebra::{Point2, Point3, Vector3};
+
+/// What a simulated ray hit (the contract's `hit` field).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[repr(u8)]
+pub enum Hit {
+    Nothing = 0,
+    Wall = 1,
+    Floor = 2,
+    Ceiling = 3,
+}
+
+impl Hit {
+    pub fn from_code(code: u64) -> Option<Hit> {
+        match code {
+            0 => Some(Hit::Nothing),
+            1 => Some(Hit::Wall),
+            2 => Some(Hit::Floor),
+            3 => Some(Hit::Ceiling),
+            _ => None,
+        }
+    }
+}
+
+/// A scan timestamp as CSM writes it: `[sec, usec]`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub struct Timestamp {
+    pub sec: i64,
+    pub usec: i64,
+}
+
+impl Timestamp {
+    pub fn seconds(&self) -> f64 {
+        self.sec as f64 + self.usec as f64 * 1e-6
+    }
+
+    pub fn from_seconds(t: f64) -> Self {
+        let sec = t.floor();
+        Self {
+            sec: sec as i64,
+            usec: ((t - sec) * 1e6).round() as i64,
+        }
+    }
+}
+
+/// One scan. All per-ray vectors have `nrays` entries; `theta` is always filled in (from
+/// `min_theta`/`max_theta` when the file had none).
+#[derive(Clone, Debug, PartialEq, Default)]
+pub struct Scan {
+    /// The pose this scan was taken at; scans of one pose share it.
+    pub sequence: Option<u64>,
+    /// Hinge elevation [rad]; positive tilts the beams down.
+    pub elevation: Option<f64>,
+    /// Bearing of each ray [rad].
+    pub theta: Vec<f64>,
+    /// Range of each ray [m]; `None` where there was no return.
+    pub readings: Vec<Option<f64>>,
+    /// True where the ray hit something.
+    pub valid: Vec<bool>,
+    pub odometry: Option<Pose>,
+    pub estimate: Option<Pose>,
+    /// Ground truth; written by simulators, never read by `level` or `match`.
+    pub true_pose: Option<Pose>,
+    pub timestamp: Option<Timestamp>,
+    /// Range noise per ray [m].
+    pub readings_sigma: Option<Vec<Option<f64>>>,
+    /// The scanner's origin seen from the hinge axis point, in the scanner's tilted frame [m].
+    pub hinge_offset: Option<[f64; 3]>,
+    /// Simulators only: what each ray hit.
+    pub hit: Option<Vec<Hit>>,
+    /// Fields this crate does not know, kept in input order for pass-through.
+    pub extra: serde_json::Map<String, serde_json::Value>,
+}
+
+impl Scan {
+    pub fn nrays(&self) -> usize {
+        self.theta.len()
+    }
+
+    /// The range of ray `i` when it is valid and finite.
+    pub fn range(&self, i: usize) -> Option<f64> {
+        if !self.valid[i] {
+            return None;
+        }
+        self.readings[i].filter(|r| r.is_finite())
+    }
+
+    pub fn valid_count(&self) -> usize {
+        (0..self.nrays()).filter(|&i| self.range(i).is_some()).count()
+    }
+
+    pub fn hinge_offset_vector(&self) -> Vector3<f64> {
+        self.hinge_offset
+            .map(|o| Vector3::new(o[0], o[1], o[2]))
+            .unwrap_or_else(Vector3::zeros)
+    }
+
+    /// Ray `i` as a robot-frame 3D point, taking the elevation (0 when absent) and the hinge
+    /// offset into account (paper sect. 5.1).
+    pub fn point_in_robot(&self, i: usize) -> Option<Point3<f64>> {
+        let r = self.range(i)?;
+        Some(reading_in_robot(
+            self.elevation.unwrap_or(0.0),
+            self.theta[i],
+            r,
+            &self.hinge_offset_vector(),
+        ))
+    }
+
+    /// Valid rays as 2D points in the scanner plane (x forward, y left), for planar matching.
+    pub fn points_2d(&self) -> Vec<Point2<f64>> {
+        (0..self.nrays())
+            .filter_map(|i| {
+                let r = self.range(i)?;
+                let (s, c) = self.theta[i].sin_cos();
+                Some(Point2::new(r * c, r * s))
+            })
+            .collect()
+    }
+
+    /// Builds a scan with evenly spread bearings from `min_theta` to `max_theta`.
+    pub fn with_even_bearings(nrays: usize, min_theta: f64, max_theta: f64) -> Scan {
+        Scan {
+            theta: even_bearings(nrays, min_theta, max_theta),
+            readings: vec![None; nrays],
+            valid: vec![false; nrays],
+            ..Scan::default()
+        }
+    }
+
+    pub fn min_theta(&self) -> Option<f64> {
+        self.theta.first().copied()
+    }
+
+    pub fn max_theta(&self) -> Option<f64> {
+        self.theta.last().copied()
+    }
+}
+
+/// `n` bearings spread evenly from `min` to `max`, both included.
+pub fn even_bearings(n: usize, min: f64, max: f64) -> Vec<f64> {
+    match n {
+        0 => Vec::new(),
+        1 => vec![min],
+        _ => (0..n)
+            .map(|i| min + (max - min) * i as f64 / (n - 1) as f64)
+            .collect(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn even_bearings_include_both_ends() {
+        let b = even_bearings(181, -std::f64::consts::FRAC_PI_2, std::f64::consts::FRAC_PI_2);
+        assert_eq!(b.len(), 181);
+        assert!((b[0] + std::f64::consts::FRAC_PI_2).abs() < 1e-15);
+        assert!((b[180] - std::f64::consts::FRAC_PI_2).abs() < 1e-15);
+        assert!((b[90]).abs() < 1e-15);
+    }
+
+    #[test]
+    fn invalid_rays_have_no_point() {
+        let mut s = Scan::with_even_bearings(3, -0.1, 0.1);
+        s.readings[1] = Some(2.0);
+        s.valid[1] = true;
+        s.readings[2] = Some(2.0); // a reading that is marked invalid stays invalid
+        assert!(s.point_in_robot(0).is_none());
+        assert!(s.point_in_robot(2).is_none());
+        let p = s.point_in_robot(1).unwrap();
+        assert!((p.coords.norm() - 2.0).abs() < 1e-12);
+        assert_eq!(s.valid_count(), 1);
+    }
+
+    #[test]
+    fn timestamp_seconds_roundtrip() {
+        let t = Timestamp::from_seconds(1234.5678);
+        assert_eq!(t.sec, 1234);
+        assert_eq!(t.usec, 567800);
+        assert!((t.seconds() - 1234.5678).abs() < 1e-6);
+    }
+}
