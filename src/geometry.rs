@@ -8,7 +8,9 @@
 //! Note: the paper's appendix A uses the opposite sign for `Ry`; the formulas here follow the
 //! contract and are checked against the rotation matrices in the tests.
 
-use nalgebra::{Isometry3, Matrix3, Point2, Point3, Rotation3, Translation3, UnitQuaternion, Vector2, Vector3};
+use nalgebra::{
+    Isometry3, Matrix3, Point2, Point3, Rotation3, Translation3, UnitQuaternion, Vector2, Vector3,
+};
 use serde::{Deserialize, Serialize};
 use std::f64::consts::PI;
 
@@ -97,7 +99,14 @@ pub struct Pose {
 
 impl Pose {
     pub fn new(x: f64, y: f64, z: f64, rz: f64, ry: f64, rx: f64) -> Self {
-        Self { x, y, z, rz, ry, rx }
+        Self {
+            x,
+            y,
+            z,
+            rz,
+            ry,
+            rx,
+        }
     }
 
     /// A planar pose: `[x, y, rz]` with z, pitch and roll zero.

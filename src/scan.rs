@@ -91,7 +91,9 @@ impl Scan {
     }
 
     pub fn valid_count(&self) -> usize {
-        (0..self.nrays()).filter(|&i| self.range(i).is_some()).count()
+        (0..self.nrays())
+            .filter(|&i| self.range(i).is_some())
+            .count()
     }
 
     pub fn hinge_offset_vector(&self) -> Vector3<f64> {
@@ -159,7 +161,11 @@ mod tests {
 
     #[test]
     fn even_bearings_include_both_ends() {
-        let b = even_bearings(181, -std::f64::consts::FRAC_PI_2, std::f64::consts::FRAC_PI_2);
+        let b = even_bearings(
+            181,
+            -std::f64::consts::FRAC_PI_2,
+            std::f64::consts::FRAC_PI_2,
+        );
         assert_eq!(b.len(), 181);
         assert!((b[0] + std::f64::consts::FRAC_PI_2).abs() < 1e-15);
         assert!((b[180] - std::f64::consts::FRAC_PI_2).abs() < 1e-15);

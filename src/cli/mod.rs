@@ -2,6 +2,8 @@
 
 mod demo;
 mod eval;
+mod eval_accuracy;
+mod eval_matching;
 mod info;
 mod level;
 mod matching;

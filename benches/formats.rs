@@ -1,0 +1,5 @@
+//! Benchmarks (divan): run with `cargo bench --bench formats`.
+
+fn main() {
+    divan::main();
+}

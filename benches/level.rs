@@ -1,0 +1,5 @@
+//! Benchmarks (divan): run with `cargo bench --bench level`.
+
+fn main() {
+    divan::main();
+}

@@ -1,0 +1,5 @@
+//! Benchmarks (divan): run with `cargo bench --bench simulate`.
+
+fn main() {
+    divan::main();
+}
