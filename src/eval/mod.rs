@@ -1,1 +1,3 @@
 //! The paper's experiments (sect. 8) and trajectory metrics.
+
+pub mod accuracy;
