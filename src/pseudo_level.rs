@@ -150,7 +150,8 @@ fn kept_rays(
         };
         let lp = level(&g.p);
         let dz_noise = 3.0 * sigma * (level_from_robot * g.dir).z.abs();
-        let near = |h: Option<f64>| h.is_some_and(|h| (lp.z - h).abs() < params.floor_margin + dz_noise);
+        let near =
+            |h: Option<f64>| h.is_some_and(|h| (lp.z - h).abs() < params.floor_margin + dz_noise);
         let label = est.labels.get(i).copied().unwrap_or(UNLABELLED);
         let on_flat = label != UNLABELLED && est.patches[label as usize].kind != SurfaceKind::Wall;
         if near(floor_z) || near(ceiling_z) || on_flat {
@@ -162,7 +163,10 @@ fn kept_rays(
             continue;
         }
         if params.vertical_ratio > 0.0 {
-            let neighbours = [row.checked_sub(1), Some(row + 1).filter(|&r| r < grid.rows())];
+            let neighbours = [
+                row.checked_sub(1),
+                Some(row + 1).filter(|&r| r < grid.rows()),
+            ];
             *slot = neighbours.into_iter().flatten().any(|r| {
                 grid.at(r, c).is_some_and(|q| {
                     let d = level(&q.p) - lp;
@@ -179,17 +183,15 @@ fn kept_rays(
     // floor or ceiling points.
     let mut keep = is_wall.clone();
     let mut last: Option<usize> = None;
-    for c in 0..n {
-        if !is_wall[c] {
+    for (c, &wall) in is_wall.iter().enumerate() {
+        if !wall {
             continue;
         }
         if let Some(l) = last {
             let gap = c - l - 1;
             if gap > 0 && gap <= params.max_gap {
                 for k in l + 1..c {
-                    if !blocked[k] {
-                        keep[k] = true;
-                    }
+                    keep[k] |= !blocked[k];
                 }
             }
         }

@@ -1,4 +1,5 @@
 //! Level estimation on analytic rooms: exact recovery, failure reasons, honesty of sigmas.
+#![allow(clippy::needless_range_loop)]
 
 mod common;
 
@@ -29,7 +30,11 @@ fn box_room_without_noise_recovers_known_tilt_within_005_deg() {
         let e = level_pose(&scans, &params(est));
         assert!(e.is_ok(), "{est}: {:?}", e.failure);
         let err = e.attitude.unwrap().max_abs_error(&pose.attitude());
-        assert!(err.to_degrees() < 0.05, "{est}: error {} deg", err.to_degrees());
+        assert!(
+            err.to_degrees() < 0.05,
+            "{est}: error {} deg",
+            err.to_degrees()
+        );
     }
 }
 
@@ -82,7 +87,14 @@ fn scans_with_different_ray_counts_fail_as_inconsistent() {
 
 fn room_l() -> Room {
     Room::polygon(
-        &[[0.0, 0.0], [7.0, 0.0], [7.0, 3.0], [4.5, 5.5], [1.0, 5.5], [0.0, 4.0]],
+        &[
+            [0.0, 0.0],
+            [7.0, 0.0],
+            [7.0, 3.0],
+            [4.5, 5.5],
+            [1.0, 5.5],
+            [0.0, 4.0],
+        ],
         3.0,
         false,
     )
@@ -114,9 +126,18 @@ fn reported_sigmas_are_honest_within_three_sigma_for_95_percent() {
         let (mut ok, mut inside) = (0, 0);
         for k in 0..60 {
             let pose = random_pose(&mut rng);
-            let scans = scans_at(&room_l(), &pose, &elevations(nscans, 5.0), noise, 1000 + k, k);
+            let scans = scans_at(
+                &room_l(),
+                &pose,
+                &elevations(nscans, 5.0),
+                noise,
+                1000 + k,
+                k,
+            );
             let e = level_pose(&scans, &LevelParams::default());
-            let (Some(att), Some(s)) = (e.attitude, e.sigmas) else { continue };
+            let (Some(att), Some(s)) = (e.attitude, e.sigmas) else {
+                continue;
+            };
             ok += 1;
             let truth = pose.attitude();
             if (att.theta_x - truth.theta_x).abs() <= 3.0 * s[0]
@@ -139,7 +160,13 @@ fn pseudo_level_scan_keeps_walls_and_drops_floor_hits() {
     let pose = Pose::new(2.0, 2.5, 0.45, deg(20.0), deg(8.0), deg(5.0));
     let scans = scans_at(&room, &pose, &elevations(5, 5.0), 0.01, 9, 7);
     let e = level_pose(&scans, &LevelParams::default());
-    assert!(e.is_ok(), "{:?} walls {} patches {}", e.failure, e.wall_polygons(), e.patches.len());
+    assert!(
+        e.is_ok(),
+        "{:?} walls {} patches {}",
+        e.failure,
+        e.wall_polygons(),
+        e.patches.len()
+    );
     let out = pseudo_level_scan(&scans, &e, &PseudoLevelParams::default());
     let base = &scans[e.base_scan.unwrap()];
     assert_eq!(out.nrays(), base.nrays());
@@ -150,7 +177,11 @@ fn pseudo_level_scan_keeps_walls_and_drops_floor_hits() {
     for i in 0..out.nrays() {
         assert_eq!(out.valid[i], out.readings[i].is_some());
         if out.valid[i] {
-            assert_eq!(hits[i], levelscan::scan::Hit::Wall, "ray {i} kept but not a wall");
+            assert_eq!(
+                hits[i],
+                levelscan::scan::Hit::Wall,
+                "ray {i} kept but not a wall"
+            );
             // The leveled point lies on the box's walls, seen from the true planar pose.
             let r = out.readings[i].unwrap();
             let (s, c) = (pose.rz + out.theta[i]).sin_cos();
@@ -163,7 +194,10 @@ fn pseudo_level_scan_keeps_walls_and_drops_floor_hits() {
         }
     }
     let kept = out.valid.iter().filter(|&&v| v).count();
-    assert!(kept as f64 >= 0.9 * walls as f64, "kept {kept} of {walls} wall hits");
+    assert!(
+        kept as f64 >= 0.9 * walls as f64,
+        "kept {kept} of {walls} wall hits"
+    );
 }
 
 proptest! {

@@ -20,7 +20,12 @@ pub struct Args {
     #[arg(long, value_delimiter = ',', default_value = "0.01,0.05,0.10")]
     pub noise: Vec<f64>,
     /// Estimators to compare.
-    #[arg(long, value_enum, value_delimiter = ',', default_value = "paper,robust")]
+    #[arg(
+        long,
+        value_enum,
+        value_delimiter = ',',
+        default_value = "paper,robust"
+    )]
     pub estimators: Vec<Estimator>,
     /// Random poses per plan.
     #[arg(long, default_value_t = 100)]
@@ -40,7 +45,10 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
-    anyhow::ensure!(!args.scans.is_empty() && args.scans.iter().all(|&s| s >= 1), "--scans must list scan counts of at least 1");
+    anyhow::ensure!(
+        !args.scans.is_empty() && args.scans.iter().all(|&s| s >= 1),
+        "--scans must list scan counts of at least 1"
+    );
     anyhow::ensure!(
         args.noise.iter().all(|n| n.is_finite() && *n >= 0.0),
         "--noise must list non-negative sigmas in metres"
@@ -63,7 +71,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let stats = run_accuracy(&plans, &params)?;
     print!("{}", markdown(&stats, &params));
     if let Some(dir) = &args.out {
-        std::fs::create_dir_all(dir).with_context(|| format!("{}: cannot create", dir.display()))?;
+        std::fs::create_dir_all(dir)
+            .with_context(|| format!("{}: cannot create", dir.display()))?;
         let path = dir.join("accuracy.json");
         let json = serde_json::json!({
             "plans": args.plans.iter().map(|p| p.display().to_string()).collect::<Vec<_>>(),
@@ -106,11 +115,19 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 }
 
 fn fmt_deg(x: f64) -> String {
-    if x.is_finite() { format!("{x:.3}") } else { "-".to_string() }
+    if x.is_finite() {
+        format!("{x:.3}")
+    } else {
+        "-".to_string()
+    }
 }
 
 fn fmt_pct(x: f64) -> String {
-    if x.is_finite() { format!("{:.1}%", 100.0 * x) } else { "-".to_string() }
+    if x.is_finite() {
+        format!("{:.1}%", 100.0 * x)
+    } else {
+        "-".to_string()
+    }
 }
 
 /// Table I per estimator (mean error, the paper's value in parentheses), then every cell's
@@ -119,7 +136,10 @@ fn markdown(stats: &[CellStats], params: &AccuracyParams) -> String {
     let mut s = String::new();
     for est in &params.estimators {
         let name = est.to_string();
-        let _ = writeln!(s, "### Table I, {name} estimator: mean error [deg] (paper's)\n");
+        let _ = writeln!(
+            s,
+            "### Table I, {name} estimator: mean error [deg] (paper's)\n"
+        );
         let _ = write!(s, "| scans |");
         for n in &params.noise {
             let _ = write!(s, " {} cm |", n * 100.0);

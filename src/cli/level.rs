@@ -59,7 +59,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         ..LevelParams::default()
     };
     if let Some(s) = params.sigma {
-        anyhow::ensure!(s >= 0.0 && s.is_finite(), "--sigma must be a non-negative number of metres");
+        anyhow::ensure!(
+            s >= 0.0 && s.is_finite(),
+            "--sigma must be a non-negative number of metres"
+        );
     }
     anyhow::ensure!(
         params.quad_rows >= 2 && params.quad_cols >= 2,
@@ -78,6 +81,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let mut failure: Option<InputError> = None;
     loop {
         let item = reader.next();
+        let exhausted = item.is_none();
         match item {
             Some(Ok((line, scan))) => match grouper.push(&name, line, scan) {
                 Ok(Some(pose)) => batch.push(pose),
@@ -91,7 +95,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 }
             }
         }
-        let end = item.is_none() || failure.is_some();
+        let end = exhausted || failure.is_some();
         if batch.len() >= BATCH_POSES || end {
             write_batch(&mut out, &batch, &params, &pseudo, args.polygons)?;
             batch.clear();
@@ -163,9 +167,12 @@ pub fn level_record(
             .filter(|q| q.kind == SurfaceKind::Wall)
             .map(|q| corners_json(&q.corners))
             .collect();
-        scan.extra.insert("wall_polygons".to_string(), Value::Array(quads));
         scan.extra
-            .insert("wall_patches".to_string(), Value::Array(patch_outlines(est)));
+            .insert("wall_polygons".to_string(), Value::Array(quads));
+        scan.extra.insert(
+            "wall_patches".to_string(),
+            Value::Array(patch_outlines(est)),
+        );
     }
     scan
 }
@@ -215,7 +222,12 @@ struct Grouper {
 }
 
 impl Grouper {
-    fn push(&mut self, file: &str, line: usize, scan: Scan) -> Result<Option<Vec<Scan>>, InputError> {
+    fn push(
+        &mut self,
+        file: &str,
+        line: usize,
+        scan: Scan,
+    ) -> Result<Option<Vec<Scan>>, InputError> {
         let Some(seq) = scan.sequence else {
             return Err(InputError::at_line(
                 file,

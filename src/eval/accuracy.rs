@@ -140,7 +140,10 @@ pub struct CellStats {
 
 /// Runs the experiment over `plans`. Returns one [`CellStats`] per (scans, noise, estimator),
 /// in that nesting order.
-pub fn run_accuracy(plans: &[Plan], params: &AccuracyParams) -> Result<Vec<CellStats>, SimulateError> {
+pub fn run_accuracy(
+    plans: &[Plan],
+    params: &AccuracyParams,
+) -> Result<Vec<CellStats>, SimulateError> {
     let pose_params = RandomPoseParams {
         tilt: params.tilt_deg.to_radians(),
         clearance: params.clearance,
@@ -187,7 +190,14 @@ pub fn run_accuracy(plans: &[Plan], params: &AccuracyParams) -> Result<Vec<CellS
                         .wrapping_add((nscans as u64) << 48);
                     let mut rng = stream_rng(stream_seed, Stream::Scans, k as u64);
                     let elevations = elevations_centred(nscans, params.step_deg.to_radians());
-                    let scans = simulate_pose(&worlds[pi], k as u64, &pose, &elevations, &scanner, &mut rng);
+                    let scans = simulate_pose(
+                        &worlds[pi],
+                        k as u64,
+                        &pose,
+                        &elevations,
+                        &scanner,
+                        &mut rng,
+                    );
                     params
                         .estimators
                         .iter()
@@ -242,7 +252,10 @@ pub fn evaluate_pose(
         };
     };
     let t = truth.attitude();
-    let (dx, dy) = ((att.theta_x - t.theta_x).abs(), (att.theta_y - t.theta_y).abs());
+    let (dx, dy) = (
+        (att.theta_x - t.theta_x).abs(),
+        (att.theta_y - t.theta_y).abs(),
+    );
     let pseudo = pseudo_level_scan(scans, &est, &params.pseudo);
     let planar = truth.to_pose2();
     let mut valid = 0;
@@ -300,7 +313,13 @@ fn cell_stats(scans: usize, noise: f64, estimator: Estimator, o: &[&PoseOutcome]
     let valid: usize = leveled.iter().map(|p| p.pseudo_valid).sum();
     let phantoms: usize = leveled.iter().map(|p| p.phantoms).sum();
     let walls: usize = leveled.iter().map(|p| p.best_wall_hits).sum();
-    let ratio = |a: usize, b: usize| if b == 0 { f64::NAN } else { a as f64 / b as f64 };
+    let ratio = |a: usize, b: usize| {
+        if b == 0 {
+            f64::NAN
+        } else {
+            a as f64 / b as f64
+        }
+    };
     CellStats {
         scans,
         noise,
@@ -308,7 +327,11 @@ fn cell_stats(scans: usize, noise: f64, estimator: Estimator, o: &[&PoseOutcome]
         poses: o.len(),
         leveled: n,
         leveled_fraction: ratio(n, o.len()),
-        mean_deg: if n == 0 { f64::NAN } else { errors.iter().sum::<f64>() / n as f64 },
+        mean_deg: if n == 0 {
+            f64::NAN
+        } else {
+            errors.iter().sum::<f64>() / n as f64
+        },
         median_deg: median,
         p95_deg: quantile(0.95),
         max_deg: sorted.last().copied().unwrap_or(f64::NAN),
@@ -336,7 +359,11 @@ mod tests {
     #[test]
     fn cell_stats_on_known_errors() {
         let mk = |e: Option<f64>| PoseOutcome {
-            failure: if e.is_none() { Some(FailReason::ParallelWalls) } else { None },
+            failure: if e.is_none() {
+                Some(FailReason::ParallelWalls)
+            } else {
+                None
+            },
             error_deg: e,
             within_3_sigma: e.is_some_and(|x| x < 2.0),
             pseudo_valid: 10,

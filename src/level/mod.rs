@@ -312,7 +312,11 @@ fn solve(est: &LevelEstimate, params: &LevelParams, sigma: f64) -> Result<UpSolu
     solve_up(est, params, sigma).map_err(facing)
 }
 
-fn solve_up(est: &LevelEstimate, params: &LevelParams, sigma: f64) -> Result<UpSolution, FailReason> {
+fn solve_up(
+    est: &LevelEstimate,
+    params: &LevelParams,
+    sigma: f64,
+) -> Result<UpSolution, FailReason> {
     let misfit = |f: &grid::PlaneFit| f.misfit_ratio(sigma.max(params.min_sigma)).max(1.0);
     let sigma_eff = sigma.max(params.min_sigma);
     let sol = match params.estimator {
@@ -351,7 +355,7 @@ fn solve_up(est: &LevelEstimate, params: &LevelParams, sigma: f64) -> Result<UpS
         }
     };
     let (lo, hi) = sol.info_eigenvalues;
-    if !(hi > 0.0) || lo < params.parallel_ratio * hi {
+    if hi.is_nan() || hi <= 0.0 || lo < params.parallel_ratio * hi {
         return Err(FailReason::ParallelWalls);
     }
     let s = sol.attitude_sigmas();

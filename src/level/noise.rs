@@ -61,9 +61,18 @@ mod tests {
         let mut rng = rand::rngs::ChaCha8Rng::seed_from_u64(seed);
         let noise = Normal::new(0.0, sigma.max(1e-300)).unwrap();
         for i in 0..s.nrays() {
-            let r = d / s.theta[i].cos() + if sigma > 0.0 { noise.sample(&mut rng) } else { 0.0 };
+            let r = d / s.theta[i].cos()
+                + if sigma > 0.0 {
+                    noise.sample(&mut rng)
+                } else {
+                    0.0
+                };
             // A corner every 30 rays: the median must shrug it off.
-            let r = if i % 30 == 0 { r * rng.random_range(1.1..1.5) } else { r };
+            let r = if i % 30 == 0 {
+                r * rng.random_range(1.1..1.5)
+            } else {
+                r
+            };
             s.readings[i] = Some(r);
             s.valid[i] = true;
         }
@@ -75,7 +84,10 @@ mod tests {
         for &sigma in &[0.01, 0.1] {
             let scans: Vec<Scan> = (0..5).map(|k| wall_scan(3.0, sigma, k)).collect();
             let est = estimate_range_sigma(&scans).unwrap();
-            assert!((est / sigma - 1.0).abs() < 0.15, "sigma {sigma} estimated {est}");
+            assert!(
+                (est / sigma - 1.0).abs() < 0.15,
+                "sigma {sigma} estimated {est}"
+            );
         }
     }
 

@@ -131,9 +131,9 @@ pub fn grow_patches(
                 false
             }
         });
-        let (lo, hi) = members
-            .iter()
-            .fold((usize::MAX, 0), |(lo, hi), &i| (lo.min(i / cols), hi.max(i / cols)));
+        let (lo, hi) = members.iter().fold((usize::MAX, 0), |(lo, hi), &i| {
+            (lo.min(i / cols), hi.max(i / cols))
+        });
         let fit = kept.fit(sigma);
         match fit {
             Some(fit) if members.len() >= params.min_patch_points && hi > lo => {

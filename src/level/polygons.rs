@@ -35,7 +35,11 @@ impl Polygon {
 /// when the plane passes below the scanner (along its up-pointing normal) and ceiling when above.
 /// (A point's robot-frame z would not do: a beam tilted up in the robot frame still meets the
 /// floor when the robot pitches down.)
-pub fn classify(normal: &Vector3<f64>, centroid: &Point3<f64>, params: &LevelParams) -> SurfaceKind {
+pub fn classify(
+    normal: &Vector3<f64>,
+    centroid: &Point3<f64>,
+    params: &LevelParams,
+) -> SurfaceKind {
     if normal.z.abs() < params.wall_min_angle_deg.to_radians().cos() {
         SurfaceKind::Wall
     } else if normal.dot(&centroid.coords) * normal.z.signum() < 0.0 {
@@ -124,7 +128,10 @@ fn quad_at(
             }
         }
     }
-    let area = 0.5 * (corners[2] - corners[0]).cross(&(corners[3] - corners[1])).norm();
+    let area = 0.5
+        * (corners[2] - corners[0])
+            .cross(&(corners[3] - corners[1]))
+            .norm();
     Some(Polygon {
         row: r,
         col: c,

@@ -87,7 +87,11 @@ impl UpSolution {
 fn smallest_eigenvector(m: &Matrix3<f64>) -> Option<Vector3<f64>> {
     let eig = nalgebra::SymmetricEigen::new(*m);
     let k = eig.eigenvalues.imin();
-    let v = eig.eigenvectors.column(k).into_owned().try_normalize(1e-300)?;
+    let v = eig
+        .eigenvectors
+        .column(k)
+        .into_owned()
+        .try_normalize(1e-300)?;
     Some(if v.z < 0.0 { -v } else { v })
 }
 
@@ -157,7 +161,11 @@ pub fn solution_at(up: Vector3<f64>, planes: &[PlaneObs], sigma: f64, robust: bo
         wsum += w;
     }
     let dof = wsum - 2.0;
-    let scale = if dof >= 1.0 { (chi2 / dof).max(1.0) } else { 1.0 };
+    let scale = if dof >= 1.0 {
+        (chi2 / dof).max(1.0)
+    } else {
+        1.0
+    };
     let eig = nalgebra::SymmetricEigen::new(h);
     let (lo, hi) = (
         eig.eigenvalues.min().max(0.0),

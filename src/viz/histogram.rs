@@ -31,18 +31,25 @@ pub struct Series {
 }
 
 /// Writes the histogram as `<stem>.png` and `<stem>.svg` in `dir`.
-pub fn write_histogram(dir: &Path, stem: &str, title: &str, series: &[Series]) -> Result<(), String> {
+pub fn write_histogram(
+    dir: &Path,
+    stem: &str,
+    title: &str,
+    series: &[Series],
+) -> Result<(), String> {
     let png = dir.join(format!("{stem}.png"));
     let svg = dir.join(format!("{stem}.svg"));
     {
         let root = BitMapBackend::new(&png, (900, 540)).into_drawing_area();
         draw(&root, title, series)?;
-        root.present().map_err(|e| format!("{}: {e}", png.display()))?;
+        root.present()
+            .map_err(|e| format!("{}: {e}", png.display()))?;
     }
     {
         let root = SVGBackend::new(&svg, (900, 540)).into_drawing_area();
         draw(&root, title, series)?;
-        root.present().map_err(|e| format!("{}: {e}", svg.display()))?;
+        root.present()
+            .map_err(|e| format!("{}: {e}", svg.display()))?;
     }
     Ok(())
 }
@@ -54,7 +61,10 @@ fn draw<DB: DrawingBackend>(
 ) -> Result<(), String> {
     let err = |e: DrawingAreaErrorKind<DB::ErrorType>| e.to_string();
     root.fill(&WHITE).map_err(err)?;
-    let data: Vec<[f64; BUCKETS]> = series.iter().map(|s| bucket_percentages(&s.errors_deg)).collect();
+    let data: Vec<[f64; BUCKETS]> = series
+        .iter()
+        .map(|s| bucket_percentages(&s.errors_deg))
+        .collect();
     let top = data
         .iter()
         .flat_map(|d| d.iter().copied())
@@ -75,7 +85,12 @@ fn draw<DB: DrawingBackend>(
         .disable_x_mesh()
         .draw()
         .map_err(err)?;
-    let palette = [RGBColor(31, 119, 180), RGBColor(255, 127, 14), RGBColor(44, 160, 44), RGBColor(214, 39, 40)];
+    let palette = [
+        RGBColor(31, 119, 180),
+        RGBColor(255, 127, 14),
+        RGBColor(44, 160, 44),
+        RGBColor(214, 39, 40),
+    ];
     let width = BUCKET_DEG * 0.8 / series.len().max(1) as f64;
     for (si, (s, d)) in series.iter().zip(&data).enumerate() {
         let color = palette[si % palette.len()];

@@ -1,7 +1,7 @@
 //! A tiny analytic ray caster for level tests: vertical walls over 2D segments, the floor z = 0
 //! and an optional ceiling. Independent of `levelscan::simulate` on purpose (a twin to check
 //! the leveler against, not the code under test).
-#![allow(dead_code)]
+#![allow(dead_code, clippy::needless_range_loop)]
 
 use levelscan::geometry::{Pose, beam_direction};
 use levelscan::scan::{Hit, Scan};
@@ -21,7 +21,11 @@ impl Room {
         let segments = (0..corners.len())
             .map(|i| (corners[i], corners[(i + 1) % corners.len()]))
             .collect();
-        Room { segments, height, ceiling }
+        Room {
+            segments,
+            height,
+            ceiling,
+        }
     }
 
     pub fn box_room(w: f64, d: f64) -> Room {
@@ -100,7 +104,11 @@ pub fn scans_at(
             for i in 0..nrays {
                 let d = world_from_robot.rotation * beam_direction(e, s.theta[i]);
                 if let Some((t, h)) = room.cast(&origin, &d, 30.0) {
-                    let r = t + if noise > 0.0 { normal.sample(&mut rng) } else { 0.0 };
+                    let r = t + if noise > 0.0 {
+                        normal.sample(&mut rng)
+                    } else {
+                        0.0
+                    };
                     if r > 0.0 {
                         s.readings[i] = Some(r);
                         s.valid[i] = true;
