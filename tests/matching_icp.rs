@@ -140,8 +140,10 @@ fn the_coarse_search_rescues_a_guess_outside_the_icp_basin() {
             Some(b.compose(&Pose2::new(-0.25, 0.2, -0.22))),
         ),
     ];
-    let mut params = MatcherParams::default();
-    params.coarse = Coarse::Always;
+    let params = MatcherParams {
+        coarse: Coarse::Always,
+        ..MatcherParams::default()
+    };
     let reports = match_run(&scans, &params);
     assert_eq!(reports[1].status, MatchStatus::Ok);
     assert!(

@@ -201,6 +201,11 @@ mod tests {
             let l = l.expect("every point lies on a straight wall");
             assert!((l.anchor - pts[i]).norm() < 1e-12);
             let n = l.normal;
+            if i == 10 {
+                // The corner itself lies on both walls; either normal is right.
+                assert!(n.x.abs() < 1e-9 || n.y.abs() < 1e-9);
+                continue;
+            }
             let expect = if i < 10 {
                 Vector2::new(0.0, -1.0)
             } else {
