@@ -2,3 +2,5 @@
 //! ([`plots`]) and the demo report ([`report`]).
 
 pub mod html;
+pub mod plots;
+pub mod report;

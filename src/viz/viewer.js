@@ -150,7 +150,7 @@
       cam.t = [(box.lo[0] + box.hi[0]) / 2, (box.lo[1] + box.hi[1]) / 2, (box.lo[2] + box.hi[2]) / 2];
       cam.yaw = -Math.PI / 2 - 0.6;
       cam.pitch = 0.6;
-      cam.dist = (diag / 2) / Math.sin(FOV / 2) * 0.85;
+      cam.dist = (diag / 2) / Math.sin(FOV / 2);
       var sx = Math.max(size[0], 1e-3), sy = Math.max(size[1], 1e-3);
       cam.scale = 0.92 * Math.min(width / sx, height / sy);
       modeButton.textContent = topDown ? "3D view" : "Top-down 2D";
