@@ -108,6 +108,7 @@ pub fn open_output(path: Option<&PathBuf>) -> anyhow::Result<Box<dyn Write>> {
 }
 
 /// A progress bar on standard error; indicatif hides it when standard error is not a terminal.
+#[allow(dead_code)] // for the long-running commands (simulate, level, eval) as they land
 pub fn progress_bar(len: u64, what: &str) -> ProgressBar {
     let bar = ProgressBar::new(len);
     bar.set_style(
