@@ -43,7 +43,9 @@ fn chromium_or_skip(test: &str) -> Option<PathBuf> {
         if std::env::var("LEVELSCAN_REQUIRE_BROWSER").as_deref() == Ok("1") {
             panic!("{test}: chromium not found and LEVELSCAN_REQUIRE_BROWSER=1");
         }
-        eprintln!("{test}: SKIPPED: chromium not found (install it, e.g. apt-get install chromium)");
+        eprintln!(
+            "{test}: SKIPPED: chromium not found (install it, e.g. apt-get install chromium)"
+        );
     }
     found
 }
@@ -57,10 +59,8 @@ impl TempDir {
             .duration_since(std::time::UNIX_EPOCH)
             .map(|d| d.as_nanos())
             .unwrap_or(0);
-        let dir = std::env::temp_dir().join(format!(
-            "levelscan-{tag}-{}-{nanos}",
-            std::process::id()
-        ));
+        let dir =
+            std::env::temp_dir().join(format!("levelscan-{tag}-{}-{nanos}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         TempDir(dir)
     }
@@ -215,7 +215,9 @@ impl Browser {
         self.call("Page.navigate", json!({"url": url}));
         self.wait_event("Page.loadEventFired");
         // Two animation frames: every viewer has drawn.
-        self.eval("new Promise(r => requestAnimationFrame(() => requestAnimationFrame(() => r(true))))");
+        self.eval(
+            "new Promise(r => requestAnimationFrame(() => requestAnimationFrame(() => r(true))))",
+        );
     }
 
     /// Evaluates an expression in the page (awaiting promises) and returns its value.
@@ -459,9 +461,7 @@ fn write_box_room_inputs(dir: &Path) -> (PathBuf, PathBuf) {
     let mut text = String::new();
     for e_deg in [-5.0f64, 0.0, 5.0] {
         let e = e_deg.to_radians();
-        let bearings: Vec<f64> = (0..181)
-            .map(|i| (i as f64 - 90.0).to_radians())
-            .collect();
+        let bearings: Vec<f64> = (0..181).map(|i| (i as f64 - 90.0).to_radians()).collect();
         let readings: Vec<f64> = bearings
             .iter()
             .map(|&phi| {

@@ -351,6 +351,8 @@ pub fn build_scene(plan: Option<&Plan>, sources: &[Source], params: &ViewParams)
     let mut pose_cones: Vec<Pose> = Vec::new();
     let mut truth_path: Vec<Mm> = Vec::new();
     let mut unplaced = 0usize;
+    // Whether any raw scan needs 3D: tilted, or taken at a hinge elevation.
+    let mut raw_3d = false;
     for (k, (_, group)) in all_groups.iter().enumerate() {
         if k % stride != 0 {
             continue;
@@ -363,6 +365,11 @@ pub fn build_scene(plan: Option<&Plan>, sources: &[Source], params: &ViewParams)
                 }
                 let pose = pose.unwrap_or_default();
                 let world_from_robot = pose.world_from_robot();
+                raw_3d |= !pose.is_planar()
+                    || group
+                        .scans
+                        .iter()
+                        .any(|s| s.elevation.is_some_and(|e| e != 0.0));
                 for scan in &group.scans {
                     scans_layer.lines.extend(scan_polylines(scan, |i| {
                         scan.point_in_robot(i)
@@ -396,9 +403,15 @@ pub fn build_scene(plan: Option<&Plan>, sources: &[Source], params: &ViewParams)
                         )
                     });
                 // The pseudo-level scan is in the level frame: only heading and position apply.
-                let world_from_level =
-                    Pose::new(robot_pose.x, robot_pose.y, robot_pose.z, robot_pose.rz, 0.0, 0.0)
-                        .world_from_robot();
+                let world_from_level = Pose::new(
+                    robot_pose.x,
+                    robot_pose.y,
+                    robot_pose.z,
+                    robot_pose.rz,
+                    0.0,
+                    0.0,
+                )
+                .world_from_robot();
                 pseudo_layer.lines.extend(scan_polylines(scan, |i| {
                     let r = scan.range(i)?;
                     let (s, c) = scan.theta[i].sin_cos();
@@ -462,8 +475,9 @@ pub fn build_scene(plan: Option<&Plan>, sources: &[Source], params: &ViewParams)
         .map(|(i, p)| cone(p, i, n))
         .collect();
 
-    let has_3d = !scans_layer.is_empty() || !polys_layer.is_empty() || !pseudo_layer.is_empty();
-    let top_down = !has_3d && !matched_layer.is_empty();
+    // Flat 2D logs (CSM, matched scans) open in the top-down mode made for them.
+    let has_3d = raw_3d || !polys_layer.is_empty() || !pseudo_layer.is_empty();
+    let top_down = !has_3d && !(matched_layer.is_empty() && scans_layer.is_empty());
     let layers: Vec<Layer> = [
         plan_layer,
         scans_layer,
@@ -517,9 +531,13 @@ pub fn escape_html(s: &str) -> String {
 /// The HTML fragment of one viewer: its container, the scene data and the call that mounts
 /// it. The page must include [`VIEWER_JS`] and [`VIEWER_CSS`] once (see [`page_head_assets`]).
 pub fn viewer_fragment(scene: &Scene, element_id: &str) -> String {
+    viewer_fragment_with_class(scene, element_id, "lsv")
+}
+
+fn viewer_fragment_with_class(scene: &Scene, element_id: &str, class: &str) -> String {
     let id = escape_html(element_id);
     format!(
-        "<div class=\"lsv\" id=\"{id}\"></div>\n\
+        "<div class=\"{class}\" id=\"{id}\"></div>\n\
          <script type=\"application/json\" id=\"{id}-data\">{json}</script>\n\
          <script>LevelscanViewer.mount(document.getElementById(\"{id}\"), \
          JSON.parse(document.getElementById(\"{id}-data\").textContent));</script>\n",
@@ -541,7 +559,7 @@ pub fn viewer_page(scene: &Scene) -> String {
          <h1 class=\"lsv-title\">{title}</h1>\n{viewer}</body>\n</html>\n",
         title = escape_html(&scene.title),
         assets = page_head_assets(),
-        viewer = viewer_fragment(scene, "viewer"),
+        viewer = viewer_fragment_with_class(scene, "viewer", "lsv lsv-full"),
     )
 }
 
@@ -649,7 +667,10 @@ mod tests {
         );
         lev.extra.insert(
             "wall_polygons".into(),
-            json!([[[1, 0, 0], [1, 1, 0], [1, 1, 1], [1, 0, 1]], [[2, 0, 0], [2, 1, 0], [2, 1, 1]]]),
+            json!([
+                [[1, 0, 0], [1, 1, 0], [1, 1, 1], [1, 0, 1]],
+                [[2, 0, 0], [2, 1, 0], [2, 1, 1]]
+            ]),
         );
         let scene = build_scene(
             None,

@@ -76,9 +76,7 @@ pub struct AccuracyCell {
 }
 
 fn paper_value(noise: f64, scans: usize) -> Option<f64> {
-    let col = PAPER_NOISE
-        .iter()
-        .position(|&n| (n - noise).abs() < 1e-9)?;
+    let col = PAPER_NOISE.iter().position(|&n| (n - noise).abs() < 1e-9)?;
     let row = scans.checked_sub(3).filter(|&r| r < 3)?;
     Some(PAPER_TABLE_ONE[row][col])
 }
@@ -92,7 +90,12 @@ pub fn table_one_chart(cells: &[AccuracyCell]) -> GroupedBars {
     let mut scans: Vec<usize> = cells.iter().map(|c| c.scans).collect();
     scans.sort_unstable();
     scans.dedup();
-    let palette = [(31, 119, 180), (255, 127, 14), (44, 160, 44), (148, 103, 189)];
+    let palette = [
+        (31, 119, 180),
+        (255, 127, 14),
+        (44, 160, 44),
+        (148, 103, 189),
+    ];
     let mut series = Vec::new();
     for (k, &n) in scans.iter().enumerate() {
         let color = palette[k % palette.len()];

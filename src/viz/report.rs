@@ -188,9 +188,10 @@ pub fn render(report: &Report) -> String {
         for block in &section.blocks {
             match block {
                 Block::Text(t) => body.push_str(&format!("<p>{}</p>\n", escape_html(t))),
-                Block::Code(c) => {
-                    body.push_str(&format!("<pre class=\"lsr-code\">{}</pre>\n", escape_html(c)))
-                }
+                Block::Code(c) => body.push_str(&format!(
+                    "<pre class=\"lsr-code\">{}</pre>\n",
+                    escape_html(c)
+                )),
                 Block::Table(t) => body.push_str(&table_html(t)),
                 Block::Panels(p) => body.push_str(&panels_html(p, "")),
                 Block::Viewer(scene) => {
