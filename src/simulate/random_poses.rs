@@ -1,0 +1,231 @@
+//! Random robot poses in a plan's free space (the paper's experiments use 100 random poses
+//! per round, sect. 8.1).
+//!
+//! Plans are sets of polylines, not always closed, so "inside the building" takes two tests:
+//! the crossing parity with the CLOSED polylines (a point inside a closed pillar or box is
+//! inside two closed outlines, hence outside), and enclosure: level rays in 16 directions all
+//! meet a wall within range. A plan with no closed polyline relies on enclosure alone.
+
+use super::raycast::World;
+use super::{SimulateError, Stream, stream_rng};
+use crate::geometry::Pose;
+use nalgebra::{Point2, Point3, Vector3};
+use rand::RngExt;
+use rayon::prelude::*;
+use std::f64::consts::PI;
+
+/// Directions of the enclosure test.
+const ENCLOSURE_RAYS: usize = 16;
+
+/// How random poses are drawn.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RandomPoseParams {
+    /// Largest roll and pitch; both are uniform in [-tilt, +tilt] [rad]. Default 20 deg.
+    pub tilt: f64,
+    /// Smallest distance from the robot's position to every wall segment [m]. Default 0.5.
+    pub clearance: f64,
+    /// Scanner height above the floor, the pose's z [m]. Default 0.45.
+    pub height: f64,
+    /// Range within which all 16 enclosure rays must meet a wall [m]. Default 30 (the
+    /// scanner's default maximum range).
+    pub enclosure_range: f64,
+    /// Positions tried per pose before giving up. Default 10,000.
+    pub max_tries: usize,
+}
+
+impl Default for RandomPoseParams {
+    fn default() -> Self {
+        Self {
+            tilt: 20.0_f64.to_radians(),
+            clearance: 0.5,
+            height: 0.45,
+            enclosure_range: 30.0,
+            max_tries: 10_000,
+        }
+    }
+}
+
+/// True when `p` is inside the building (parity with closed polylines, and enclosed) and at
+/// least `clearance` metres from every wall.
+pub fn is_free(world: &World, p: &Point2<f64>, clearance: f64, enclosure_range: f64) -> bool {
+    let closed = world.closed_segments();
+    if !closed.is_empty() && !odd_crossings(closed, p) {
+        return false;
+    }
+    if world
+        .segments()
+        .iter()
+        .any(|s| s.distance_to(p) < clearance)
+    {
+        return false;
+    }
+    // Level rays at mid-wall height, so they meet walls rather than the floor or ceiling.
+    let origin = Point3::new(p.x, p.y, world.wall_height() / 2.0);
+    (0..ENCLOSURE_RAYS).all(|k| {
+        let a = 2.0 * PI * k as f64 / ENCLOSURE_RAYS as f64;
+        world
+            .cast(
+                &origin,
+                &Vector3::new(a.cos(), a.sin(), 0.0),
+                enclosure_range,
+            )
+            .is_some()
+    })
+}
+
+/// Crossing parity of a ray from `p` towards +x with the segments (half-open rule on y, so a
+/// ray through a vertex counts it once).
+fn odd_crossings(segments: &[crate::plan::Segment], p: &Point2<f64>) -> bool {
+    let mut odd = false;
+    for s in segments {
+        if (s.a.y > p.y) != (s.b.y > p.y) {
+            let x = s.a.x + (p.y - s.a.y) / (s.b.y - s.a.y) * (s.b.x - s.a.x);
+            if x > p.x {
+                odd = !odd;
+            }
+        }
+    }
+    odd
+}
+
+/// `n` random poses in free space: positions uniform over the free part of the plan's bounds,
+/// yaw uniform, roll and pitch uniform in +-tilt, z the scanner height. Pose `i` is drawn from
+/// its own random stream (seed, i), so the poses do not depend on the thread count.
+pub fn random_poses(
+    world: &World,
+    n: usize,
+    params: &RandomPoseParams,
+    seed: u64,
+) -> Result<Vec<Pose>, SimulateError> {
+    let Some((lo, hi)) = bounds(world) else {
+        return Err(SimulateError::NoWalls);
+    };
+    (0..n)
+        .into_par_iter()
+        .map(|i| {
+            let mut rng = stream_rng(seed, Stream::RandomPoses, i as u64);
+            for _ in 0..params.max_tries {
+                let p = Point2::new(
+                    lo.x + (hi.x - lo.x) * rng.random::<f64>(),
+                    lo.y + (hi.y - lo.y) * rng.random::<f64>(),
+                );
+                if is_free(world, &p, params.clearance, params.enclosure_range) {
+                    let rz = rng.random_range(-PI..PI);
+                    let mut tilt = || params.tilt * (2.0 * rng.random::<f64>() - 1.0);
+                    let (ry, rx) = (tilt(), tilt());
+                    return Ok(Pose::new(p.x, p.y, params.height, rz, ry, rx));
+                }
+            }
+            Err(SimulateError::NoFreeSpace {
+                tries: params.max_tries,
+                clearance: params.clearance,
+            })
+        })
+        .collect()
+}
+
+fn bounds(world: &World) -> Option<(Point2<f64>, Point2<f64>)> {
+    let mut pts = world.segments().iter().flat_map(|s| [s.a, s.b]);
+    let first = pts.next()?;
+    Some(pts.fold((first, first), |(lo, hi), p| {
+        (
+            Point2::new(lo.x.min(p.x), lo.y.min(p.y)),
+            Point2::new(hi.x.max(p.x), hi.y.max(p.y)),
+        )
+    }))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::plan::Plan;
+
+    fn square(x0: f64, y0: f64, x1: f64, y1: f64) -> Vec<Point2<f64>> {
+        vec![
+            Point2::new(x0, y0),
+            Point2::new(x1, y0),
+            Point2::new(x1, y1),
+            Point2::new(x0, y1),
+            Point2::new(x0, y0),
+        ]
+    }
+
+    fn room_with_pillar() -> World {
+        World::from_plan(&Plan {
+            wall_height: 3.0,
+            walls: vec![square(0.0, 0.0, 10.0, 8.0), square(4.0, 3.0, 6.0, 5.0)],
+            ceiling: false,
+            poses: vec![],
+        })
+    }
+
+    #[test]
+    fn inside_room_is_free_but_not_inside_pillar_or_outside() {
+        let w = room_with_pillar();
+        assert!(is_free(&w, &Point2::new(2.0, 2.0), 0.5, 30.0));
+        assert!(!is_free(&w, &Point2::new(5.0, 4.0), 0.5, 30.0), "in pillar");
+        assert!(!is_free(&w, &Point2::new(-3.0, 4.0), 0.5, 30.0), "outside");
+        assert!(!is_free(&w, &Point2::new(0.3, 4.0), 0.5, 30.0), "near wall");
+        assert!(
+            !is_free(&w, &Point2::new(3.7, 4.0), 0.5, 30.0),
+            "near pillar"
+        );
+    }
+
+    #[test]
+    fn open_polyline_plans_use_enclosure() {
+        // Two open "U" shapes that together close a room: no closed polyline.
+        let w = World::from_plan(&Plan {
+            wall_height: 3.0,
+            walls: vec![
+                vec![
+                    Point2::new(5.0, 0.0),
+                    Point2::new(0.0, 0.0),
+                    Point2::new(0.0, 4.0),
+                    Point2::new(5.0, 4.0),
+                ],
+                vec![
+                    Point2::new(5.0, 0.0),
+                    Point2::new(8.0, 0.0),
+                    Point2::new(8.0, 4.0),
+                    Point2::new(5.0, 4.0),
+                ],
+            ],
+            ceiling: false,
+            poses: vec![],
+        });
+        assert!(w.closed_segments().is_empty());
+        assert!(is_free(&w, &Point2::new(4.0, 2.0), 0.5, 30.0));
+        assert!(!is_free(&w, &Point2::new(4.0, 6.0), 0.5, 30.0));
+    }
+
+    #[test]
+    fn random_poses_respect_clearance_tilt_and_height() {
+        let w = room_with_pillar();
+        let params = RandomPoseParams::default();
+        let poses = random_poses(&w, 200, &params, 3).unwrap();
+        assert_eq!(poses.len(), 200);
+        for p in &poses {
+            let q = Point2::new(p.x, p.y);
+            assert!(is_free(&w, &q, 0.5, 30.0));
+            assert!(p.rx.abs() <= params.tilt && p.ry.abs() <= params.tilt);
+            assert!(p.rz.abs() <= PI);
+            assert_eq!(p.z, 0.45);
+        }
+        // Uniform: poses on both sides of the pillar.
+        assert!(poses.iter().any(|p| p.x < 4.0) && poses.iter().any(|p| p.x > 6.0));
+        assert_eq!(poses, random_poses(&w, 200, &params, 3).unwrap());
+    }
+
+    #[test]
+    fn impossible_clearance_is_a_clear_error() {
+        let w = room_with_pillar();
+        let params = RandomPoseParams {
+            clearance: 5.0,
+            max_tries: 500,
+            ..RandomPoseParams::default()
+        };
+        let err = random_poses(&w, 3, &params, 0).unwrap_err();
+        assert!(err.to_string().contains("500"), "{err}");
+    }
+}
