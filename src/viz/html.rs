@@ -477,7 +477,8 @@ pub fn build_scene(plan: Option<&Plan>, sources: &[Source], params: &ViewParams)
 
     // Flat 2D logs (CSM, matched scans) open in the top-down mode made for them.
     let has_3d = raw_3d || !polys_layer.is_empty() || !pseudo_layer.is_empty();
-    let top_down = !has_3d && !(matched_layer.is_empty() && scans_layer.is_empty());
+    let has_2d = !matched_layer.is_empty() || !scans_layer.is_empty();
+    let top_down = !has_3d && has_2d;
     let layers: Vec<Layer> = [
         plan_layer,
         scans_layer,
