@@ -30,7 +30,7 @@ pub enum Command {
     /// Run the whole system on a built-in example and write a report.
     Demo(demo::Args),
     /// Simulate multi-elevation laser scans from a floor plan (.wall).
-    Simulate(simulate::Args),
+    Simulate(Box<simulate::Args>),
     /// Estimate each pose's attitude and write one pseudo-level scan per pose.
     Level(level::Args),
     /// Match 2D scans pairwise or against a growing map; fills in `estimate`.
@@ -47,7 +47,7 @@ pub enum Command {
 pub fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
         Command::Demo(a) => demo::run(a),
-        Command::Simulate(a) => simulate::run(a),
+        Command::Simulate(a) => simulate::run(*a),
         Command::Level(a) => level::run(a),
         Command::Match(a) => matching::run(a),
         Command::Info(a) => info::run(a),

@@ -1,8 +1,202 @@
-//! Not written yet.
+//! `levelscan simulate PLAN.wall`: tilted multi-elevation scans of a floor plan as scan JSON
+//! Lines (paper sect. 7.2.1), a thin layer over [`levelscan::simulate`].
+
+use super::{open_output, progress_bar};
+use anyhow::{Context, bail};
+use levelscan::formats::{read_plan, write_scan};
+use levelscan::geometry::Pose;
+use levelscan::simulate::{
+    OdometryParams, RandomPoseParams, ScannerParams, World, elevations_centred, odometry,
+    random_poses, simulate_poses,
+};
+use std::io::Write;
+use std::path::PathBuf;
+
+/// Poses simulated in parallel between writes: bounds memory, and fixed so that the output
+/// does not depend on the thread count.
+const CHUNK: usize = 64;
 
 #[derive(clap::Args, Debug)]
-pub struct Args {}
+pub struct Args {
+    /// Floor plan (.wall); its `poses` are used unless --random is given.
+    pub plan: PathBuf,
 
-pub fn run(_args: Args) -> anyhow::Result<()> {
-    anyhow::bail!("this command is not implemented yet")
+    /// Rays per scan, spread evenly over the field of view.
+    #[arg(long, default_value_t = 181)]
+    pub rays: usize,
+    /// Field of view centred on the robot's forward axis [deg].
+    #[arg(long, default_value_t = 180.0)]
+    pub fov: f64,
+    /// Longest range that returns [m]; rays that meet nothing within it are invalid.
+    #[arg(long, default_value_t = 30.0)]
+    pub max_range: f64,
+    /// Standard deviation of the Gaussian range noise [m].
+    #[arg(long, default_value_t = 0.01)]
+    pub noise: f64,
+    /// Random seed: the same seed gives the same output bytes, whatever the thread count.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+
+    /// Scans per pose, at elevations --step apart centred on level.
+    #[arg(long, default_value_t = 3)]
+    pub scans: usize,
+    /// Elevation step between scans [deg]; positive elevations tilt the beams down.
+    #[arg(long, default_value_t = 5.0)]
+    pub step: f64,
+    /// Explicit elevations instead of --scans/--step [deg, comma separated], e.g. -5,0,5.
+    #[arg(long, value_delimiter = ',', allow_hyphen_values = true, conflicts_with_all = ["scans", "step"])]
+    pub elevations: Option<Vec<f64>>,
+
+    /// Simulate N random poses in the plan's free space instead of the plan's poses.
+    #[arg(long, value_name = "N")]
+    pub random: Option<usize>,
+    /// Random poses: roll and pitch uniform in +-TILT [deg].
+    #[arg(long, default_value_t = 20.0)]
+    pub tilt: f64,
+    /// Random poses: smallest distance to every wall [m].
+    #[arg(long, default_value_t = 0.5)]
+    pub clearance: f64,
+    /// Scanner height above the floor, the pose's z [m] [default: 0.45 for random poses; plan
+    /// poses keep their own z unless this is given].
+    #[arg(long)]
+    pub height: Option<f64>,
+    /// Level floor: set every pose's roll and pitch to 0 (reference runs without tilt).
+    #[arg(long)]
+    pub flat: bool,
+    /// Hinge offset x,y,z [m]: the scanner's origin seen from the hinge axis, in the scanner's
+    /// tilted frame (written to each scan's `hinge_offset`) [default: none].
+    #[arg(
+        long,
+        value_delimiter = ',',
+        allow_hyphen_values = true,
+        value_name = "X,Y,Z"
+    )]
+    pub hinge_offset: Option<Vec<f64>>,
+
+    /// Odometry: translation noise per step, fraction of the step's length (x and y each).
+    #[arg(long, default_value_t = 0.02)]
+    pub odo_trans: f64,
+    /// Odometry: translation noise added to every step [m].
+    #[arg(long, default_value_t = 0.005)]
+    pub odo_trans_min: f64,
+    /// Odometry: heading noise per step, fraction of the step's rotation.
+    #[arg(long, default_value_t = 0.02)]
+    pub odo_rot: f64,
+    /// Odometry: heading noise added to every step [deg].
+    #[arg(long, default_value_t = 0.5)]
+    pub odo_rot_min: f64,
+
+    /// Write each scan's `readings_sigma` (the noise sigma). Off by default: `level` estimates
+    /// the noise itself.
+    #[arg(long)]
+    pub with_sigma: bool,
+    /// Output file; standard output when absent or `-`.
+    #[arg(short, long)]
+    pub output: Option<PathBuf>,
+}
+
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let scanner = scanner_params(&args)?;
+    let odo = OdometryParams {
+        trans_per_m: args.odo_trans,
+        trans_const: args.odo_trans_min,
+        rot_per_rad: args.odo_rot,
+        rot_const: args.odo_rot_min.to_radians(),
+    };
+    if !odo.is_valid() {
+        bail!("--odo-trans, --odo-trans-min, --odo-rot and --odo-rot-min must be >= 0");
+    }
+    let elevations: Vec<f64> = match &args.elevations {
+        Some(list) => list.iter().map(|e| e.to_radians()).collect(),
+        None => elevations_centred(args.scans, args.step.to_radians()),
+    };
+    if elevations.is_empty() {
+        bail!("--scans must be at least 1");
+    }
+    if elevations.iter().any(|e| !e.is_finite()) {
+        bail!("elevations must be finite numbers of degrees");
+    }
+    if let Some(h) = args.height
+        && !h.is_finite()
+    {
+        bail!("--height must be a finite number of metres");
+    }
+
+    let plan = read_plan(&args.plan)?;
+    let name = args.plan.display().to_string();
+    let world = World::from_plan(&plan);
+    let poses: Vec<Pose> = match args.random {
+        Some(n) => {
+            let params = RandomPoseParams {
+                tilt: args.tilt.to_radians(),
+                clearance: args.clearance,
+                height: args.height.unwrap_or(RandomPoseParams::default().height),
+                enclosure_range: scanner.max_range,
+                ..RandomPoseParams::default()
+            };
+            if !(params.tilt.is_finite() && params.clearance >= 0.0) {
+                bail!("--tilt must be finite and --clearance >= 0");
+            }
+            random_poses(&world, n, &params, args.seed).with_context(|| name.clone())?
+        }
+        None => {
+            if plan.poses.is_empty() {
+                bail!("{name}: poses: the plan has no poses; give --random N to draw some");
+            }
+            let mut poses = plan.poses.clone();
+            if let Some(h) = args.height {
+                poses.iter_mut().for_each(|p| p.z = h);
+            }
+            poses
+        }
+    };
+    let poses: Vec<Pose> = if args.flat {
+        poses
+            .into_iter()
+            .map(|p| Pose::new(p.x, p.y, p.z, p.rz, 0.0, 0.0))
+            .collect()
+    } else {
+        poses
+    };
+    let odometry = odometry(&poses, &odo, args.seed);
+
+    let mut out = open_output(args.output.as_ref())?;
+    let bar = progress_bar(poses.len() as u64, "simulate");
+    for (c, chunk) in poses.chunks(CHUNK).enumerate() {
+        let first = c * CHUNK;
+        let scans = simulate_poses(
+            &world,
+            chunk,
+            Some(&odometry[first..first + chunk.len()]),
+            first as u64,
+            &elevations,
+            &scanner,
+            args.seed,
+        );
+        for scan in scans.iter().flatten() {
+            write_scan(&mut out, scan)?;
+        }
+        bar.inc(chunk.len() as u64);
+    }
+    out.flush()?;
+    bar.finish_and_clear();
+    Ok(())
+}
+
+fn scanner_params(args: &Args) -> anyhow::Result<ScannerParams> {
+    let hinge_offset = match args.hinge_offset.as_deref() {
+        None => None,
+        Some(&[x, y, z]) => Some([x, y, z]),
+        Some(v) => bail!("--hinge-offset needs 3 numbers x,y,z, not {}", v.len()),
+    };
+    let params = ScannerParams {
+        rays: args.rays,
+        fov: args.fov.to_radians(),
+        max_range: args.max_range,
+        noise_sigma: args.noise,
+        hinge_offset,
+        write_sigma: args.with_sigma,
+    };
+    params.validate()?;
+    Ok(params)
 }

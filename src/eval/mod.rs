@@ -1,1 +1,2 @@
 //! The paper's experiments (sect. 8) and trajectory metrics.
+pub mod metrics;

@@ -1,2 +1,27 @@
 //! Scan matching (paper sect. 2.2 and 8.2): ICP point-to-point and point-to-line, pairwise and
 //! against a growing map (metascan).
+//!
+//! - [`solve`]: the exact closed-form least-squares motion for both metrics (Censi 2008).
+//! - [`reference`]: match targets: a scan with line normals and a kd-tree.
+//! - [`icp`]: the ICP loop with trimming (Chetverikov et al. 2002) and a robust kernel.
+//! - [`correlative`]: the coarse correlative search (Olson 2009) that widens the basin.
+//! - [`map`]: the bounded voxel map for metascan matching.
+//! - [`matcher`]: a run of scans, one at a time, with fallback to odometry.
+//!
+//! All of it is pure: points and poses in, poses and reports out.
+
+pub mod correlative;
+pub mod icp;
+pub mod map;
+pub mod matcher;
+pub mod reference;
+pub mod solve;
+
+pub use correlative::{CorrelativeParams, correlative_search};
+pub use icp::{IcpParams, IcpResult, Kernel, Metric, icp};
+pub use map::{MapParams, VoxelMap};
+pub use matcher::{
+    CheckParams, Coarse, FallbackReason, MatchReport, MatchStatus, Matcher, MatcherParams, Mode,
+    RangeParams, match_run, odometry_step, scan_points,
+};
+pub use reference::{Line, NormalParams, ScanReference, Target, estimate_lines};

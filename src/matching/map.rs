@@ -1,0 +1,181 @@
+//! The metascan (paper sect. 2.2, 8.2): a map of all earlier matched scans.
+//!
+//! Kept bounded as KISS-ICP keeps its map (Vizzo et al. 2023): points fall into voxels, each
+//! voxel holds a running mean of its points and of their normals, and only a new voxel adds a
+//! point to the kd-tree (inserted incrementally, never rebuilt). Revisiting a place therefore
+//! costs nothing extra, and the cost per scan depends on the size of the place, not on the
+//! length of the run.
+
+use super::reference::{Line, Neighbour, Target};
+use kiddo::{MutableKdTree, SquaredEuclidean};
+use nalgebra::{Point2, Vector2};
+use std::collections::HashMap;
+
+/// Metascan map settings.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MapParams {
+    /// Voxel edge [m]. Default 0.05.
+    pub voxel_size: f64,
+    /// A voxel stops averaging after this many points, so old well-seen places stay fixed
+    /// and the update cost stays constant [-]. Default 20.
+    pub max_points_per_voxel: u32,
+}
+
+impl Default for MapParams {
+    fn default() -> Self {
+        Self {
+            voxel_size: 0.05,
+            max_points_per_voxel: 20,
+        }
+    }
+}
+
+#[derive(Clone, Debug)]
+struct Voxel {
+    sum: Vector2<f64>,
+    count: u32,
+    normal_sum: Vector2<f64>,
+    normal_count: u32,
+}
+
+/// A voxel map of world-frame points with normals, searchable through a kd-tree.
+pub struct VoxelMap {
+    params: MapParams,
+    index: HashMap<(i64, i64), u32>,
+    voxels: Vec<Voxel>,
+    tree: MutableKdTree<f64, 2>,
+}
+
+impl VoxelMap {
+    pub fn new(params: MapParams) -> Self {
+        Self {
+            params,
+            index: HashMap::new(),
+            voxels: Vec::new(),
+            tree: MutableKdTree::default(),
+        }
+    }
+
+    /// Number of voxels.
+    pub fn len(&self) -> usize {
+        self.voxels.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.voxels.is_empty()
+    }
+
+    /// Adds world-frame points with their world-frame local lines; where a line is known its
+    /// anchor (the denoised point) goes into the map instead of the raw point.
+    pub fn insert(&mut self, points: &[Point2<f64>], lines: &[Option<Line>]) {
+        let v = self.params.voxel_size;
+        for (i, raw) in points.iter().enumerate() {
+            let line = lines.get(i).copied().flatten();
+            let p = line.map_or(*raw, |l| l.anchor);
+            let normal = line.map(|l| l.normal);
+            let key = ((p.x / v).floor() as i64, (p.y / v).floor() as i64);
+            match self.index.get(&key) {
+                Some(&slot) => {
+                    let voxel = &mut self.voxels[slot as usize];
+                    if voxel.count >= self.params.max_points_per_voxel {
+                        continue;
+                    }
+                    voxel.sum += p.coords;
+                    voxel.count += 1;
+                    if let Some(n) = normal {
+                        voxel.normal_sum += n;
+                        voxel.normal_count += 1;
+                    }
+                }
+                None => {
+                    let slot = self.voxels.len() as u32;
+                    // The tree holds the voxel's first point; the mean moves less than a voxel,
+                    // which only makes the neighbour search approximate by that much.
+                    if self.tree.add(&[p.x, p.y], slot).is_err() {
+                        continue;
+                    }
+                    self.index.insert(key, slot);
+                    self.voxels.push(Voxel {
+                        sum: p.coords,
+                        count: 1,
+                        normal_sum: normal.unwrap_or_else(Vector2::zeros),
+                        normal_count: u32::from(normal.is_some()),
+                    });
+                }
+            }
+        }
+    }
+
+    /// Every voxel's mean point, for drawing.
+    pub fn points(&self) -> Vec<Point2<f64>> {
+        self.voxels
+            .iter()
+            .map(|v| Point2::from(v.sum / v.count as f64))
+            .collect()
+    }
+}
+
+impl Target for VoxelMap {
+    fn nearest(&self, p: &Point2<f64>) -> Option<Neighbour> {
+        if self.voxels.is_empty() {
+            return None;
+        }
+        let hit = self
+            .tree
+            .query(&[p.x, p.y])
+            .nearest_one::<SquaredEuclidean<f64>>()
+            .execute();
+        let voxel = self.voxels.get(hit.item as usize)?;
+        let mean = Point2::from(voxel.sum / voxel.count as f64);
+        // Normals that disagree (two sides of a thin wall, a corner) cancel out: keep the
+        // average only when it is clearly one direction.
+        let line = (voxel.normal_count > 0)
+            .then(|| voxel.normal_sum / voxel.normal_count as f64)
+            .filter(|n| n.norm() > 0.8)
+            .map(|n| Line {
+                normal: n.normalize(),
+                anchor: mean,
+            });
+        Some(Neighbour {
+            point: mean,
+            line,
+            dist2: (mean - p).norm_squared(),
+        })
+    }
+
+    fn len(&self) -> usize {
+        self.voxels.len()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn revisiting_adds_no_voxels() {
+        let pts: Vec<Point2<f64>> = (0..100)
+            .map(|i| Point2::new(0.01 * i as f64, 1.0))
+            .collect();
+        let normals: Vec<Option<Line>> = pts
+            .iter()
+            .map(|p| {
+                Some(Line {
+                    normal: Vector2::new(0.0, -1.0),
+                    anchor: *p,
+                })
+            })
+            .collect();
+        let mut map = VoxelMap::new(MapParams::default());
+        map.insert(&pts, &normals);
+        let after_first = map.len();
+        for _ in 0..30 {
+            map.insert(&pts, &normals);
+        }
+        assert_eq!(map.len(), after_first);
+        assert_eq!(after_first, 20);
+        let nb = map.nearest(&Point2::new(0.5, 1.2)).unwrap();
+        assert!((nb.point.y - 1.0).abs() < 1e-12);
+        assert_eq!(nb.line.map(|l| l.normal), Some(Vector2::new(0.0, -1.0)));
+    }
+}

@@ -1,0 +1,237 @@
+//! What a scan is matched against: points with line normals and a kd-tree over them.
+//!
+//! Normals come from the reference scan's own neighbours in ray order (Censi 2008 uses the
+//! segment through the two nearest points; a small line fit is steadier under noise). Near a
+//! corner the centred window straddles two walls, so the one-sided windows are tried as well
+//! and the flattest fit wins.
+
+use kiddo::{ImmutableKdTree, SquaredEuclidean};
+use nalgebra::{Matrix2, Point2, Vector2};
+
+/// The nearest reference point to a query.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Neighbour {
+    pub point: Point2<f64>,
+    /// The reference surface there, when its neighbourhood is a line (not a corner, clutter
+    /// or a lone point).
+    pub line: Option<Line>,
+    /// Squared distance from the query [m²].
+    pub dist2: f64,
+}
+
+/// Anything a scan can be matched against: one scan (pairwise) or the map (metascan).
+pub trait Target {
+    fn nearest(&self, p: &Point2<f64>) -> Option<Neighbour>;
+    /// Number of points (0 means nothing to match against).
+    fn len(&self) -> usize;
+    fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+}
+
+/// A local line fitted through a reference point's neighbours.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Line {
+    /// Unit normal, facing the scanner.
+    pub normal: Vector2<f64>,
+    /// The reference point moved onto the fitted line: the fit averages the range noise of
+    /// its neighbours, so point-to-line residuals measure from here rather than from the raw,
+    /// noisy point.
+    pub anchor: Point2<f64>,
+}
+
+/// Normal estimation settings.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct NormalParams {
+    /// Neighbours on each side (in ray order) used for the line fit [rays]. Default 3.
+    pub window: usize,
+    /// A larger step between consecutive points ends the neighbourhood [m]. Default 0.3.
+    pub max_gap: f64,
+    /// Largest accepted thickness of the fit, sqrt(λ_min / λ_max) of the scatter [-].
+    /// Default 0.15.
+    pub max_thickness: f64,
+}
+
+impl Default for NormalParams {
+    fn default() -> Self {
+        Self {
+            window: 3,
+            max_gap: 0.3,
+            max_thickness: 0.15,
+        }
+    }
+}
+
+/// Local lines of points given in scan order, seen from `sensor` (normals face it).
+pub fn estimate_lines(
+    points: &[Point2<f64>],
+    sensor: &Point2<f64>,
+    params: &NormalParams,
+) -> Vec<Option<Line>> {
+    let n = points.len();
+    // Chain break before index i when the step from i-1 is too long.
+    let gap_before: Vec<bool> = (0..n)
+        .map(|i| i > 0 && (points[i] - points[i - 1]).norm() > params.max_gap)
+        .collect();
+    (0..n)
+        .map(|i| {
+            let mut lo = i;
+            while lo > 0 && i - lo < params.window && !gap_before[lo] {
+                lo -= 1;
+            }
+            let mut hi = i;
+            while hi + 1 < n && hi - i < params.window && !gap_before[hi + 1] {
+                hi += 1;
+            }
+            let best = [(lo, hi), (lo, i), (i, hi)]
+                .into_iter()
+                .filter(|(a, b)| b - a >= 2)
+                .filter_map(|(a, b)| line_fit(&points[a..=b]))
+                .min_by(|x, y| x.1.total_cmp(&y.1))?;
+            let (mut normal, thickness, centroid) = best;
+            if thickness > params.max_thickness {
+                return None;
+            }
+            if normal.dot(&(sensor - points[i])) < 0.0 {
+                normal = -normal;
+            }
+            let anchor = points[i] - normal * normal.dot(&(points[i] - centroid));
+            Some(Line { normal, anchor })
+        })
+        .collect()
+}
+
+/// Total-least-squares line through `pts`: (unit normal, thickness sqrt(λ_min/λ_max), centroid).
+fn line_fit(pts: &[Point2<f64>]) -> Option<(Vector2<f64>, f64, Point2<f64>)> {
+    let k = pts.len() as f64;
+    let mean = pts.iter().fold(Vector2::zeros(), |acc, p| acc + p.coords) / k;
+    let mut cov = Matrix2::zeros();
+    for p in pts {
+        let d = p.coords - mean;
+        cov += d * d.transpose();
+    }
+    let eig = cov.symmetric_eigen();
+    let (imin, imax) = if eig.eigenvalues[0] <= eig.eigenvalues[1] {
+        (0, 1)
+    } else {
+        (1, 0)
+    };
+    let lmax = eig.eigenvalues[imax];
+    if lmax <= 0.0 {
+        return None;
+    }
+    let thickness = (eig.eigenvalues[imin].max(0.0) / lmax).sqrt();
+    Some((
+        eig.eigenvectors.column(imin).into_owned(),
+        thickness,
+        Point2::from(mean),
+    ))
+}
+
+/// One scan as a match target: its points, their local lines and a kd-tree.
+pub struct ScanReference {
+    points: Vec<Point2<f64>>,
+    lines: Vec<Option<Line>>,
+    tree: Option<ImmutableKdTree<f64, 2>>,
+}
+
+impl ScanReference {
+    /// Points in scan order, in the reference frame, seen from `sensor` in that frame.
+    pub fn new(points: Vec<Point2<f64>>, sensor: &Point2<f64>, params: &NormalParams) -> Self {
+        let lines = estimate_lines(&points, sensor, params);
+        Self::with_lines(points, lines)
+    }
+
+    pub fn with_lines(points: Vec<Point2<f64>>, lines: Vec<Option<Line>>) -> Self {
+        let coords: Vec<[f64; 2]> = points.iter().map(|p| [p.x, p.y]).collect();
+        let tree = if coords.is_empty() {
+            None
+        } else {
+            ImmutableKdTree::new_from_slice(&coords).ok()
+        };
+        Self {
+            points,
+            lines,
+            tree,
+        }
+    }
+
+    pub fn points(&self) -> &[Point2<f64>] {
+        &self.points
+    }
+
+    pub fn lines(&self) -> &[Option<Line>] {
+        &self.lines
+    }
+}
+
+impl Target for ScanReference {
+    fn nearest(&self, p: &Point2<f64>) -> Option<Neighbour> {
+        let tree = self.tree.as_ref()?;
+        let hit = tree
+            .query(&[p.x, p.y])
+            .nearest_one::<SquaredEuclidean<f64>>()
+            .execute();
+        let i = hit.item as usize;
+        Some(Neighbour {
+            point: self.points[i],
+            line: self.lines[i],
+            dist2: hit.distance,
+        })
+    }
+
+    fn len(&self) -> usize {
+        self.points.len()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn normals_at_a_corner_follow_each_wall() {
+        // An L: wall along y = 2 (x from -1 to 0), then wall along x = 0 (y from 2 down to 0).
+        let mut pts: Vec<Point2<f64>> = (0..10)
+            .map(|i| Point2::new(-1.0 + 0.1 * i as f64, 2.0))
+            .collect();
+        pts.extend((0..10).map(|i| Point2::new(0.0, 2.0 - 0.1 * i as f64)));
+        let lines = estimate_lines(&pts, &Point2::new(-1.0, 0.0), &NormalParams::default());
+        for (i, l) in lines.iter().enumerate() {
+            let l = l.expect("every point lies on a straight wall");
+            assert!((l.anchor - pts[i]).norm() < 1e-12);
+            let n = l.normal;
+            if i == 10 {
+                // The corner itself lies on both walls; either normal is right.
+                assert!(n.x.abs() < 1e-9 || n.y.abs() < 1e-9);
+                continue;
+            }
+            let expect = if i < 10 {
+                Vector2::new(0.0, -1.0)
+            } else {
+                Vector2::new(-1.0, 0.0)
+            };
+            assert!((n - expect).norm() < 1e-9, "point {i}: {n:?}");
+        }
+    }
+
+    #[test]
+    fn nearest_matches_brute_force() {
+        let pts: Vec<Point2<f64>> = (0..200)
+            .map(|i| {
+                let a = i as f64 * 0.37;
+                Point2::new(a.cos() * (1.0 + 0.01 * i as f64), a.sin() * 2.0)
+            })
+            .collect();
+        let r = ScanReference::with_lines(pts.clone(), vec![None; pts.len()]);
+        for k in 0..50 {
+            let q = Point2::new(-2.0 + 0.08 * k as f64, 1.5 - 0.06 * k as f64);
+            let brute = pts
+                .iter()
+                .map(|p| (p - q).norm_squared())
+                .fold(f64::INFINITY, f64::min);
+            let got = r.nearest(&q).unwrap();
+            assert!((got.dist2 - brute).abs() < 1e-12);
+        }
+    }
+}
