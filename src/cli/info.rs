@@ -2,7 +2,7 @@
 //! the file: poses, scans, rays, elevations, valid fraction, which optional fields are present.
 
 use super::{open_input, open_output};
-use levelscan::formats::ParallelScanReader;
+use levelscan::formats::{CarmenParams, read_any};
 use levelscan::scan::Scan;
 use serde_json::{Value, json};
 use std::collections::{BTreeMap, BTreeSet, HashSet};
@@ -11,22 +11,34 @@ use std::path::PathBuf;
 
 #[derive(clap::Args, Debug)]
 pub struct Args {
-    /// Scan file (JSON Lines, optionally gzipped); standard input when absent or `-`.
+    /// Scan file: JSON Lines or a CARMEN log, optionally gzipped; standard input when absent
+    /// or `-`.
     pub scans: Option<PathBuf>,
+    /// CARMEN `FLASER` maximum range [m]; readings at or beyond it are no return. Default: the
+    /// log's `PARAM robot_front_laser_max`, else 50.
+    #[arg(long)]
+    pub max_range: Option<f64>,
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
     let input = open_input(args.scans.as_deref())?;
+    let carmen = CarmenParams {
+        max_range: args.max_range,
+    };
+    let source = read_any(input.reader, &input.name, carmen)?;
+    let format = source.format();
     let mut summary = Summary::default();
-    for item in ParallelScanReader::new(input.reader, &input.name) {
+    for item in source {
         let (_, scan) = item?;
         summary.add(&scan);
     }
-    let mut out = open_output(None)?;
-    let mut report = summary.into_json();
-    if let Value::Object(m) = &mut report {
-        m.insert("file".into(), json!(input.name));
+    let mut report = serde_json::Map::new();
+    report.insert("file".into(), json!(input.name));
+    report.insert("format".into(), json!(format));
+    if let Value::Object(m) = summary.into_json() {
+        report.extend(m);
     }
+    let mut out = open_output(None)?;
     serde_json::to_writer_pretty(&mut out, &report)?;
     out.write_all(b"\n")?;
     out.flush()?;

@@ -82,7 +82,7 @@ impl<R: BufRead> Iterator for ScanReader<R> {
     }
 }
 
-fn read_error(name: &str, line: usize, e: &io::Error) -> InputError {
+pub(crate) fn read_error(name: &str, line: usize, e: &io::Error) -> InputError {
     let what = if e.kind() == io::ErrorKind::InvalidData {
         "is not valid UTF-8 text".to_string()
     } else {
