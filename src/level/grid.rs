@@ -102,7 +102,10 @@ impl PoseGrid {
 /// noise and 20 degrees of pitch it is worth several degrees on a wall 3 m away.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct PlaneAccumulator {
+    /// Points added.
     pub n: usize,
+    /// Sum of their weights (= n when unweighted).
+    pub weight: f64,
     sum: Vector3<f64>,
     /// Sum of p p^T, upper triangle: xx, xy, xz, yy, yz, zz.
     sum_pp: [f64; 6],
@@ -112,16 +115,23 @@ pub struct PlaneAccumulator {
 
 impl PlaneAccumulator {
     pub fn add(&mut self, gp: &GridPoint) {
+        self.add_weighted(gp, 1.0);
+    }
+
+    /// Adds a point with weight `w` in [0, 1] (robust refits).
+    pub fn add_weighted(&mut self, gp: &GridPoint, w: f64) {
         let p = gp.p.coords;
         let d = gp.dir;
         self.n += 1;
-        self.sum += p;
-        add_outer(&mut self.sum_pp, &p);
-        add_outer(&mut self.sum_dd, &d);
+        self.weight += w;
+        self.sum += p * w;
+        add_outer(&mut self.sum_pp, &(p * w.sqrt()));
+        add_outer(&mut self.sum_dd, &(d * w.sqrt()));
     }
 
     pub fn merge(&mut self, o: &PlaneAccumulator) {
         self.n += o.n;
+        self.weight += o.weight;
         self.sum += o.sum;
         for k in 0..6 {
             self.sum_pp[k] += o.sum_pp[k];
@@ -129,12 +139,25 @@ impl PlaneAccumulator {
         }
     }
 
+    /// The accumulator of the points in `self` but not in `part` (a subset of them).
+    pub fn minus(&self, part: &PlaneAccumulator) -> PlaneAccumulator {
+        let mut out = *self;
+        out.n -= part.n;
+        out.weight -= part.weight;
+        out.sum -= part.sum;
+        for k in 0..6 {
+            out.sum_pp[k] -= part.sum_pp[k];
+            out.sum_dd[k] -= part.sum_dd[k];
+        }
+        out
+    }
+
     /// Fits the plane; `sigma` is the range noise [m] used for the bias correction (0 for none).
     pub fn fit(&self, sigma: f64) -> Option<PlaneFit> {
-        if self.n < 3 {
+        if self.n < 3 || self.weight < 3.0 {
             return None;
         }
-        let nf = self.n as f64;
+        let nf = self.weight;
         let c = self.sum / nf;
         let s = |k: usize| self.sum_pp[k];
         let raw = nalgebra::Matrix3::new(
@@ -173,6 +196,7 @@ impl PlaneAccumulator {
                 ),
             ],
             n: self.n,
+            weight: nf,
             dn2,
             residual_ss,
         })
@@ -201,6 +225,8 @@ pub struct PlaneFit {
     /// The two in-plane eigenpairs of the corrected scatter (eigenvalue [m^2], unit vector).
     pub in_plane: [(f64, Vector3<f64>); 2],
     pub n: usize,
+    /// Sum of the points' weights (= n when unweighted).
+    pub weight: f64,
     /// Mean of (d . n)^2 over the rays: the share of range noise that acts along the normal.
     pub dn2: f64,
     /// Sum of squared distances of the points to the plane [m^2].
@@ -230,7 +256,7 @@ impl PlaneFit {
     /// Observed over expected residual variance (1 for a clean planar patch); more than 1
     /// means the points are not one plane with this noise (a corner, clutter, floor points).
     pub fn misfit_ratio(&self, sigma: f64) -> f64 {
-        let dof = (self.n as f64 - 3.0).max(1.0);
+        let dof = (self.weight - 3.0).max(1.0);
         let expected = (sigma * sigma * self.dn2).max(1e-12) * dof;
         self.residual_ss / expected
     }

@@ -78,6 +78,31 @@ pub struct LevelParams {
     pub min_edge_ratio: f64,
     /// Region growing admits points within this many sigmas of a patch's plane. Default 3.
     pub grow_k: f64,
+    /// Region-growing seeds span about this many range-noise sigmas sideways [1]. Default 6.
+    pub seed_span_sigmas: f64,
+    /// Widest seed [columns]. Default 25.
+    pub max_seed_cols: usize,
+    /// Patches whose residuals exceed this multiple of what the noise explains are tested for
+    /// being two planes [1]. Default 1.1.
+    pub split_misfit: f64,
+    /// F statistic above which two planes replace one [1]. Default 20.
+    pub split_f: f64,
+    /// Nested splits allowed per patch. Default 3.
+    pub split_depth: usize,
+    /// Patches spanning only two scans are used only when the others cannot fix up, and only
+    /// when their normal is at least this far from the robot's up [deg]. Default 60.
+    pub two_row_min_angle_deg: f64,
+    /// Robust reweighting passes of each patch's plane. Default 3.
+    pub plane_iterations: usize,
+    /// Cauchy scale of those passes, in sigmas of each point's noise along the normal [1].
+    /// Default 2.5.
+    pub plane_cauchy: f64,
+    /// Grow the patches a second time without the points at the floor's or ceiling's height
+    /// (robust estimator). Default true.
+    pub flat_pass: bool,
+    /// Height band around the floor and ceiling left out of walls in that pass, on top of
+    /// three sigmas of the range noise along the vertical [m]. Default 0.02.
+    pub flat_margin: f64,
     /// Smallest patch kept [points]. Default 20.
     pub min_patch_points: usize,
     /// Fewer wall quads than this fails the pose (too_few_polygons / facing_floor /
@@ -86,9 +111,14 @@ pub struct LevelParams {
     /// The pose fails as parallel_walls when the smaller eigenvalue of up's information
     /// matrix is below this fraction of the larger [1]. Default 0.01.
     pub parallel_ratio: f64,
-    /// The pose fails as parallel_walls when either attitude sigma exceeds this [deg].
-    /// Default 3.
+    /// The pose fails as parallel_walls when either attitude sigma exceeds this [deg]: the
+    /// walls seen do not pin the attitude down. Default 1.7, so that an accepted attitude is
+    /// within 5 degrees at three sigmas.
     pub max_sigma_deg: f64,
+    /// Factor on the propagated attitude sigmas [1]: the noise model does not see
+    /// segmentation errors (a few floor points in a wall, a corner split a little off), which
+    /// simulations show add about a fifth. Default 1.2.
+    pub sigma_inflation: f64,
     /// Reweighting iterations of the robust estimator. Default 10.
     pub iterations: usize,
 }
@@ -105,10 +135,21 @@ impl Default for LevelParams {
             wall_min_angle_deg: 45.0,
             min_edge_ratio: 0.3,
             grow_k: 3.0,
+            seed_span_sigmas: 6.0,
+            split_misfit: 1.1,
+            two_row_min_angle_deg: 60.0,
+            plane_iterations: 3,
+            flat_pass: true,
+            flat_margin: 0.02,
+            plane_cauchy: 2.5,
+            split_f: 20.0,
+            split_depth: 3,
+            max_seed_cols: 25,
             min_patch_points: 20,
             min_polygons: 3,
             parallel_ratio: 0.01,
-            max_sigma_deg: 3.0,
+            max_sigma_deg: 1.7,
+            sigma_inflation: 1.2,
             iterations: 10,
         }
     }
@@ -237,17 +278,54 @@ pub fn level_pose(scans: &[Scan], params: &LevelParams) -> LevelEstimate {
     };
     let quads = polygons::extract_quads(&grid, params, sigma);
     let (patches, labels) = match params.estimator {
-        Estimator::Robust => patches::grow_patches(&grid, &quads, params, sigma),
+        Estimator::Robust => patches::grow_patches(&grid, &quads, params, sigma, None),
         Estimator::Paper => (Vec::new(), vec![UNLABELLED; grid.points.len()]),
     };
+    let mut est = LevelEstimate {
+        failure: None,
+        attitude: None,
+        sigmas: None,
+        up: None,
+        range_sigma: sigma,
+        base_scan: None,
+        quads,
+        patches,
+        labels,
+        wall_mask: Vec::new(),
+        grid: Some(grid),
+    };
+    let mut result = solve(&est, params, sigma);
+    // Second pass: with up known, points at the floor's or ceiling's height are not wall
+    // points. Walls grown a first time can have swallowed the floor at their foot (within the
+    // noise of the wall's plane, and all on one side of it); growing again without those
+    // points removes that tilt.
+    if params.estimator == Estimator::Robust && params.flat_pass {
+        if let (Ok(sol), Some(grid)) = (&result, &est.grid) {
+            if let Some(blocked) = flat_points(grid, &est.patches, &sol.attitude(), sigma, params) {
+                let (patches, labels) =
+                    patches::grow_patches(grid, &est.quads, params, sigma, Some(&blocked));
+                let first = (
+                    std::mem::replace(&mut est.patches, patches),
+                    std::mem::replace(&mut est.labels, labels),
+                );
+                match solve(&est, params, sigma) {
+                    Ok(sol2) => result = Ok(sol2),
+                    Err(_) => (est.patches, est.labels) = first,
+                }
+            }
+        }
+    }
+    let Some(grid) = &est.grid else {
+        return est;
+    };
     let mut wall_mask = vec![false; grid.points.len()];
-    for q in quads.iter().filter(|q| q.kind == SurfaceKind::Wall) {
+    for q in est.quads.iter().filter(|q| q.kind == SurfaceKind::Wall) {
         for i in q.span(grid.cols) {
             wall_mask[i] = true;
         }
     }
-    for (i, &l) in labels.iter().enumerate() {
-        if l != UNLABELLED && patches[l as usize].kind == SurfaceKind::Wall {
+    for (i, &l) in est.labels.iter().enumerate() {
+        if l != UNLABELLED && est.patches[l as usize].kind == SurfaceKind::Wall {
             wall_mask[i] = true;
         }
     }
@@ -261,29 +339,82 @@ pub fn level_pose(scans: &[Scan], params: &LevelParams) -> LevelEstimate {
             (n, std::cmp::Reverse((grid.elevation[r].abs() * 1e6) as i64))
         })
         .unwrap_or(0);
-    let mut est = LevelEstimate {
-        failure: None,
-        attitude: None,
-        sigmas: None,
-        up: None,
-        range_sigma: sigma,
-        base_scan: Some(grid.scan_index[base_row]),
-        quads,
-        patches,
-        labels,
-        wall_mask,
-        grid: None,
-    };
-    match solve(&est, params, sigma) {
+    est.base_scan = Some(grid.scan_index[base_row]);
+    est.wall_mask = wall_mask;
+    match result {
         Ok(sol) => {
             est.attitude = Some(sol.attitude());
-            est.sigmas = Some(sol.attitude_sigmas());
+            est.sigmas = Some(attitude_sigmas(&sol, params));
             est.up = Some(sol.up);
         }
         Err(reason) => est.failure = Some(reason),
     }
-    est.grid = Some(grid);
     est
+}
+
+/// Points at the height of the floor or ceiling patches once leveled with `att` (within
+/// `flat_margin` plus three sigmas of their range noise along the vertical); `None` when
+/// neither height is known.
+fn flat_points(
+    grid: &PoseGrid,
+    patches: &[Patch],
+    att: &Attitude,
+    sigma: f64,
+    params: &LevelParams,
+) -> Option<Vec<bool>> {
+    let level_from_robot = att.level_from_robot();
+    let height = |kind: SurfaceKind| -> Option<f64> {
+        let mut z: Vec<f64> = patches
+            .iter()
+            .filter(|p| p.kind == kind)
+            .flat_map(|p| p.members.iter())
+            .filter_map(|&i| grid.points[i].as_ref())
+            .map(|g| (level_from_robot * g.p).z)
+            .collect();
+        if z.len() < params.min_patch_points {
+            return None;
+        }
+        let mid = z.len() / 2;
+        let (_, m, _) = z.select_nth_unstable_by(mid, f64::total_cmp);
+        Some(*m)
+    };
+    // Without a floor patch (the walls may have swallowed it), the floor is the lowest
+    // points seen: the 2nd percentile of the leveled heights. If no floor is in view, this
+    // only trims the lowest band of wall points.
+    let floor = height(SurfaceKind::Floor).or_else(|| {
+        let mut z: Vec<f64> = grid
+            .points
+            .iter()
+            .flatten()
+            .map(|g| (level_from_robot * g.p).z)
+            .collect();
+        if z.len() < 50 {
+            return None;
+        }
+        let k = z.len() / 50;
+        let (_, m, _) = z.select_nth_unstable_by(k, f64::total_cmp);
+        (*m < 0.0).then_some(*m)
+    });
+    let ceiling = height(SurfaceKind::Ceiling);
+    if floor.is_none() && ceiling.is_none() {
+        return None;
+    }
+    let s = sigma.max(params.min_sigma);
+    Some(
+        grid.points
+            .iter()
+            .map(|g| {
+                g.as_ref().is_some_and(|g| {
+                    let z = (level_from_robot * g.p).z;
+                    let margin = params.flat_margin + 3.0 * s * (level_from_robot * g.dir).z.abs();
+                    [floor, ceiling]
+                        .iter()
+                        .flatten()
+                        .any(|h| (z - h).abs() < margin)
+                })
+            })
+            .collect(),
+    )
 }
 
 /// Failure detection (sect. 5.5) and the up vector. When the walls seen cannot fix up (too
@@ -339,29 +470,74 @@ fn solve_up(
             up::solution_at(up, &obs, sigma_eff, false)
         }
         Estimator::Robust => {
-            let obs: Vec<PlaneObs> = est
-                .patches
-                .iter()
-                .filter(|p| p.kind == SurfaceKind::Wall)
-                .map(|p| PlaneObs {
-                    fit: &p.fit,
-                    inflate: misfit(&p.fit),
-                })
-                .collect();
-            if obs.is_empty() {
-                return Err(FailReason::TooFewPolygons);
+            // Patches over three or more scans first. A plane through just two scan lines can
+            // be a wall line and a floor line that happen to be coplanar, so two-row patches
+            // only help when the others cannot fix up, and then only clearly vertical ones.
+            let full_rows = params.quad_rows.min(grid_rows(est)).saturating_sub(1);
+            let strict = (params.two_row_min_angle_deg.to_radians()).cos();
+            let obs_with = |two_rows: bool| -> Vec<PlaneObs> {
+                est.patches
+                    .iter()
+                    .filter(|p| p.kind == SurfaceKind::Wall)
+                    .filter(|p| {
+                        p.row_range.1 - p.row_range.0 >= full_rows
+                            || (two_rows && p.fit.normal.z.abs() < strict)
+                    })
+                    .map(|p| PlaneObs {
+                        fit: &p.fit,
+                        inflate: misfit(&p.fit),
+                    })
+                    .collect()
+            };
+            let first = obs_with(false);
+            let attempt = up::up_robust(&first, sigma_eff, params.iterations)
+                .filter(|sol| acceptable(sol, params).is_ok());
+            match attempt {
+                Some(sol) => sol,
+                None => {
+                    let obs = obs_with(true);
+                    if obs.is_empty() {
+                        return Err(FailReason::TooFewPolygons);
+                    }
+                    up::up_robust(&obs, sigma_eff, params.iterations)
+                        .ok_or(FailReason::ParallelWalls)?
+                }
             }
-            up::up_robust(&obs, sigma_eff, params.iterations).ok_or(FailReason::ParallelWalls)?
         }
     };
+    acceptable(&sol, params)?;
+    Ok(sol)
+}
+
+fn grid_rows(est: &LevelEstimate) -> usize {
+    est.grid.as_ref().map_or_else(
+        || {
+            est.patches
+                .iter()
+                .map(|p| p.row_range.1 + 1)
+                .max()
+                .unwrap_or(0)
+        },
+        |g| g.rows(),
+    )
+}
+
+/// The reported 1-sigma of theta_x and theta_y [rad]: the propagated covariance, scaled by
+/// `sigma_inflation`.
+fn attitude_sigmas(sol: &UpSolution, params: &LevelParams) -> [f64; 2] {
+    sol.attitude_sigmas().map(|s| s * params.sigma_inflation)
+}
+
+/// The parallel-walls test: up must be pinned down in both tangent directions.
+fn acceptable(sol: &UpSolution, params: &LevelParams) -> Result<(), FailReason> {
     let (lo, hi) = sol.info_eigenvalues;
     if hi.is_nan() || hi <= 0.0 || lo < params.parallel_ratio * hi {
         return Err(FailReason::ParallelWalls);
     }
-    let s = sol.attitude_sigmas();
+    let s = attitude_sigmas(sol, params);
     let max_sigma = params.max_sigma_deg.to_radians();
     if !(s[0] <= max_sigma && s[1] <= max_sigma) {
         return Err(FailReason::ParallelWalls);
     }
-    Ok(sol)
+    Ok(())
 }

@@ -19,45 +19,88 @@ pub struct Patch {
     pub row_range: (usize, usize),
 }
 
+/// Seed width [columns]: the paper's quad width, or wider where the range noise would leave a
+/// quad's plane undetermined. A seed should span about `seed_span_sigmas` noise sigmas sideways
+/// at the grid's median range, so its normal is good to a few degrees and growth follows the
+/// true surface instead of wandering across a corner.
+pub fn seed_cols(grid: &PoseGrid, params: &LevelParams, sigma: f64) -> usize {
+    let mut ranges: Vec<f64> = grid.points.iter().flatten().map(|g| g.range).collect();
+    if ranges.is_empty() || grid.cols < 2 {
+        return params.quad_cols;
+    }
+    let mid = ranges.len() / 2;
+    let (_, r, _) = ranges.select_nth_unstable_by(mid, f64::total_cmp);
+    let r = *r;
+    // Angular step from the directions of the first row's consecutive valid rays.
+    let step = (0..grid.cols - 1)
+        .find_map(|c| {
+            let (a, b) = (grid.at(0, c)?, grid.at(0, c + 1)?);
+            Some(a.dir.angle(&b.dir))
+        })
+        .unwrap_or(1f64.to_radians());
+    let want = (params.seed_span_sigmas * sigma / (r * step).max(1e-9)).ceil() as usize + 1;
+    want.clamp(params.quad_cols, params.max_seed_cols.max(params.quad_cols))
+}
+
 /// No patch.
 pub const UNLABELLED: u32 = u32::MAX;
+/// Kept out of every patch while growing.
+const BLOCKED: u32 = u32::MAX - 1;
 
-/// Grows patches from the quads (best-fitting first), then from two-row quads over what is left
-/// (a wall that only two scans reach, e.g. ahead of a robot pitched towards the floor). A neighbouring grid point (same column in
-/// the next row, or next column in the same row) joins when it lies within `grow_k * sigma` of
-/// the patch's current plane; the plane is refitted as the patch grows. Finally members farther
-/// than that from the final plane are released and the plane refitted once more.
+/// Grows patches from seed quads: walls first, best-fitting first, then floors and ceilings;
+/// three-row seeds before two-row ones (a wall that only two scans reach, e.g. ahead of a robot
+/// pitched towards the floor). Seeds are as wide as the paper's quads at low noise and wider at
+/// high noise ([`seed_cols`]), since a seed's plane must be good enough to grow from.
+/// A neighbouring grid point (same column in the next row, or next column in the same row)
+/// joins when it lies within `grow_k * sigma` of the patch's current plane; the plane is
+/// refitted as the patch grows. Finally members farther than that from the final plane are
+/// released and the plane refitted once more.
 /// Returns the patches and, per grid point, the index of its patch or [`UNLABELLED`].
+/// Points marked in `blocked` join no patch.
 pub fn grow_patches(
     grid: &PoseGrid,
     quads: &[Polygon],
     params: &LevelParams,
     sigma: f64,
+    blocked: Option<&[bool]>,
 ) -> (Vec<Patch>, Vec<u32>) {
     let n = grid.points.len();
     let cols = grid.cols;
     let mut labels = vec![UNLABELLED; n];
+    if let Some(b) = blocked {
+        for (l, &b) in labels.iter_mut().zip(b) {
+            if b {
+                *l = BLOCKED;
+            }
+        }
+    }
     let mut patches = Vec::new();
     let tol = params.grow_k * sigma.max(params.min_sigma);
-    let by_fit = |qs: &[Polygon]| {
-        let mut order: Vec<usize> = (0..qs.len()).collect();
-        order.sort_by(|&a, &b| {
-            let qa = qs[a].fit.residual_ss / qs[a].fit.n as f64;
-            let qb = qs[b].fit.residual_ss / qs[b].fit.n as f64;
-            qa.total_cmp(&qb).then(a.cmp(&b))
-        });
-        order
+    let width = seed_cols(grid, params, sigma);
+    let wide: Vec<Polygon>;
+    let three_row: &[Polygon] = if width == params.quad_cols {
+        quads
+    } else {
+        wide = extract_quads_sized(grid, params, sigma, params.quad_rows, width);
+        &wide
     };
     let two_row: Vec<Polygon> = if params.quad_rows > 2 {
-        extract_quads_sized(grid, params, sigma, 2, params.quad_cols)
+        extract_quads_sized(grid, params, sigma, 2, width)
     } else {
         Vec::new()
     };
-    let seeds: Vec<&Polygon> = by_fit(quads)
-        .into_iter()
-        .map(|i| &quads[i])
-        .chain(by_fit(&two_row).into_iter().map(|i| &two_row[i]))
+    let mut seeds: Vec<(u8, f64, usize, &Polygon)> = three_row
+        .iter()
+        .map(|q| (0u8, q))
+        .chain(two_row.iter().map(|q| (1u8, q)))
+        .enumerate()
+        .map(|(i, (band, q))| {
+            let rank = band + if q.kind == SurfaceKind::Wall { 0 } else { 2 };
+            (rank, q.fit.residual_ss / q.fit.n as f64, i, q)
+        })
         .collect();
+    seeds.sort_by(|a, b| a.0.cmp(&b.0).then(a.1.total_cmp(&b.1)).then(a.2.cmp(&b.2)));
+    let seeds: Vec<&Polygon> = seeds.into_iter().map(|s| s.3).collect();
     let mut queue = VecDeque::new();
     let mut members = Vec::new();
     for q in seeds {
@@ -131,25 +174,182 @@ pub fn grow_patches(
                 false
             }
         });
-        let (lo, hi) = members.iter().fold((usize::MAX, 0), |(lo, hi), &i| {
-            (lo.min(i / cols), hi.max(i / cols))
-        });
-        let fit = kept.fit(sigma);
-        match fit {
-            Some(fit) if members.len() >= params.min_patch_points && hi > lo => {
-                patches.push(Patch {
-                    kind: classify(&fit.normal, &fit.centroid, params),
-                    fit,
-                    members: members.clone(),
-                    row_range: (lo, hi),
-                });
-            }
-            _ => {
+        match make_patch(grid, &members, params, sigma) {
+            Some(p) => patches.push(p),
+            None => {
                 for &i in &members {
                     labels[i] = UNLABELLED;
                 }
             }
         }
     }
-    (patches, labels)
+    // Split patches that are really two planes (grown across a corner or a wall's foot),
+    // then label the points afresh.
+    let mut split = Vec::with_capacity(patches.len());
+    for p in patches {
+        if p.fit.misfit_ratio(sigma.max(params.min_sigma)) <= params.split_misfit {
+            split.push(p);
+            continue;
+        }
+        for part in split_members(grid, &p.members, params, sigma, params.split_depth) {
+            split.extend(release_and_make(grid, &part, params, sigma, tol));
+        }
+    }
+    labels.fill(UNLABELLED);
+    for (id, p) in split.iter().enumerate() {
+        for &i in &p.members {
+            labels[i] = id as u32;
+        }
+    }
+    (split, labels)
+}
+
+fn rows_span(members: &[usize], cols: usize) -> (usize, usize) {
+    members
+        .iter()
+        .fold((usize::MAX, 0), |(lo, hi), &i| (lo.min(i / cols), hi.max(i / cols)))
+}
+
+/// A patch from members when it is big enough and spans at least two rows (one row is a
+/// line, which leaves its plane free to turn about it).
+fn make_patch(grid: &PoseGrid, members: &[usize], params: &LevelParams, sigma: f64) -> Option<Patch> {
+    let (lo, hi) = rows_span(members, grid.cols);
+    if members.len() < params.min_patch_points || hi <= lo {
+        return None;
+    }
+    let fit = robust_fit(grid, members, params, sigma)?;
+    Some(Patch {
+        kind: classify(&fit.normal, &fit.centroid, params),
+        fit,
+        members: members.to_vec(),
+        row_range: (lo, hi),
+    })
+}
+
+/// Drops members farther than `tol` from the members' plane, then makes the patch.
+fn release_and_make(
+    grid: &PoseGrid,
+    members: &[usize],
+    params: &LevelParams,
+    sigma: f64,
+    tol: f64,
+) -> Option<Patch> {
+    let fit = accumulate(grid, members).fit(sigma)?;
+    let kept: Vec<usize> = members
+        .iter()
+        .copied()
+        .filter(|&i| grid.points[i].as_ref().is_some_and(|g| fit.distance(&g.p).abs() <= tol))
+        .collect();
+    make_patch(grid, &kept, params, sigma)
+}
+
+/// The patch's plane refitted with Cauchy weights on each point's residual over its own noise
+/// along the normal (`sigma |d . n|`), so that the few floor points caught at a wall's foot,
+/// all on one side of it, stop tilting the wall.
+fn robust_fit(grid: &PoseGrid, members: &[usize], params: &LevelParams, sigma: f64) -> Option<PlaneFit> {
+    let mut fit = accumulate(grid, members).fit(sigma)?;
+    let s = sigma.max(params.min_sigma);
+    for _ in 0..params.plane_iterations {
+        let mut acc = PlaneAccumulator::default();
+        for g in members.iter().filter_map(|&i| grid.points[i].as_ref()) {
+            let sd = s * g.dir.dot(&fit.normal).abs().max(0.3);
+            let z = fit.distance(&g.p) / (params.plane_cauchy * sd);
+            acc.add_weighted(g, 1.0 / (1.0 + z * z));
+        }
+        fit = acc.fit(sigma)?;
+    }
+    Some(fit)
+}
+
+fn accumulate(grid: &PoseGrid, members: &[usize]) -> PlaneAccumulator {
+    let mut acc = PlaneAccumulator::default();
+    for g in members.iter().filter_map(|&i| grid.points[i].as_ref()) {
+        acc.add(g);
+    }
+    acc
+}
+
+/// Splits a patch's members into planes while two planes explain them significantly better
+/// than one: the best split by column (walls meet at corners, which are column ranges) or by
+/// row (contiguous splits only: freely reassigning points would split one noisy plane into two
+/// parallel ones and fool the test), accepted by an F test on the residual sums of squares, `F = ((RSS1 - RSS2) / 3) / (RSS2 / (n - 6))`,
+/// which needs no noise level. Recurses into the parts up to `depth` times.
+pub fn split_members(
+    grid: &PoseGrid,
+    members: &[usize],
+    params: &LevelParams,
+    sigma: f64,
+    depth: usize,
+) -> Vec<Vec<usize>> {
+    let whole = vec![members.to_vec()];
+    if depth == 0 || members.len() < 2 * params.min_patch_points {
+        return whole;
+    }
+    let cols = grid.cols;
+    let Some(fit_all) = accumulate(grid, members).fit(sigma) else {
+        return whole;
+    };
+    let rss1 = fit_all.residual_ss;
+    let mut best: Option<(f64, Vec<usize>, Vec<usize>)> = None;
+    for by_row in [false, true] {
+        let key = |i: usize| if by_row { i / cols } else { i % cols };
+        let mut sorted: Vec<usize> = members.to_vec();
+        sorted.sort_by_key(|&i| (key(i), i));
+        // Group boundaries where the key changes.
+        let bounds: Vec<usize> = (1..sorted.len())
+            .filter(|&k| key(sorted[k]) != key(sorted[k - 1]))
+            .collect();
+        let mut prefix = Vec::with_capacity(sorted.len() + 1);
+        let mut acc = PlaneAccumulator::default();
+        prefix.push(acc);
+        for &i in &sorted {
+            if let Some(g) = &grid.points[i] {
+                acc.add(g);
+            }
+            prefix.push(acc);
+        }
+        let total = acc;
+        for &b in &bounds {
+            let (left, right) = (&sorted[..b], &sorted[b..]);
+            if left.len() < params.min_patch_points / 2 || right.len() < params.min_patch_points / 2 {
+                continue;
+            }
+            let (l_lo, l_hi) = rows_span(left, cols);
+            let (r_lo, r_hi) = rows_span(right, cols);
+            if l_hi <= l_lo || r_hi <= r_lo {
+                continue;
+            }
+            let l = prefix[b];
+            let r = total.minus(&l);
+            let (Some(fl), Some(fr)) = (l.fit(sigma), r.fit(sigma)) else {
+                continue;
+            };
+            let rss2 = fl.residual_ss + fr.residual_ss;
+            if best.as_ref().is_none_or(|(br, _, _)| rss2 < *br) {
+                best = Some((rss2, left.to_vec(), right.to_vec()));
+            }
+        }
+    }
+    let Some((_, a, b)) = best else {
+        return whole;
+    };
+    let ok = |m: &[usize]| {
+        let (lo, hi) = rows_span(m, cols);
+        m.len() >= params.min_patch_points / 2 && hi > lo
+    };
+    if !ok(&a) || !ok(&b) {
+        return whole;
+    }
+    let (Some(fa), Some(fb)) = (accumulate(grid, &a).fit(sigma), accumulate(grid, &b).fit(sigma)) else {
+        return whole;
+    };
+    let rss2 = fa.residual_ss + fb.residual_ss;
+    let n = members.len() as f64;
+    let f = ((rss1 - rss2) / 3.0) / (rss2 / (n - 6.0)).max(1e-300);
+    if !(f > params.split_f) {
+        return whole;
+    }
+    let mut out = split_members(grid, &a, params, sigma, depth - 1);
+    out.extend(split_members(grid, &b, params, sigma, depth - 1));
+    out
 }

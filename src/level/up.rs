@@ -107,26 +107,63 @@ fn tangent_basis(up: &Vector3<f64>) -> [Vector3<f64>; 2] {
 /// Cauchy scale for the robust weights, in standard deviations.
 const CAUCHY_C: f64 = 2.385;
 
+/// Largest tilt of the robot considered [rad]: the paper assumes floors below 45 degrees.
+const MAX_TILT: f64 = 50.0 * std::f64::consts::PI / 180.0;
+
 /// Iteratively reweighted least squares for up over plane fits with range noise `sigma` [m].
-/// `None` with fewer than two planes or when the problem is degenerate.
+///
+/// A wrongly extracted plane (a seed across a wall's foot, clutter) can outweigh the good ones
+/// in a plain weighted fit, and reweighting from a bad start only confirms it. So the start is
+/// chosen robustly: every pair of planes proposes up as the cross product of their normals
+/// (the paper's two-polygon solution, sect. 5.3), as does the plain weighted fit, and the
+/// proposal with the least total Cauchy loss over all planes wins; only proposals within
+/// 50 degrees of the robot's own up are considered. `None` with fewer than two planes or when
+/// no proposal qualifies.
 pub fn up_robust(planes: &[PlaneObs], sigma: f64, iterations: usize) -> Option<UpSolution> {
     if planes.len() < 2 {
         return None;
     }
-    // Start from point-count weights (no variance model yet).
+    let min_z = MAX_TILT.cos();
+    let mut candidates: Vec<Vector3<f64>> = Vec::new();
     let mut m = Matrix3::zeros();
     for p in planes {
         m += p.fit.normal * p.fit.normal.transpose() * p.fit.n as f64;
     }
-    let mut up = smallest_eigenvector(&m)?;
-    for it in 0..iterations.max(1) {
+    if let Some(v) = smallest_eigenvector(&m) {
+        candidates.push(v);
+    }
+    for (i, a) in planes.iter().enumerate() {
+        for b in &planes[i + 1..] {
+            let c = a.fit.normal.cross(&b.fit.normal);
+            // Nearly parallel normals propose nothing reliable.
+            if c.norm() < 0.17 {
+                continue;
+            }
+            let c = c.normalize();
+            candidates.push(if c.z < 0.0 { -c } else { c });
+        }
+    }
+    let loss = |up: &Vector3<f64>| -> f64 {
+        planes
+            .iter()
+            .map(|p| {
+                let z = p.fit.normal.dot(up) / p.variance(up, sigma).sqrt();
+                (1.0 + (z / CAUCHY_C).powi(2)).ln()
+            })
+            .sum()
+    };
+    let mut up = candidates
+        .into_iter()
+        .filter(|c| c.z >= min_z)
+        .map(|c| (loss(&c), c))
+        .min_by(|a, b| a.0.total_cmp(&b.0))?
+        .1;
+    for _ in 0..iterations.max(1) {
         let mut m = Matrix3::zeros();
         for p in planes {
             let var = p.variance(&up, sigma);
             let z = p.fit.normal.dot(&up) / var.sqrt();
-            // The first pass is plain weighted least squares: the start may be poor.
-            let robust = if it == 0 { 1.0 } else { cauchy(z) };
-            m += p.fit.normal * p.fit.normal.transpose() * (robust / var);
+            m += p.fit.normal * p.fit.normal.transpose() * (cauchy(z) / var);
         }
         let next = smallest_eigenvector(&m)?;
         let change = (next - up).norm();
@@ -134,6 +171,9 @@ pub fn up_robust(planes: &[PlaneObs], sigma: f64, iterations: usize) -> Option<U
         if change < 1e-10 {
             break;
         }
+    }
+    if up.z < min_z {
+        return None;
     }
     Some(solution_at(up, planes, sigma, true))
 }
