@@ -163,12 +163,14 @@ enum Kind {
     Matched,
 }
 
+/// A record that went through `match` is shown where the matcher put it, even when it was
+/// `level` output before.
 fn kind_of(scan: &Scan) -> Kind {
-    if scan.extra.contains_key("level") {
+    if scan.extra.contains_key("match") {
+        Kind::Matched
+    } else if scan.extra.contains_key("level") {
         Kind::Leveled
-    } else if scan.extra.contains_key("match")
-        || (scan.elevation.is_none() && scan.estimate.is_some())
-    {
+    } else if scan.elevation.is_none() && scan.estimate.is_some() {
         Kind::Matched
     } else {
         Kind::Raw
