@@ -23,8 +23,8 @@ use levelscan::simulate::{
 use levelscan::viz::histogram;
 use levelscan::viz::html::{Source, ViewParams, build_scene, viewer_page};
 use levelscan::viz::plots::{
-    AccuracyCell, MapPanel, grouped_bars_png, grouped_bars_svg, map_panels_png,
-    map_panels_svg, table_one_chart,
+    AccuracyCell, MapPanel, grouped_bars_png, grouped_bars_svg, map_panels_png, map_panels_svg,
+    table_one_chart,
 };
 use levelscan::viz::report::{Block, Figure, Panel, Report, Section, Table, render};
 use nalgebra::Point2;
@@ -127,7 +127,10 @@ struct MatchedRun {
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
-    anyhow::ensure!(args.scans >= 3, "--scans: leveling needs at least 3 scans per pose");
+    anyhow::ensure!(
+        args.scans >= 3,
+        "--scans: leveling needs at least 3 scans per pose"
+    );
     anyhow::ensure!(args.noise >= 0.0, "--noise: must not be negative");
     let plan = parse_plan(OFFICE, "office.wall")?;
     std::fs::create_dir_all(&args.out)
@@ -143,7 +146,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     // 1. Simulate: the tilted run, and the same path on a level floor as the reference.
     stages.set_message("simulate");
     let (tilted, flat, truth) = simulate_run(&plan, &args);
-    write_jsonl(&args.out.join("scans_tilted.jsonl"), tilted.iter().flatten())?;
+    write_jsonl(
+        &args.out.join("scans_tilted.jsonl"),
+        tilted.iter().flatten(),
+    )?;
     stages.inc(1);
     lap("simulate", &mut timings);
 
@@ -161,14 +167,20 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             )
         })
         .collect();
-    write_jsonl(&args.out.join("leveled.jsonl"), leveled.iter().map(|(s, _)| s))?;
+    write_jsonl(
+        &args.out.join("leveled.jsonl"),
+        leveled.iter().map(|(s, _)| s),
+    )?;
     let level = level_summary(&tilted, &leveled);
     stages.inc(1);
     lap("level", &mut timings);
 
     // 3. Match level-floor, raw and leveled scans, pairwise and metascan (sect. 8.2).
     stages.set_message("match");
-    let raw: Vec<Scan> = tilted.iter().map(|scans| nearest_level_scan(scans)).collect();
+    let raw: Vec<Scan> = tilted
+        .iter()
+        .map(|scans| nearest_level_scan(scans))
+        .collect();
     let leveled_scans: Vec<Scan> = leveled.iter().map(|(s, _)| s.clone()).collect();
     let inputs: [(&str, &[Scan]); 3] = [
         ("level floor", &flat),
@@ -347,16 +359,17 @@ fn level_summary(tilted: &[Vec<Scan>], leveled: &[(Scan, Option<Attitude>)]) -> 
         .map(|(scans, (record, attitude))| {
             let level = record.extra.get("level");
             let field = |k: &str| level.and_then(|l| l.get(k));
-            let truth = scans.first().and_then(|s| s.true_pose).map(|p| p.attitude());
+            let truth = scans
+                .first()
+                .and_then(|s| s.true_pose)
+                .map(|p| p.attitude());
             PoseLevel {
                 sequence: record.sequence.unwrap_or(0),
                 status: field("status")
                     .and_then(|v| v.as_str())
                     .unwrap_or("failed")
                     .to_string(),
-                reason: field("reason")
-                    .and_then(|v| v.as_str())
-                    .map(str::to_string),
+                reason: field("reason").and_then(|v| v.as_str()).map(str::to_string),
                 error_deg: attitude
                     .zip(truth)
                     .map(|(a, t)| a.max_abs_error(&t).to_degrees()),
@@ -377,8 +390,8 @@ fn level_summary(tilted: &[Vec<Scan>], leveled: &[(Scan, Option<Attitude>)]) -> 
 }
 
 fn write_jsonl<'a>(path: &Path, scans: impl Iterator<Item = &'a Scan>) -> anyhow::Result<()> {
-    let file =
-        std::fs::File::create(path).with_context(|| format!("{}: cannot create", path.display()))?;
+    let file = std::fs::File::create(path)
+        .with_context(|| format!("{}: cannot create", path.display()))?;
     let mut w = std::io::BufWriter::new(file);
     for s in scans {
         write_scan(&mut w, s).with_context(|| format!("{}: cannot write", path.display()))?;
@@ -612,8 +625,10 @@ fn matched_scene(
     )
 }
 
+/// Three decimals, or "-" for a missing or undefined number (a cell with no leveled pose).
 fn fmt_m(v: Option<f64>) -> String {
-    v.map_or("-".into(), |v| format!("{v:.3}"))
+    v.filter(|v| v.is_finite())
+        .map_or("-".into(), |v| format!("{v:.3}"))
 }
 
 fn row_of<'a>(data: &'a DemoData, run: &str, mode: &str) -> Option<&'a MatchRow> {
@@ -651,12 +666,7 @@ fn build_report(
     matched_view: levelscan::viz::html::Scene,
 ) -> Report {
     let s = &data.settings;
-    let metric = |run: &str, mode: &str| {
-        format!(
-            "ATE {} m",
-            fmt_m(ate_of(data, run, mode))
-        )
-    };
+    let metric = |run: &str, mode: &str| format!("ATE {} m", fmt_m(ate_of(data, run, mode)));
     let [raw_meta, lev_meta] = figures.metascan;
     let [raw_pair, lev_pair] = figures.pairwise;
     let headline = vec![
@@ -686,12 +696,14 @@ fn build_report(
                 r.mode.clone(),
                 fmt_m(r.ate.map(|a| a.rmse)),
                 fmt_m(r.ate.map(|a| a.max)),
-                r.rpe
-                    .map_or("-".into(), |p| format!("{:.1}", p.median_translation * 1000.0)),
+                r.rpe.map_or("-".into(), |p| {
+                    format!("{:.1}", p.median_translation * 1000.0)
+                }),
                 r.rpe
                     .map_or("-".into(), |p| format!("{:.1}", p.p95_translation * 1000.0)),
-                r.rpe
-                    .map_or("-".into(), |p| format!("{:.2}", p.median_rotation.to_degrees())),
+                r.rpe.map_or("-".into(), |p| {
+                    format!("{:.2}", p.median_rotation.to_degrees())
+                }),
                 r.rpe
                     .map_or("-".into(), |p| format!("{} / {}", p.bad_pairs, p.pairs)),
                 format!("{} / {}", r.fallbacks, r.scans),
@@ -701,28 +713,26 @@ fn build_report(
     let matching = Section {
         id: "matching".into(),
         title: "Scan matching: raw vs leveled (sect. 8.2)".into(),
-        blocks: vec![
-            Block::Table(Table {
-                caption: "ATE: RMSE of positions after the best SE(2) alignment. RPE over \
+        blocks: vec![Block::Table(Table {
+            caption: "ATE: RMSE of positions after the best SE(2) alignment. RPE over \
                           consecutive pairs; a bad pair is off by more than 5 cm or 1 degree. \
                           Fallback: the step came from odometry."
-                    .into(),
-                header: [
-                    "scans",
-                    "mode",
-                    "ATE [m]",
-                    "ATE max [m]",
-                    "RPE median [mm]",
-                    "RPE p95 [mm]",
-                    "RPE median [deg]",
-                    "bad pairs",
-                    "fallbacks",
-                ]
-                .map(String::from)
-                .to_vec(),
-                rows: matching_rows,
-            }),
-        ],
+                .into(),
+            header: [
+                "scans",
+                "mode",
+                "ATE [m]",
+                "ATE max [m]",
+                "RPE median [mm]",
+                "RPE p95 [mm]",
+                "RPE median [deg]",
+                "bad pairs",
+                "fallbacks",
+            ]
+            .map(String::from)
+            .to_vec(),
+            rows: matching_rows,
+        })],
     };
     let accuracy_rows = data
         .accuracy
@@ -730,12 +740,11 @@ fn build_report(
         .map(|c| {
             vec![
                 format!("{} scans, {:.0} cm", c.scans, c.noise * 100.0),
-                format!("{:.3}", c.mean_deg),
-                c.paper_mean_deg
-                    .map_or("-".into(), |p| format!("{p:.3}")),
-                format!("{:.3}", c.median_deg),
-                format!("{:.3}", c.p95_deg),
-                format!("{:.3}", c.max_deg),
+                fmt_m(Some(c.mean_deg)),
+                fmt_m(c.paper_mean_deg),
+                fmt_m(Some(c.median_deg)),
+                fmt_m(Some(c.p95_deg)),
+                fmt_m(Some(c.max_deg)),
                 format!("{:.0}%", c.leveled_fraction * 100.0),
                 c.wrong_over_5_deg.to_string(),
                 format!("{:.2}%", c.phantom_rate * 100.0),
@@ -924,7 +933,14 @@ fn print_summary(data: &DemoData, report: &Path) {
     let cells: Vec<String> = data
         .accuracy
         .iter()
-        .map(|c| format!("{}x{:.0}cm {:.2}", c.scans, c.noise * 100.0, c.mean_deg))
+        .map(|c| {
+            format!(
+                "{}x{:.0}cm {}",
+                c.scans,
+                c.noise * 100.0,
+                fmt_m(Some(c.mean_deg))
+            )
+        })
         .collect();
     println!("  Table I mean error [deg]: {}", cells.join(", "));
     println!("report: {}", report.display());

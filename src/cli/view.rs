@@ -78,29 +78,6 @@ fn is_floor_plan(text: &str) -> bool {
     first.starts_with('{') && (text.contains("\"walls\"") || text.contains("\"wallheight\""))
 }
 
-#[cfg(test)]
-mod tests {
-    use super::is_floor_plan;
-
-    #[test]
-    fn commented_multi_line_plan_is_a_plan() {
-        let plan =
-            "// an office\n{\n  \"version\": \"w0.1\",\n  \"wallheight\": 3,\n  \"walls\": []\n}\n";
-        assert!(is_floor_plan(plan));
-        assert!(is_floor_plan(
-            "{\"walls\": [[[0, 0], [1, 0]]], \"wallheight\": 2}"
-        ));
-    }
-
-    #[test]
-    fn scan_lines_are_not_a_plan_even_with_a_walls_field() {
-        let scans = "{\"nrays\": 1, \"readings\": [1], \"theta\": [0], \"note\": \"walls\"}\n{\"nrays\": 1}\n";
-        assert!(!is_floor_plan(scans));
-        assert!(!is_floor_plan("FLASER 3 1 1 1 0 0 0 0 0 0 1 h 1\n"));
-        assert!(!is_floor_plan(""));
-    }
-}
-
 pub fn run(args: Args) -> anyhow::Result<()> {
     let mut plan: Option<(String, Plan)> = None;
     if let Some(p) = &args.plan {
@@ -151,4 +128,27 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         );
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::is_floor_plan;
+
+    #[test]
+    fn commented_multi_line_plan_is_a_plan() {
+        let plan =
+            "// an office\n{\n  \"version\": \"w0.1\",\n  \"wallheight\": 3,\n  \"walls\": []\n}\n";
+        assert!(is_floor_plan(plan));
+        assert!(is_floor_plan(
+            "{\"walls\": [[[0, 0], [1, 0]]], \"wallheight\": 2}"
+        ));
+    }
+
+    #[test]
+    fn scan_lines_are_not_a_plan_even_with_a_walls_field() {
+        let scans = "{\"nrays\": 1, \"readings\": [1], \"theta\": [0], \"note\": \"walls\"}\n{\"nrays\": 1}\n";
+        assert!(!is_floor_plan(scans));
+        assert!(!is_floor_plan("FLASER 3 1 1 1 0 0 0 0 0 0 1 h 1\n"));
+        assert!(!is_floor_plan(""));
+    }
 }

@@ -222,7 +222,7 @@ fn wall_polygons(scan: &Scan) -> Vec<Vec<Point3<f64>>> {
 /// not joined: they lie on different surfaces (a depth discontinuity) [m].
 const JUMP_MIN: f64 = 0.3;
 /// See [`JUMP_MIN`] [1].
-const JUMP_FRACTION: f64 = 0.25;
+const JUMP_FRACTION: f64 = 0.15;
 
 /// Splits a scan into polylines of consecutive valid rays, mapped by `f`; an invalid ray or a
 /// depth discontinuity breaks the line, so no segment is drawn across what the laser did not see.

@@ -2,6 +2,7 @@
 //! with the paper's own values beside ours), drawn on any plotters backend, and written as SVG
 //! text (for self-contained reports) or PNG files.
 
+use crate::eval::accuracy::paper_mean;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 use std::path::Path;
@@ -54,16 +55,6 @@ impl GroupedBars {
     }
 }
 
-/// The paper's Table I (mean error, degrees): rows 3, 4, 5 scans; columns 1, 5, 10 cm noise.
-pub const PAPER_TABLE_ONE: [[f64; 3]; 3] = [
-    [0.857, 2.083, 5.724],
-    [0.649, 1.731, 4.260],
-    [0.409, 1.172, 3.742],
-];
-
-/// Range noise levels of the paper's Table I columns [m].
-pub const PAPER_NOISE: [f64; 3] = [0.01, 0.05, 0.10];
-
 /// One cell of a Table I run: mean attitude error at a noise level and number of scans.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct AccuracyCell {
@@ -73,12 +64,6 @@ pub struct AccuracyCell {
     pub scans: usize,
     /// Mean of max(|dx|, |dy|) over leveled poses [deg].
     pub mean_deg: f64,
-}
-
-fn paper_value(noise: f64, scans: usize) -> Option<f64> {
-    let col = PAPER_NOISE.iter().position(|&n| (n - noise).abs() < 1e-9)?;
-    let row = scans.checked_sub(3).filter(|&r| r < 3)?;
-    Some(PAPER_TABLE_ONE[row][col])
 }
 
 /// Table I as a figure: groups are noise levels, bars are scan counts, with the paper's value
@@ -114,7 +99,7 @@ pub fn table_one_chart(cells: &[AccuracyCell]) -> GroupedBars {
             color,
             outline: false,
         });
-        let paper: Vec<Option<f64>> = noises.iter().map(|&noise| paper_value(noise, n)).collect();
+        let paper: Vec<Option<f64>> = noises.iter().map(|&noise| paper_mean(n, noise)).collect();
         if paper.iter().any(Option::is_some) {
             series.push(Series {
                 label: format!("{n} scans (paper)"),
