@@ -30,7 +30,7 @@ pub enum ScanSource<R> {
     Carmen(CarmenReader<R>),
 }
 
-impl<R: BufRead> ScanSource<R> {
+impl<R: BufRead + Send> ScanSource<R> {
     /// The format's name, for summaries: `"jsonl"` or `"carmen"`.
     pub fn format(&self) -> &'static str {
         match self {
@@ -40,7 +40,7 @@ impl<R: BufRead> ScanSource<R> {
     }
 }
 
-impl<R: BufRead> Iterator for ScanSource<R> {
+impl<R: BufRead + Send> Iterator for ScanSource<R> {
     type Item = Result<(usize, Scan), InputError>;
 
     fn next(&mut self) -> Option<Self::Item> {
@@ -55,7 +55,7 @@ impl<R: BufRead> Iterator for ScanSource<R> {
 /// character is `{`, a CARMEN log otherwise. Only looks at the reader's buffer, so nothing
 /// is consumed and line numbers stay right; a buffer of nothing but blanks reads as JSON Lines
 /// (no scans either way). `name` is for error messages.
-pub fn read_any<R: BufRead>(
+pub fn read_any<R: BufRead + Send>(
     mut reader: R,
     name: impl Into<String>,
     carmen: CarmenParams,
