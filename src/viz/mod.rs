@@ -1,1 +1,6 @@
-//! Visualization (paper sect. 7.2.3): static plots, the 3D viewer page and reports.
+//! Visualization (paper sect. 7.2.3): the 3D viewer page ([`html`]), static figures
+//! ([`plots`]) and the demo report ([`report`]).
+
+pub mod html;
+pub mod plots;
+pub mod report;
