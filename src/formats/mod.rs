@@ -26,7 +26,8 @@ use std::io::BufRead;
 /// Scans from a file in either format: JSON Lines (parsed in parallel batches) or a CARMEN log.
 /// Yields `(line number, scan)` and stops after the first error, like the readers it wraps.
 pub enum ScanSource<R> {
-    JsonLines(ParallelScanReader<R>),
+    /// Boxed: the parallel reader carries two batches of line buffers.
+    JsonLines(Box<ParallelScanReader<R>>),
     Carmen(CarmenReader<R>),
 }
 
@@ -68,7 +69,7 @@ pub fn read_any<R: BufRead + Send>(
         .copied()
         .find(|b| !b.is_ascii_whitespace());
     Ok(match first {
-        None | Some(b'{') => ScanSource::JsonLines(ParallelScanReader::new(reader, name)),
+        None | Some(b'{') => ScanSource::JsonLines(Box::new(ParallelScanReader::new(reader, name))),
         Some(_) => ScanSource::Carmen(CarmenReader::new(reader, name, carmen)),
     })
 }
