@@ -227,3 +227,32 @@ fn missing_plan_file_fails_naming_it() {
         "{err}"
     );
 }
+
+/// `level` needs every scan's hinge elevation; the check is the level command's own.
+#[test]
+fn missing_elevation_in_level_input_fails_with_file_and_line() {
+    let text = format!(
+        "{GOOD}\n{}\n",
+        r#"{"sequence": 0, "nrays": 3, "theta": [-1, 0, 1], "readings": [1, 2, 3]}"#
+    );
+    let f = TempFile::new("no_elevation.jsonl", text.as_bytes());
+    let out = bin().args(["level", f.path()]).output().unwrap();
+    let err = one_line_failure(&out, "missing elevation");
+    assert!(
+        err.starts_with(&format!("{}:2: elevation", f.path())),
+        "{err}"
+    );
+}
+
+/// The scan-file errors are the reader's, so `level` reports them the same way as `info`.
+#[test]
+fn level_reports_bad_scan_lines_like_info() {
+    for (case, bad, want) in BAD_SCAN_LINES {
+        let text = format!("{GOOD}\n{bad}\n");
+        let f = TempFile::new(&format!("level-{case}.jsonl"), text.as_bytes());
+        let out = bin().args(["level", f.path()]).output().unwrap();
+        let err = one_line_failure(&out, case);
+        let prefix = format!("{}:2: {want}", f.path());
+        assert!(err.starts_with(&prefix), "{case}: {err}\n  want {prefix}");
+    }
+}
