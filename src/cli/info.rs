@@ -102,8 +102,9 @@ impl Summary {
         if new_pose {
             self.close_pose();
             self.poses += 1;
-            if let Some(seq) = scan.sequence
-                && !self.sequences_seen.insert(seq)
+            if scan
+                .sequence
+                .is_some_and(|seq| !self.sequences_seen.insert(seq))
             {
                 self.returning_sequences += 1;
             }
