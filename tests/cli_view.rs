@@ -75,10 +75,10 @@ fn raw_scans() -> String {
         let readings = if k == 0 {
             json!([2.0, null, 2.0])
         } else {
-            json!([2.0, 2.5, 2.0])
+            json!([2.0, 2.05, 2.0])
         };
-        let line = json!({"sequence": 4, "nrays": 3, "elevation": e, "min_theta": -0.5,
-            "max_theta": 0.5, "readings": readings, "true_pose": [1, 2, 0.45, 0.3, 0.05, 0.0]});
+        let line = json!({"sequence": 4, "nrays": 3, "elevation": e, "min_theta": -0.1,
+            "max_theta": 0.1, "readings": readings, "true_pose": [1, 2, 0.45, 0.3, 0.05, 0.0]});
         s.push_str(&format!("{line}\n"));
     }
     s
@@ -168,10 +168,10 @@ fn view_reads_level_output_polygons_and_pseudo_level_scan() {
 
 #[test]
 fn view_of_a_csm_log_on_stdin_opens_top_down_at_the_estimates() {
-    let log = "{ \"nrays\": 2, \"min_theta\": 0, \"max_theta\": 1.5707963267948966, \
+    let log = "{ \"nrays\": 2, \"min_theta\": 0, \"max_theta\": 0.2, \
                \"readings\": [1, 1], \"odometry\": [0, 0, 0], \"estimate\": [5, 0, 0], \
                \"true_pose\": [0, 0, 0], \"true_alpha\": [0, 0] }\n\
-               { \"nrays\": 2, \"min_theta\": 0, \"max_theta\": 1.5707963267948966, \
+               { \"nrays\": 2, \"min_theta\": 0, \"max_theta\": 0.2, \
                \"readings\": [1, 1], \"odometry\": [1, 0, 0], \"estimate\": [null, null, null] }\n";
     let out = run(&["view", "-o", "-"], Some(log));
     assert!(out.status.success(), "{}", stderr(&out));

@@ -61,18 +61,21 @@ fn load(path: Option<&std::path::Path>) -> anyhow::Result<Loaded> {
     Ok(Loaded::Scans(Source { name, scans }))
 }
 
-/// A `.wall` file is one JSON object with a `walls` key (maybe over many lines); scan files
-/// have one object per line, so parsing the whole text as one value fails or lacks `walls`.
+/// Tells a `.wall` floor plan (one JSON object, maybe over many lines, maybe with `//`
+/// comment lines) from scan JSON Lines (one object per line, each with `nrays`): a first line
+/// that is a whole scan object means scans; otherwise a `walls` or `wallheight` key means a plan.
 fn is_floor_plan(text: &str) -> bool {
-    if !text.trim_start().starts_with('{') {
+    let first = text
+        .lines()
+        .map(str::trim)
+        .find(|l| !l.is_empty() && !l.starts_with("//"));
+    let Some(first) = first else {
         return false;
+    };
+    if let Ok(v) = serde_json::from_str::<serde_json::Value>(first) {
+        return v.get("walls").is_some() || v.get("wallheight").is_some();
     }
-    let mut de = serde_json::Deserializer::from_str(text);
-    // Only the first object is looked at: a scan file fails fast on its second line.
-    match <serde_json::Value as serde::Deserialize>::deserialize(&mut de) {
-        Ok(v) => v.get("walls").is_some() || v.get("wallheight").is_some(),
-        Err(_) => false,
-    }
+    first.starts_with('{') && (text.contains("\"walls\"") || text.contains("\"wallheight\""))
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
@@ -125,4 +128,27 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         );
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::is_floor_plan;
+
+    #[test]
+    fn commented_multi_line_plan_is_a_plan() {
+        let plan =
+            "// an office\n{\n  \"version\": \"w0.1\",\n  \"wallheight\": 3,\n  \"walls\": []\n}\n";
+        assert!(is_floor_plan(plan));
+        assert!(is_floor_plan(
+            "{\"walls\": [[[0, 0], [1, 0]]], \"wallheight\": 2}"
+        ));
+    }
+
+    #[test]
+    fn scan_lines_are_not_a_plan_even_with_a_walls_field() {
+        let scans = "{\"nrays\": 1, \"readings\": [1], \"theta\": [0], \"note\": \"walls\"}\n{\"nrays\": 1}\n";
+        assert!(!is_floor_plan(scans));
+        assert!(!is_floor_plan("FLASER 3 1 1 1 0 0 0 0 0 0 1 h 1\n"));
+        assert!(!is_floor_plan(""));
+    }
 }

@@ -101,7 +101,9 @@
         points: L.lines.reduce(function (s, l) { return s + l.length / 3; }, 0)
       };
     });
-    var box = bounds(layers);
+    // The view fits what is shown at first (a hidden floor plan does not shrink the data).
+    var shownAtFirst = layers.filter(function (L) { return L.visible; });
+    var box = bounds(shownAtFirst.length ? shownAtFirst : layers);
     var size = [box.hi[0] - box.lo[0], box.hi[1] - box.lo[1], box.hi[2] - box.lo[2]];
     var diag = Math.max(1e-3, Math.sqrt(size[0] * size[0] + size[1] * size[1] + size[2] * size[2]));
     var coneLength = Math.min(Math.max(diag / 40, 0.25), 0.8);
