@@ -53,6 +53,9 @@ fn simulated_run_is_summarised() {
     assert_eq!(j["poses"], 7);
     assert_eq!(j["scans"], 35);
     assert_eq!(j["scans_per_pose"], json!({"min": 5, "max": 5}));
+    assert_eq!(j["elevations_per_pose"], json!({"min": 5, "max": 5}));
+    assert_eq!(j["poses_with_too_few_elevations"], 0);
+    assert_eq!(j["poses_with_mixed_nrays"], 0);
     assert_eq!(j["returning_sequences"], 0);
     assert_eq!(j["rays"]["total"], 35 * 181);
     assert_eq!(j["rays"]["per_scan"], json!({"min": 181, "max": 181}));
