@@ -116,11 +116,11 @@ fn view_sniffs_plan_and_scans_in_any_order_and_writes_an_offline_page() {
             .len(),
         4
     );
-    // 8 valid rays; the invalid ray breaks the first scan's line into two single points, which
-    // make no segment, so 6 points in 2 lines are drawn.
+    // 8 valid rays; the invalid ray breaks the first scan's line into two lone points, so
+    // 8 points in 4 lines.
     let scans_layer = layer(&scene, "scans").unwrap();
-    assert_eq!(scans_layer["lines"].as_array().unwrap().len(), 2);
-    assert_eq!(points(scans_layer), 6);
+    assert_eq!(scans_layer["lines"].as_array().unwrap().len(), 4);
+    assert_eq!(points(scans_layer), 8);
     assert_eq!(
         layer(&scene, "poses").unwrap()["cones"][0]["t"],
         json!([1000, 2000, 450])
@@ -257,4 +257,21 @@ fn view_decimates_big_input_and_says_so() {
     let scene = embedded_scene(&String::from_utf8(out.stdout).unwrap());
     assert_eq!(points(layer(&scene, "scans").unwrap()), 250);
     assert!(scene["notes"][0].as_str().unwrap().contains("1 pose in 4"));
+}
+
+#[test]
+fn view_reads_a_carmen_log_at_its_corrected_poses() {
+    // FLASER n r1..rn x y theta odom_x odom_y odom_theta timestamp host logger_timestamp
+    let log = format!(
+        "# a comment\nFLASER 19 {} 1.0 2.0 0.0 1.1 2.1 0.0 10.0 host 10.0\n",
+        vec!["2.0"; 19].join(" ")
+    );
+    let out = run(&["view", "-o", "-"], Some(&log));
+    assert!(out.status.success(), "{}", stderr(&out));
+    let scene = embedded_scene(&String::from_utf8(out.stdout).unwrap());
+    assert_eq!(scene["top_down"], json!(true));
+    // The middle beam (bearing 0) of the scan at the corrected pose (1, 2, heading 0).
+    let scans = layer(&scene, "scans").unwrap();
+    assert_eq!(points(scans), 19);
+    assert_eq!(xyz(&scans["lines"][0], 9), [3000, 2000, 0]);
 }

@@ -1,11 +1,12 @@
 //! `levelscan view`: one self-contained HTML page with the 3D viewer (paper sect. 7.2.3).
 //! Each input is sniffed: a JSON object with `walls` is a floor plan; anything else is read as
-//! scans (raw scans, CSM logs, `level` output and `match` output are told apart per record by
-//! `viz::html`).
+//! scans, JSON Lines or a CARMEN log (raw scans, CSM logs, `level` output and `match` output are
+//! told apart per record by `viz::html`).
 
 use super::{open_input, open_output};
 use anyhow::{Context, bail};
-use levelscan::formats::{ScanReader, parse_plan};
+use levelscan::formats::carmen::CarmenParams;
+use levelscan::formats::{parse_plan, read_any};
 use levelscan::plan::Plan;
 use levelscan::viz::html::{Source, ViewParams, build_scene, viewer_page};
 use std::io::{Read, Write};
@@ -13,8 +14,8 @@ use std::path::PathBuf;
 
 #[derive(clap::Args, Debug)]
 pub struct Args {
-    /// Scan files (simulate, level or match output, CSM logs) and `.wall` floor plans; none or
-    /// `-` reads standard input.
+    /// Scan files (simulate, level or match output, CSM or CARMEN logs, gzipped or not) and
+    /// `.wall` floor plans; none or `-` reads standard input.
     pub files: Vec<PathBuf>,
     /// A floor plan to overlay (same as giving it among FILES).
     #[arg(long)]
@@ -51,7 +52,7 @@ fn load(path: Option<&std::path::Path>) -> anyhow::Result<Loaded> {
         return Ok(Loaded::Plan(parse_plan(&text, &name)?));
     }
     let mut scans = Vec::new();
-    for item in ScanReader::new(text.as_bytes(), name.clone()) {
+    for item in read_any(text.as_bytes(), name.clone(), CarmenParams::default())? {
         let (_, scan) = item?;
         scans.push(scan);
     }

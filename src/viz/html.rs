@@ -226,6 +226,7 @@ const JUMP_FRACTION: f64 = 0.15;
 
 /// Splits a scan into polylines of consecutive valid rays, mapped by `f`; an invalid ray or a
 /// depth discontinuity breaks the line, so no segment is drawn across what the laser did not see.
+/// A point left alone is a polyline of one point (the viewer draws it as a dot).
 fn scan_polylines(scan: &Scan, f: impl Fn(usize) -> Option<Point3<f64>>) -> Vec<Vec<Mm>> {
     let mut lines = Vec::new();
     let mut current = Vec::new();
@@ -235,7 +236,7 @@ fn scan_polylines(scan: &Scan, f: impl Fn(usize) -> Option<Point3<f64>>) -> Vec<
         if let (Some((r, p)), Some((q, rq))) = (point, last)
             && (p - q).norm() > JUMP_MIN + JUMP_FRACTION * r.min(rq)
         {
-            if current.len() >= 6 {
+            if !current.is_empty() {
                 lines.push(std::mem::take(&mut current));
             }
             current.clear();
@@ -244,14 +245,14 @@ fn scan_polylines(scan: &Scan, f: impl Fn(usize) -> Option<Point3<f64>>) -> Vec<
         match point {
             Some((_, p)) => push_mm(&mut current, &p),
             None => {
-                if current.len() >= 6 {
+                if !current.is_empty() {
                     lines.push(std::mem::take(&mut current));
                 }
                 current.clear();
             }
         }
     }
-    if current.len() >= 6 {
+    if !current.is_empty() {
         lines.push(current);
     }
     lines
@@ -305,7 +306,7 @@ fn cone(pose: &Pose, index: usize, count: usize) -> Cone {
 pub fn build_scene(plan: Option<&Plan>, sources: &[Source], params: &ViewParams) -> Scene {
     let mut notes = Vec::new();
     let mut plan_layer = Layer::new("plan", "Floor plan walls", WALL_FILL, 1.0);
-    let mut scans_layer = Layer::new("scans", "Scans (multi-elevation, red)", RED, 1.0);
+    let mut scans_layer = Layer::new("scans", "Scans (red)", RED, 1.0);
     let mut polys_layer = Layer::new("polygons", "Wall polygons (green/red)", RED_FILL, 1.0);
     let mut pseudo_layer = Layer::new("pseudo", "Pseudo-level scans (blue)", BLUE, 1.6);
     let mut matched_layer = Layer::new("matched", "Matched 2D scans (blue)", BLUE, 1.0);

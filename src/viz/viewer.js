@@ -106,7 +106,9 @@
     var box = bounds(shownAtFirst.length ? shownAtFirst : layers);
     var size = [box.hi[0] - box.lo[0], box.hi[1] - box.lo[1], box.hi[2] - box.lo[2]];
     var diag = Math.max(1e-3, Math.sqrt(size[0] * size[0] + size[1] * size[1] + size[2] * size[2]));
-    var coneLength = Math.min(Math.max(diag / 40, 0.25), 0.8);
+    // Cones scale with the scene, and shrink when there are many so a long run stays readable.
+    var coneCount = layers.reduce(function (n, L) { return n + L.cones.length; }, 0);
+    var coneLength = Math.min(Math.max(diag / 40 / Math.sqrt(Math.max(1, coneCount / 60)), 0.15), 0.8);
     layers.forEach(function (L) {
       L.coneFaces = [];
       L.cones.forEach(function (c) { L.coneFaces = L.coneFaces.concat(coneFaces(c, coneLength, c.s)); });
@@ -244,6 +246,14 @@
       var q = [0, 0, 0];
       ctx.beginPath();
       L.lines.forEach(function (line) {
+        if (line.length === 3) {
+          // A lone point: a small dot.
+          if (proj(line[0], line[1], line[2], q)) {
+            ctx.moveTo(q[0] + 1, q[1]);
+            ctx.arc(q[0], q[1], 1, 0, 2 * Math.PI);
+          }
+          return;
+        }
         var pen = false;
         for (var i = 0; i + 2 < line.length; i += 3) {
           if (!proj(line[i], line[i + 1], line[i + 2], q)) { pen = false; continue; }
