@@ -631,6 +631,15 @@ fn fmt_m(v: Option<f64>) -> String {
         .map_or("-".into(), |v| format!("{v:.3}"))
 }
 
+/// A fraction as a percentage, or "-" when undefined (no leveled pose to count over).
+fn percent(v: f64, decimals: usize) -> String {
+    if v.is_finite() {
+        format!("{:.*}%", decimals, v * 100.0)
+    } else {
+        "-".into()
+    }
+}
+
 fn row_of<'a>(data: &'a DemoData, run: &str, mode: &str) -> Option<&'a MatchRow> {
     data.matching
         .iter()
@@ -745,10 +754,10 @@ fn build_report(
                 fmt_m(Some(c.median_deg)),
                 fmt_m(Some(c.p95_deg)),
                 fmt_m(Some(c.max_deg)),
-                format!("{:.0}%", c.leveled_fraction * 100.0),
+                percent(c.leveled_fraction, 0),
                 c.wrong_over_5_deg.to_string(),
-                format!("{:.2}%", c.phantom_rate * 100.0),
-                format!("{:.0}%", c.coverage * 100.0),
+                percent(c.phantom_rate, 2),
+                percent(c.coverage, 0),
             ]
         })
         .collect();

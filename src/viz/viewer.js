@@ -282,14 +282,17 @@
       ctx.stroke();
       var faces = 0;
       var shown = layers.filter(function (L) { return L.visible; });
+      // Translucent surfaces first (plan walls behind wall polygons), then the scan lines on
+      // top so they stay crisp, then the pose cones.
       shown.forEach(function (L) { if (L.id === "plan") faces += drawFaces(ctx, proj, L.faces); });
-      shown.forEach(function (L) { if (L.lines.length) drawLines(ctx, proj, L); });
-      var rest = [];
+      var surfaces = [], cones = [];
       shown.forEach(function (L) {
-        if (L.id !== "plan") rest = rest.concat(L.faces);
-        rest = rest.concat(L.coneFaces);
+        if (L.id !== "plan") surfaces = surfaces.concat(L.faces);
+        cones = cones.concat(L.coneFaces);
       });
-      faces += drawFaces(ctx, proj, rest);
+      faces += drawFaces(ctx, proj, surfaces);
+      shown.forEach(function (L) { if (L.lines.length) drawLines(ctx, proj, L); });
+      faces += drawFaces(ctx, proj, cones);
       stats.draws += 1;
       stats.faces = faces;
     }
