@@ -400,9 +400,16 @@ fn check_viewer_draws_and_toggles(b: &mut Browser, root: &str, layer: &str, name
         changed * 1000 > before.pixels(),
         "{name}: hiding {layer} changed only {changed} pixels"
     );
-    assert!(
-        after.count_unlike(BACKGROUND) < drawn,
-        "{name}: hiding {layer} did not remove anything"
+    // Ticking it again brings back exactly the first picture.
+    b.eval(&format!(
+        "document.querySelector({}).click()",
+        serde_json::to_string(&toggle).unwrap()
+    ));
+    let again = b.screenshot_element(&canvas, &format!("{name}-all-layers-again"));
+    assert_eq!(
+        again.count_changed(&before),
+        0,
+        "{name}: showing {layer} again did not restore the view"
     );
 }
 

@@ -577,14 +577,7 @@ fn pose_scene(
         ),
         ..ViewParams::default()
     };
-    let mut scene = build_scene(Some(plan), &sources, &params);
-    // Start with the scans and polygons in front: the plan is there to toggle on.
-    for layer in &mut scene.layers {
-        if layer.id == "plan" {
-            layer.visible = false;
-        }
-    }
-    scene
+    build_scene(Some(plan), &sources, &params)
 }
 
 /// The leveled scans as matched by metascan, top down (the paper's Fig. 5b).
@@ -822,8 +815,8 @@ fn build_report(
             Block::Text(level_text),
             Block::Text(
                 "Red: the pose's scans at each hinge elevation; green and red: the wall polygons \
-                 found; blue: the pseudo-level scan. Drag to orbit, wheel to zoom, tick the floor \
-                 plan to overlay it."
+                 found; blue: the pseudo-level scan; grey: the floor plan. Drag to orbit, wheel to \
+                 zoom, untick a layer to hide it."
                     .into(),
             ),
             Block::Viewer(Box::new(pose_view)),

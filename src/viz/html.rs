@@ -362,8 +362,9 @@ pub fn build_scene(plan: Option<&Plan>, sources: &[Source], params: &ViewParams)
     if stride > 1 {
         let kept = all_groups.len().div_ceil(stride);
         notes.push(format!(
-            "{total_points} scan points in {} poses: showing every {stride}th pose ({kept} poses) to keep the page small.",
-            all_groups.len()
+            "{total_points} scan points in {} poses: keeping 1 pose in {stride} ({kept} poses) to keep the page small (--max-points {}).",
+            all_groups.len(),
+            params.max_points
         ));
     }
 
@@ -853,7 +854,12 @@ mod tests {
         // 1000 points over a cap of 300: every 4th pose, i.e. poses 0, 4 and 8.
         assert_eq!(scene.layer("scans").unwrap().point_count(), 300);
         assert_eq!(scene.layer("poses").unwrap().cones.len(), 3);
-        assert!(scene.notes.iter().any(|n| n.contains("every 4th pose")));
+        assert!(
+            scene
+                .notes
+                .iter()
+                .any(|n| n.contains("1 pose in 4 (3 poses)"))
+        );
     }
 
     #[test]

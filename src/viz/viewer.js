@@ -163,7 +163,7 @@
       width = Math.max(200, root.clientWidth || 800);
       // A page's only viewer (class lsv-full) takes the window's height; others a fixed one.
       var fixed = parseInt(root.getAttribute("data-height") || "560", 10);
-      var full = (global.innerHeight || 0) - root.getBoundingClientRect().top - 90;
+      var full = (global.innerHeight || 0) - root.getBoundingClientRect().top - 120;
       height = Math.max(300, root.classList.contains("lsv-full") ? Math.max(full, 400) : fixed);
       canvas.style.width = width + "px";
       canvas.style.height = height + "px";
