@@ -1234,5 +1234,23 @@ mod tests {
                 .unwrap();
             prop_assert_eq!(back, scans);
         }
+
+        /// CSM's tools write spaces everywhere and their own field order: the same scan laid
+        /// out that way (pretty-printed onto one line, fields in reverse order) reads the same.
+        #[test]
+        fn spacing_and_field_order_do_not_matter(scan in arb_scan()) {
+            let mut out = Vec::new();
+            write_scan(&mut out, &scan).unwrap();
+            let value: serde_json::Value = serde_json::from_slice(&out).unwrap();
+            let serde_json::Value::Object(map) = value else { unreachable!() };
+            let reversed: serde_json::Map<String, serde_json::Value> =
+                map.into_iter().rev().collect();
+            let text = serde_json::to_string_pretty(&reversed).unwrap().replace('\n', " ");
+            let mut back = parse_scan_line(&text).unwrap();
+            // Unknown fields keep the order they had in the line, now reversed.
+            let extra: Vec<_> = back.extra.clone().into_iter().rev().collect();
+            back.extra = extra.into_iter().collect();
+            prop_assert_eq!(back, scan);
+        }
     }
 }
