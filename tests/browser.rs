@@ -400,9 +400,16 @@ fn check_viewer_draws_and_toggles(b: &mut Browser, root: &str, layer: &str, name
         changed * 1000 > before.pixels(),
         "{name}: hiding {layer} changed only {changed} pixels"
     );
-    assert!(
-        after.count_unlike(BACKGROUND) < drawn,
-        "{name}: hiding {layer} did not remove anything"
+    // Ticking it again brings back exactly the first picture.
+    b.eval(&format!(
+        "document.querySelector({}).click()",
+        serde_json::to_string(&toggle).unwrap()
+    ));
+    let again = b.screenshot_element(&canvas, &format!("{name}-all-layers-again"));
+    assert_eq!(
+        again.count_changed(&before),
+        0,
+        "{name}: showing {layer} again did not restore the view"
     );
 }
 
@@ -488,4 +495,71 @@ fn write_box_room_inputs(dir: &Path) -> (PathBuf, PathBuf) {
     let scans = dir.join("scans.jsonl");
     std::fs::write(&scans, text).unwrap();
     (plan, scans)
+}
+
+#[test]
+fn demo_report_has_its_sections_and_its_viewer_draws() {
+    let Some(chromium) = chromium_or_skip("demo_report_has_its_sections_and_its_viewer_draws")
+    else {
+        return;
+    };
+    let dir = TempDir::new("browser-demo");
+    let out = dir.0.join("demo");
+    run_levelscan(&[
+        "demo",
+        "--out",
+        out.to_str().unwrap(),
+        "--accuracy-poses",
+        "5",
+    ]);
+    let mut b = Browser::launch(&chromium);
+    b.open(&out.join("report.html"));
+    b.assert_no_errors("report.html");
+    let sections = b.eval("Array.from(document.querySelectorAll('section')).map(s => s.id)");
+    for id in ["summary", "matching", "accuracy", "viewer", "maps", "data"] {
+        assert!(
+            sections.as_array().unwrap().iter().any(|s| s == id),
+            "section {id} missing from {sections}"
+        );
+    }
+    // The first screen: raw and leveled maps side by side, each with its ATE, both drawn.
+    let headline = b.eval(
+        "Array.from(document.querySelectorAll('#summary .lsr-panel')).map(p => {
+           const r = p.getBoundingClientRect(); const img = p.querySelector('img, svg');
+           return {title: p.querySelector('.lsr-panel-title').textContent,
+                   metric: p.querySelector('.lsr-metric').textContent,
+                   top: r.top, left: r.left, bottom: r.bottom,
+                   drawn: !!img && (img.tagName !== 'IMG' || (img.complete && img.naturalWidth > 0))}; })",
+    );
+    let panels = headline.as_array().unwrap();
+    assert_eq!(panels.len(), 2, "{headline}");
+    assert!(panels[0]["title"].as_str().unwrap().starts_with("Raw"));
+    assert!(panels[1]["title"].as_str().unwrap().starts_with("Leveled"));
+    for p in panels {
+        assert!(p["metric"].as_str().unwrap().starts_with("ATE 0."), "{p}");
+        assert_eq!(p["drawn"], Value::Bool(true), "{p}");
+        // Within the first screen (1000 px high), and side by side.
+        assert!(p["bottom"].as_f64().unwrap() < 1000.0, "{p}");
+    }
+    assert_eq!(panels[0]["top"], panels[1]["top"]);
+    assert!(panels[0]["left"].as_f64() < panels[1]["left"].as_f64());
+    let tables = b.eval(
+        "[document.querySelectorAll('#matching table tbody tr').length,
+          document.querySelectorAll('#accuracy table tbody tr').length]",
+    );
+    assert_eq!(tables, json!([6, 9]), "matching runs and Table I cells");
+    let figures = b.eval(
+        "[document.querySelectorAll('#accuracy svg').length, document.querySelectorAll('#maps img').length,
+          document.querySelectorAll('.lsr-missing').length]",
+    );
+    assert_eq!(
+        figures,
+        json!([2, 3, 0]),
+        "accuracy charts, maps, missing figures"
+    );
+    let _ = b.screenshot_element("#summary", "report-first-screen");
+    let _ = b.screenshot_element("#accuracy", "report-accuracy");
+    check_viewer_draws_and_toggles(&mut b, "#viewer", "polygons", "report-pose");
+    check_viewer_draws_and_toggles(&mut b, "#maps", "matched", "report-matched");
+    b.assert_no_errors("report.html after toggles");
 }

@@ -75,10 +75,10 @@ fn raw_scans() -> String {
         let readings = if k == 0 {
             json!([2.0, null, 2.0])
         } else {
-            json!([2.0, 2.5, 2.0])
+            json!([2.0, 2.05, 2.0])
         };
-        let line = json!({"sequence": 4, "nrays": 3, "elevation": e, "min_theta": -0.5,
-            "max_theta": 0.5, "readings": readings, "true_pose": [1, 2, 0.45, 0.3, 0.05, 0.0]});
+        let line = json!({"sequence": 4, "nrays": 3, "elevation": e, "min_theta": -0.1,
+            "max_theta": 0.1, "readings": readings, "true_pose": [1, 2, 0.45, 0.3, 0.05, 0.0]});
         s.push_str(&format!("{line}\n"));
     }
     s
@@ -116,11 +116,11 @@ fn view_sniffs_plan_and_scans_in_any_order_and_writes_an_offline_page() {
             .len(),
         4
     );
-    // 8 valid rays; the invalid ray breaks the first scan's line into two single points, which
-    // make no segment, so 6 points in 2 lines are drawn.
+    // 8 valid rays; the invalid ray breaks the first scan's line into two lone points, so
+    // 8 points in 4 lines.
     let scans_layer = layer(&scene, "scans").unwrap();
-    assert_eq!(scans_layer["lines"].as_array().unwrap().len(), 2);
-    assert_eq!(points(scans_layer), 6);
+    assert_eq!(scans_layer["lines"].as_array().unwrap().len(), 4);
+    assert_eq!(points(scans_layer), 8);
     assert_eq!(
         layer(&scene, "poses").unwrap()["cones"][0]["t"],
         json!([1000, 2000, 450])
@@ -168,10 +168,10 @@ fn view_reads_level_output_polygons_and_pseudo_level_scan() {
 
 #[test]
 fn view_of_a_csm_log_on_stdin_opens_top_down_at_the_estimates() {
-    let log = "{ \"nrays\": 2, \"min_theta\": 0, \"max_theta\": 1.5707963267948966, \
+    let log = "{ \"nrays\": 2, \"min_theta\": 0, \"max_theta\": 0.2, \
                \"readings\": [1, 1], \"odometry\": [0, 0, 0], \"estimate\": [5, 0, 0], \
                \"true_pose\": [0, 0, 0], \"true_alpha\": [0, 0] }\n\
-               { \"nrays\": 2, \"min_theta\": 0, \"max_theta\": 1.5707963267948966, \
+               { \"nrays\": 2, \"min_theta\": 0, \"max_theta\": 0.2, \
                \"readings\": [1, 1], \"odometry\": [1, 0, 0], \"estimate\": [null, null, null] }\n";
     let out = run(&["view", "-o", "-"], Some(log));
     assert!(out.status.success(), "{}", stderr(&out));
@@ -253,13 +253,25 @@ fn view_decimates_big_input_and_says_so() {
     }
     let out = run(&["view", "--max-points", "250", "-o", "-"], Some(&text));
     assert!(out.status.success(), "{}", stderr(&out));
-    assert!(stderr(&out).contains("every 4th pose"), "{}", stderr(&out));
+    assert!(stderr(&out).contains("1 pose in 4"), "{}", stderr(&out));
     let scene = embedded_scene(&String::from_utf8(out.stdout).unwrap());
     assert_eq!(points(layer(&scene, "scans").unwrap()), 250);
-    assert!(
-        scene["notes"][0]
-            .as_str()
-            .unwrap()
-            .contains("every 4th pose")
+    assert!(scene["notes"][0].as_str().unwrap().contains("1 pose in 4"));
+}
+
+#[test]
+fn view_reads_a_carmen_log_at_its_corrected_poses() {
+    // FLASER n r1..rn x y theta odom_x odom_y odom_theta timestamp host logger_timestamp
+    let log = format!(
+        "# a comment\nFLASER 19 {} 1.0 2.0 0.0 1.1 2.1 0.0 10.0 host 10.0\n",
+        vec!["2.0"; 19].join(" ")
     );
+    let out = run(&["view", "-o", "-"], Some(&log));
+    assert!(out.status.success(), "{}", stderr(&out));
+    let scene = embedded_scene(&String::from_utf8(out.stdout).unwrap());
+    assert_eq!(scene["top_down"], json!(true));
+    // The middle beam (bearing 0) of the scan at the corrected pose (1, 2, heading 0).
+    let scans = layer(&scene, "scans").unwrap();
+    assert_eq!(points(scans), 19);
+    assert_eq!(xyz(&scans["lines"][0], 9), [3000, 2000, 0]);
 }

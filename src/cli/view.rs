@@ -1,11 +1,12 @@
 //! `levelscan view`: one self-contained HTML page with the 3D viewer (paper sect. 7.2.3).
 //! Each input is sniffed: a JSON object with `walls` is a floor plan; anything else is read as
-//! scans (raw scans, CSM logs, `level` output and `match` output are told apart per record by
-//! `viz::html`).
+//! scans, JSON Lines or a CARMEN log (raw scans, CSM logs, `level` output and `match` output are
+//! told apart per record by `viz::html`).
 
 use super::{open_input, open_output};
 use anyhow::{Context, bail};
-use levelscan::formats::{ScanReader, parse_plan};
+use levelscan::formats::carmen::CarmenParams;
+use levelscan::formats::{parse_plan, read_any};
 use levelscan::plan::Plan;
 use levelscan::viz::html::{Source, ViewParams, build_scene, viewer_page};
 use std::io::{Read, Write};
@@ -13,8 +14,8 @@ use std::path::PathBuf;
 
 #[derive(clap::Args, Debug)]
 pub struct Args {
-    /// Scan files (simulate, level or match output, CSM logs) and `.wall` floor plans; none or
-    /// `-` reads standard input.
+    /// Scan files (simulate, level or match output, CSM or CARMEN logs, gzipped or not) and
+    /// `.wall` floor plans; none or `-` reads standard input.
     pub files: Vec<PathBuf>,
     /// A floor plan to overlay (same as giving it among FILES).
     #[arg(long)]
@@ -51,7 +52,7 @@ fn load(path: Option<&std::path::Path>) -> anyhow::Result<Loaded> {
         return Ok(Loaded::Plan(parse_plan(&text, &name)?));
     }
     let mut scans = Vec::new();
-    for item in ScanReader::new(text.as_bytes(), name.clone()) {
+    for item in read_any(text.as_bytes(), name.clone(), CarmenParams::default())? {
         let (_, scan) = item?;
         scans.push(scan);
     }
@@ -61,18 +62,21 @@ fn load(path: Option<&std::path::Path>) -> anyhow::Result<Loaded> {
     Ok(Loaded::Scans(Source { name, scans }))
 }
 
-/// A `.wall` file is one JSON object with a `walls` key (maybe over many lines); scan files
-/// have one object per line, so parsing the whole text as one value fails or lacks `walls`.
+/// Tells a `.wall` floor plan (one JSON object, maybe over many lines, maybe with `//`
+/// comment lines) from scan JSON Lines (one object per line, each with `nrays`): a first line
+/// that is a whole scan object means scans; otherwise a `walls` or `wallheight` key means a plan.
 fn is_floor_plan(text: &str) -> bool {
-    if !text.trim_start().starts_with('{') {
+    let first = text
+        .lines()
+        .map(str::trim)
+        .find(|l| !l.is_empty() && !l.starts_with("//"));
+    let Some(first) = first else {
         return false;
+    };
+    if let Ok(v) = serde_json::from_str::<serde_json::Value>(first) {
+        return v.get("walls").is_some() || v.get("wallheight").is_some();
     }
-    let mut de = serde_json::Deserializer::from_str(text);
-    // Only the first object is looked at: a scan file fails fast on its second line.
-    match <serde_json::Value as serde::Deserialize>::deserialize(&mut de) {
-        Ok(v) => v.get("walls").is_some() || v.get("wallheight").is_some(),
-        Err(_) => false,
-    }
+    first.starts_with('{') && (text.contains("\"walls\"") || text.contains("\"wallheight\""))
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
@@ -125,4 +129,27 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         );
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::is_floor_plan;
+
+    #[test]
+    fn commented_multi_line_plan_is_a_plan() {
+        let plan =
+            "// an office\n{\n  \"version\": \"w0.1\",\n  \"wallheight\": 3,\n  \"walls\": []\n}\n";
+        assert!(is_floor_plan(plan));
+        assert!(is_floor_plan(
+            "{\"walls\": [[[0, 0], [1, 0]]], \"wallheight\": 2}"
+        ));
+    }
+
+    #[test]
+    fn scan_lines_are_not_a_plan_even_with_a_walls_field() {
+        let scans = "{\"nrays\": 1, \"readings\": [1], \"theta\": [0], \"note\": \"walls\"}\n{\"nrays\": 1}\n";
+        assert!(!is_floor_plan(scans));
+        assert!(!is_floor_plan("FLASER 3 1 1 1 0 0 0 0 0 0 1 h 1\n"));
+        assert!(!is_floor_plan(""));
+    }
 }

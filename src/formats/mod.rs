@@ -26,11 +26,12 @@ use std::io::BufRead;
 /// Scans from a file in either format: JSON Lines (parsed in parallel batches) or a CARMEN log.
 /// Yields `(line number, scan)` and stops after the first error, like the readers it wraps.
 pub enum ScanSource<R> {
-    JsonLines(ParallelScanReader<R>),
+    /// Boxed: the parallel reader carries two batches of line buffers.
+    JsonLines(Box<ParallelScanReader<R>>),
     Carmen(CarmenReader<R>),
 }
 
-impl<R: BufRead> ScanSource<R> {
+impl<R: BufRead + Send> ScanSource<R> {
     /// The format's name, for summaries: `"jsonl"` or `"carmen"`.
     pub fn format(&self) -> &'static str {
         match self {
@@ -40,7 +41,7 @@ impl<R: BufRead> ScanSource<R> {
     }
 }
 
-impl<R: BufRead> Iterator for ScanSource<R> {
+impl<R: BufRead + Send> Iterator for ScanSource<R> {
     type Item = Result<(usize, Scan), InputError>;
 
     fn next(&mut self) -> Option<Self::Item> {
@@ -55,7 +56,7 @@ impl<R: BufRead> Iterator for ScanSource<R> {
 /// character is `{`, a CARMEN log otherwise. Only looks at the reader's buffer, so nothing
 /// is consumed and line numbers stay right; a buffer of nothing but blanks reads as JSON Lines
 /// (no scans either way). `name` is for error messages.
-pub fn read_any<R: BufRead>(
+pub fn read_any<R: BufRead + Send>(
     mut reader: R,
     name: impl Into<String>,
     carmen: CarmenParams,
@@ -68,7 +69,7 @@ pub fn read_any<R: BufRead>(
         .copied()
         .find(|b| !b.is_ascii_whitespace());
     Ok(match first {
-        None | Some(b'{') => ScanSource::JsonLines(ParallelScanReader::new(reader, name)),
+        None | Some(b'{') => ScanSource::JsonLines(Box::new(ParallelScanReader::new(reader, name))),
         Some(_) => ScanSource::Carmen(CarmenReader::new(reader, name, carmen)),
     })
 }

@@ -163,12 +163,14 @@ enum Kind {
     Matched,
 }
 
+/// A record that went through `match` is shown where the matcher put it, even when it was
+/// `level` output before.
 fn kind_of(scan: &Scan) -> Kind {
-    if scan.extra.contains_key("level") {
+    if scan.extra.contains_key("match") {
+        Kind::Matched
+    } else if scan.extra.contains_key("level") {
         Kind::Leveled
-    } else if scan.extra.contains_key("match")
-        || (scan.elevation.is_none() && scan.estimate.is_some())
-    {
+    } else if scan.elevation.is_none() && scan.estimate.is_some() {
         Kind::Matched
     } else {
         Kind::Raw
@@ -216,23 +218,41 @@ fn wall_polygons(scan: &Scan) -> Vec<Vec<Point3<f64>>> {
         .collect()
 }
 
-/// Splits a scan into polylines of consecutive valid rays, mapped by `f`; an invalid ray breaks
-/// the line, so no segment is drawn across a gap the laser did not see.
+/// Consecutive points farther apart than this plus [`JUMP_FRACTION`] of the nearer range are
+/// not joined: they lie on different surfaces (a depth discontinuity) [m].
+const JUMP_MIN: f64 = 0.3;
+/// See [`JUMP_MIN`] [1].
+const JUMP_FRACTION: f64 = 0.15;
+
+/// Splits a scan into polylines of consecutive valid rays, mapped by `f`; an invalid ray or a
+/// depth discontinuity breaks the line, so no segment is drawn across what the laser did not see.
+/// A point left alone is a polyline of one point (the viewer draws it as a dot).
 fn scan_polylines(scan: &Scan, f: impl Fn(usize) -> Option<Point3<f64>>) -> Vec<Vec<Mm>> {
     let mut lines = Vec::new();
     let mut current = Vec::new();
+    let mut last: Option<(Point3<f64>, f64)> = None;
     for i in 0..scan.nrays() {
-        match f(i) {
-            Some(p) => push_mm(&mut current, &p),
+        let point = scan.range(i).zip(f(i));
+        if let (Some((r, p)), Some((q, rq))) = (point, last)
+            && (p - q).norm() > JUMP_MIN + JUMP_FRACTION * r.min(rq)
+        {
+            if !current.is_empty() {
+                lines.push(std::mem::take(&mut current));
+            }
+            current.clear();
+        }
+        last = point.map(|(r, p)| (p, r));
+        match point {
+            Some((_, p)) => push_mm(&mut current, &p),
             None => {
-                if current.len() >= 6 {
+                if !current.is_empty() {
                     lines.push(std::mem::take(&mut current));
                 }
                 current.clear();
             }
         }
     }
-    if current.len() >= 6 {
+    if !current.is_empty() {
         lines.push(current);
     }
     lines
@@ -286,7 +306,7 @@ fn cone(pose: &Pose, index: usize, count: usize) -> Cone {
 pub fn build_scene(plan: Option<&Plan>, sources: &[Source], params: &ViewParams) -> Scene {
     let mut notes = Vec::new();
     let mut plan_layer = Layer::new("plan", "Floor plan walls", WALL_FILL, 1.0);
-    let mut scans_layer = Layer::new("scans", "Scans (multi-elevation, red)", RED, 1.0);
+    let mut scans_layer = Layer::new("scans", "Scans (red)", RED, 1.0);
     let mut polys_layer = Layer::new("polygons", "Wall polygons (green/red)", RED_FILL, 1.0);
     let mut pseudo_layer = Layer::new("pseudo", "Pseudo-level scans (blue)", BLUE, 1.6);
     let mut matched_layer = Layer::new("matched", "Matched 2D scans (blue)", BLUE, 1.0);
@@ -343,8 +363,9 @@ pub fn build_scene(plan: Option<&Plan>, sources: &[Source], params: &ViewParams)
     if stride > 1 {
         let kept = all_groups.len().div_ceil(stride);
         notes.push(format!(
-            "{total_points} scan points in {} poses: showing every {stride}th pose ({kept} poses) to keep the page small.",
-            all_groups.len()
+            "{total_points} scan points in {} poses: keeping 1 pose in {stride} ({kept} poses) to keep the page small (--max-points {}).",
+            all_groups.len(),
+            params.max_points
         ));
     }
 
@@ -589,8 +610,8 @@ mod tests {
     #[test]
     fn raw_scan_is_placed_with_true_pose_in_millimetres() {
         // Yaw 90 degrees at (1, 2, 0.5): a 1 m reading straight ahead lands at (1, 3, 0.5),
-        // one to the left (bearing +90) at (0, 2, 0.5).
-        let mut s = scan_with(&[Some(1.0), Some(1.0)], &[0.0, FRAC_PI_2]);
+        // one at bearing 0.2 rad (to the left) at (1 - sin 0.2, 2 + cos 0.2, 0.5).
+        let mut s = scan_with(&[Some(1.0), Some(1.0)], &[0.0, 0.2]);
         s.elevation = Some(0.0);
         s.true_pose = Some(Pose::new(1.0, 2.0, 0.5, FRAC_PI_2, 0.0, 0.0));
         s.odometry = Some(Pose::planar(9.0, 9.0, 0.0));
@@ -605,7 +626,10 @@ mod tests {
         let layer = scene.layer("scans").unwrap();
         assert_eq!(
             coords(&layer.lines[0]),
-            vec![[1000, 3000, 500], [0, 2000, 500]]
+            vec![
+                [1000, 3000, 500],
+                [mm(1.0 - 0.2f64.sin()), mm(2.0 + 0.2f64.cos()), 500]
+            ]
         );
         assert!(!scene.top_down);
     }
@@ -650,6 +674,27 @@ mod tests {
         assert_eq!(layer.point_count(), 5);
         // No true pose, estimate or odometry: drawn at the origin, and the page says so.
         assert!(scene.notes.iter().any(|n| n.contains("origin")));
+    }
+
+    #[test]
+    fn depth_discontinuity_breaks_the_red_line() {
+        // 1 m, 1 m, then 5 m along nearly the same bearing: the jump is not a surface.
+        let mut s = scan_with(
+            &[Some(1.0), Some(1.0), Some(5.0), Some(5.0)],
+            &[0.0, 0.01, 0.02, 0.03],
+        );
+        s.elevation = Some(0.0);
+        let scene = build_scene(
+            None,
+            &[Source {
+                name: "a".into(),
+                scans: vec![s],
+            }],
+            &ViewParams::default(),
+        );
+        let layer = scene.layer("scans").unwrap();
+        assert_eq!(layer.lines.len(), 2);
+        assert_eq!(layer.point_count(), 4);
     }
 
     #[test]
@@ -810,7 +855,12 @@ mod tests {
         // 1000 points over a cap of 300: every 4th pose, i.e. poses 0, 4 and 8.
         assert_eq!(scene.layer("scans").unwrap().point_count(), 300);
         assert_eq!(scene.layer("poses").unwrap().cones.len(), 3);
-        assert!(scene.notes.iter().any(|n| n.contains("every 4th pose")));
+        assert!(
+            scene
+                .notes
+                .iter()
+                .any(|n| n.contains("1 pose in 4 (3 poses)"))
+        );
     }
 
     #[test]

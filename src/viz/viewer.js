@@ -101,10 +101,14 @@
         points: L.lines.reduce(function (s, l) { return s + l.length / 3; }, 0)
       };
     });
-    var box = bounds(layers);
+    // The view fits what is shown at first (a hidden floor plan does not shrink the data).
+    var shownAtFirst = layers.filter(function (L) { return L.visible; });
+    var box = bounds(shownAtFirst.length ? shownAtFirst : layers);
     var size = [box.hi[0] - box.lo[0], box.hi[1] - box.lo[1], box.hi[2] - box.lo[2]];
     var diag = Math.max(1e-3, Math.sqrt(size[0] * size[0] + size[1] * size[1] + size[2] * size[2]));
-    var coneLength = Math.min(Math.max(diag / 40, 0.25), 0.8);
+    // Cones scale with the scene, and shrink when there are many so a long run stays readable.
+    var coneCount = layers.reduce(function (n, L) { return n + L.cones.length; }, 0);
+    var coneLength = Math.min(Math.max(diag / 40 / Math.sqrt(Math.max(1, coneCount / 60)), 0.15), 0.8);
     layers.forEach(function (L) {
       L.coneFaces = [];
       L.cones.forEach(function (c) { L.coneFaces = L.coneFaces.concat(coneFaces(c, coneLength, c.s)); });
@@ -161,7 +165,7 @@
       width = Math.max(200, root.clientWidth || 800);
       // A page's only viewer (class lsv-full) takes the window's height; others a fixed one.
       var fixed = parseInt(root.getAttribute("data-height") || "560", 10);
-      var full = (global.innerHeight || 0) - root.getBoundingClientRect().top - 90;
+      var full = (global.innerHeight || 0) - root.getBoundingClientRect().top - 120;
       height = Math.max(300, root.classList.contains("lsv-full") ? Math.max(full, 400) : fixed);
       canvas.style.width = width + "px";
       canvas.style.height = height + "px";
@@ -242,6 +246,14 @@
       var q = [0, 0, 0];
       ctx.beginPath();
       L.lines.forEach(function (line) {
+        if (line.length === 3) {
+          // A lone point: a small dot.
+          if (proj(line[0], line[1], line[2], q)) {
+            ctx.moveTo(q[0] + 1, q[1]);
+            ctx.arc(q[0], q[1], 1, 0, 2 * Math.PI);
+          }
+          return;
+        }
         var pen = false;
         for (var i = 0; i + 2 < line.length; i += 3) {
           if (!proj(line[i], line[i + 1], line[i + 2], q)) { pen = false; continue; }
@@ -280,14 +292,17 @@
       ctx.stroke();
       var faces = 0;
       var shown = layers.filter(function (L) { return L.visible; });
+      // Translucent surfaces first (plan walls behind wall polygons), then the scan lines on
+      // top so they stay crisp, then the pose cones.
       shown.forEach(function (L) { if (L.id === "plan") faces += drawFaces(ctx, proj, L.faces); });
-      shown.forEach(function (L) { if (L.lines.length) drawLines(ctx, proj, L); });
-      var rest = [];
+      var surfaces = [], cones = [];
       shown.forEach(function (L) {
-        if (L.id !== "plan") rest = rest.concat(L.faces);
-        rest = rest.concat(L.coneFaces);
+        if (L.id !== "plan") surfaces = surfaces.concat(L.faces);
+        cones = cones.concat(L.coneFaces);
       });
-      faces += drawFaces(ctx, proj, rest);
+      faces += drawFaces(ctx, proj, surfaces);
+      shown.forEach(function (L) { if (L.lines.length) drawLines(ctx, proj, L); });
+      faces += drawFaces(ctx, proj, cones);
       stats.draws += 1;
       stats.faces = faces;
     }
