@@ -162,7 +162,7 @@ fn reported_sigmas_are_honest_within_three_sigma_for_95_percent() {
 #[test]
 fn pseudo_level_scan_keeps_walls_and_drops_floor_hits() {
     let room = Room::box_room(6.0, 5.0);
-    let pose = Pose::new(2.0, 2.5, 0.45, deg(20.0), deg(8.0), deg(5.0));
+    let pose = Pose::new(2.0, 2.5, 0.45, deg(20.0), deg(4.0), deg(5.0));
     let scans = scans_at(&room, &pose, &elevations(5, 5.0), 0.01, 9, 7);
     let e = level_pose(&scans, &LevelParams::default());
     assert!(

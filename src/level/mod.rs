@@ -89,6 +89,12 @@ pub struct LevelParams {
     pub split_f: f64,
     /// Nested splits allowed per patch. Default 3.
     pub split_depth: usize,
+    /// Also seed patches from two-row quads, for walls that only two scans reach (used only
+    /// when the other patches cannot fix up, and only if they rise steeply like a wall, see
+    /// `steep`). Default false: a wall line and the floor line just in front of its foot, in
+    /// adjacent scans, are coplanar within the noise, and the plane through them is neither
+    /// (it gave confident 20-degree errors); failing is better.
+    pub two_row_seeds: bool,
     /// Patches spanning only two scans are used only when the others cannot fix up, and only
     /// when their normal is at least this far from the robot's up [deg]. Default 60.
     pub two_row_min_angle_deg: f64,
@@ -137,6 +143,7 @@ impl Default for LevelParams {
             grow_k: 3.0,
             seed_span_sigmas: 6.0,
             split_misfit: 1.1,
+            two_row_seeds: false,
             two_row_min_angle_deg: 60.0,
             plane_iterations: 3,
             flat_pass: true,
@@ -481,7 +488,9 @@ fn solve_up(
                     .filter(|p| p.kind == SurfaceKind::Wall)
                     .filter(|p| {
                         p.row_range.1 - p.row_range.0 >= full_rows
-                            || (two_rows && p.fit.normal.z.abs() < strict)
+                            || (two_rows
+                                && p.fit.normal.z.abs() < strict
+                                && est.grid.as_ref().is_some_and(|g| steep(g, p)))
                     })
                     .map(|p| PlaneObs {
                         fit: &p.fit,
@@ -494,6 +503,13 @@ fn solve_up(
                 .filter(|sol| acceptable(sol, params).is_ok());
             match attempt {
                 Some(sol) => sol,
+                None if !params.two_row_seeds => {
+                    if first.is_empty() {
+                        return Err(FailReason::TooFewPolygons);
+                    }
+                    up::up_robust(&first, sigma_eff, params.iterations)
+                        .ok_or(FailReason::ParallelWalls)?
+                }
                 None => {
                     let obs = obs_with(true);
                     if obs.is_empty() {
@@ -507,6 +523,36 @@ fn solve_up(
     };
     acceptable(&sol, params)?;
     Ok(sol)
+}
+
+/// True when the patch's points rise steeply from scan to scan, as on a wall: in each column
+/// with points in two adjacent rows, the range changes by less than `0.7 r de` (on a wall met
+/// at a vertical incidence below 35 degrees, `|dr| = r tan(incidence) de`; on a floor met at
+/// less than 45 degrees down, `|dr| = r cot(angle) de > r de`); the median over columns
+/// decides. It keeps a wall line plus a floor line out of the walls.
+pub fn steep(grid: &PoseGrid, p: &Patch) -> bool {
+    let cols = grid.cols;
+    let member = |i: usize| p.members.binary_search(&i).is_ok();
+    let mut ratios: Vec<f64> = p
+        .members
+        .iter()
+        .filter_map(|&i| {
+            let (r, c) = (i / cols, i % cols);
+            let j = (r + 1) * cols + c;
+            if r + 1 >= grid.rows() || !member(j) {
+                return None;
+            }
+            let (a, b) = (grid.points[i].as_ref()?, grid.points[j].as_ref()?);
+            let de = (grid.elevation[r + 1] - grid.elevation[r]).abs();
+            Some((b.range - a.range).abs() / (0.5 * (a.range + b.range) * de).max(1e-9))
+        })
+        .collect();
+    if ratios.len() < 5 {
+        return false;
+    }
+    let mid = ratios.len() / 2;
+    let (_, m, _) = ratios.select_nth_unstable_by(mid, f64::total_cmp);
+    *m < 0.7
 }
 
 fn grid_rows(est: &LevelEstimate) -> usize {

@@ -13,7 +13,7 @@ use std::collections::VecDeque;
 pub struct Patch {
     pub fit: PlaneFit,
     pub kind: SurfaceKind,
-    /// Grid indices (row * cols + col) of its points.
+    /// Grid indices (row * cols + col) of its points, ascending.
     pub members: Vec<usize>,
     /// Lowest and highest row it reaches.
     pub row_range: (usize, usize),
@@ -84,7 +84,7 @@ pub fn grow_patches(
         wide = extract_quads_sized(grid, params, sigma, params.quad_rows, width);
         &wide
     };
-    let two_row: Vec<Polygon> = if params.quad_rows > 2 {
+    let two_row: Vec<Polygon> = if params.two_row_seeds && params.quad_rows > 2 {
         extract_quads_sized(grid, params, sigma, 2, width)
     } else {
         Vec::new()
@@ -205,14 +205,19 @@ pub fn grow_patches(
 }
 
 fn rows_span(members: &[usize], cols: usize) -> (usize, usize) {
-    members
-        .iter()
-        .fold((usize::MAX, 0), |(lo, hi), &i| (lo.min(i / cols), hi.max(i / cols)))
+    members.iter().fold((usize::MAX, 0), |(lo, hi), &i| {
+        (lo.min(i / cols), hi.max(i / cols))
+    })
 }
 
 /// A patch from members when it is big enough and spans at least two rows (one row is a
 /// line, which leaves its plane free to turn about it).
-fn make_patch(grid: &PoseGrid, members: &[usize], params: &LevelParams, sigma: f64) -> Option<Patch> {
+fn make_patch(
+    grid: &PoseGrid,
+    members: &[usize],
+    params: &LevelParams,
+    sigma: f64,
+) -> Option<Patch> {
     let (lo, hi) = rows_span(members, grid.cols);
     if members.len() < params.min_patch_points || hi <= lo {
         return None;
@@ -221,7 +226,11 @@ fn make_patch(grid: &PoseGrid, members: &[usize], params: &LevelParams, sigma: f
     Some(Patch {
         kind: classify(&fit.normal, &fit.centroid, params),
         fit,
-        members: members.to_vec(),
+        members: {
+            let mut m = members.to_vec();
+            m.sort_unstable();
+            m
+        },
         row_range: (lo, hi),
     })
 }
@@ -238,7 +247,11 @@ fn release_and_make(
     let kept: Vec<usize> = members
         .iter()
         .copied()
-        .filter(|&i| grid.points[i].as_ref().is_some_and(|g| fit.distance(&g.p).abs() <= tol))
+        .filter(|&i| {
+            grid.points[i]
+                .as_ref()
+                .is_some_and(|g| fit.distance(&g.p).abs() <= tol)
+        })
         .collect();
     make_patch(grid, &kept, params, sigma)
 }
@@ -246,7 +259,12 @@ fn release_and_make(
 /// The patch's plane refitted with Cauchy weights on each point's residual over its own noise
 /// along the normal (`sigma |d . n|`), so that the few floor points caught at a wall's foot,
 /// all on one side of it, stop tilting the wall.
-fn robust_fit(grid: &PoseGrid, members: &[usize], params: &LevelParams, sigma: f64) -> Option<PlaneFit> {
+fn robust_fit(
+    grid: &PoseGrid,
+    members: &[usize],
+    params: &LevelParams,
+    sigma: f64,
+) -> Option<PlaneFit> {
     let mut fit = accumulate(grid, members).fit(sigma)?;
     let s = sigma.max(params.min_sigma);
     for _ in 0..params.plane_iterations {
@@ -311,7 +329,8 @@ pub fn split_members(
         let total = acc;
         for &b in &bounds {
             let (left, right) = (&sorted[..b], &sorted[b..]);
-            if left.len() < params.min_patch_points / 2 || right.len() < params.min_patch_points / 2 {
+            if left.len() < params.min_patch_points / 2 || right.len() < params.min_patch_points / 2
+            {
                 continue;
             }
             let (l_lo, l_hi) = rows_span(left, cols);
@@ -340,13 +359,16 @@ pub fn split_members(
     if !ok(&a) || !ok(&b) {
         return whole;
     }
-    let (Some(fa), Some(fb)) = (accumulate(grid, &a).fit(sigma), accumulate(grid, &b).fit(sigma)) else {
+    let (Some(fa), Some(fb)) = (
+        accumulate(grid, &a).fit(sigma),
+        accumulate(grid, &b).fit(sigma),
+    ) else {
         return whole;
     };
     let rss2 = fa.residual_ss + fb.residual_ss;
     let n = members.len() as f64;
     let f = ((rss1 - rss2) / 3.0) / (rss2 / (n - 6.0)).max(1e-300);
-    if !(f > params.split_f) {
+    if f.is_nan() || f <= params.split_f {
         return whole;
     }
     let mut out = split_members(grid, &a, params, sigma, depth - 1);

@@ -333,6 +333,10 @@ impl Matcher {
             return self.fallback(points, odometry, guess, FallbackReason::NoValidRays, None);
         }
         if self.map.is_empty() {
+            // Nothing to match against yet (e.g. the first pose failed to level and had no
+            // valid ray): this scan starts the map at its odometry guess, as a first scan does;
+            // otherwise the map would stay empty for the whole run.
+            self.remember(points, guess, odometry);
             return self.fallback(points, odometry, guess, FallbackReason::NoReference, None);
         }
         // The coarse search runs against the last remembered scan (bounded cost), placed in the
