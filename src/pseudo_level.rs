@@ -1,1 +1,201 @@
-//! Pseudo-level scans (paper sect. 6): one scan projected onto the level plane, wall points only.
+//! Pseudo-level scans (paper sect. 6): one scan of the pose (the base scan) rotated into the
+//! level frame with `level_from_robot`, its z dropped, keeping only points on walls so that
+//! floor hits (phantom obstacles) never reach the 2D matcher.
+//!
+//! A point is kept when its ray had a return and it lies on a wall: inside a wall quad's span
+//! or a grown wall patch (the paper's test), or, beyond the paper, when the point in the same
+//! column of an adjacent scan lies nearly straight above or below it after leveling (walls are
+//! vertical; on the floor the same two rays land far apart horizontally at nearly the same
+//! height). That per-point test recovers corners and small features that no quad covers.
+//! Points at the floor's or ceiling's height (from floor/ceiling patches) are never kept.
+//! Then gaps of at most `max_gap` rays between kept points are filled, for rays with a return.
+
+use crate::geometry::{Pose, beam_direction};
+use crate::level::patches::UNLABELLED;
+use crate::level::{LevelEstimate, SurfaceKind};
+use crate::scan::Scan;
+use nalgebra::{Matrix3, Point3};
+
+/// Parameters of the pseudo-level scan.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PseudoLevelParams {
+    /// Gaps of at most this many rays between kept points are filled [rays]. Default 3.
+    pub max_gap: usize,
+    /// The per-point vertical test: a pair of points in adjacent scans is wall-like when its
+    /// height difference exceeds this many times its horizontal distance (less noise) [1].
+    /// Default 1.5; 0 turns the test off.
+    pub vertical_ratio: f64,
+    /// Points within this height of the floor or ceiling (plus three sigmas of the range noise
+    /// along the vertical) are never kept [m]. Default 0.05.
+    pub floor_margin: f64,
+}
+
+impl Default for PseudoLevelParams {
+    fn default() -> Self {
+        Self {
+            max_gap: 3,
+            vertical_ratio: 1.5,
+            floor_margin: 0.05,
+        }
+    }
+}
+
+/// Builds the pseudo-level 2D scan of a pose from its scans and their estimate. Metadata come
+/// from the base scan: `sequence`, planar `odometry`/`true_pose`/`estimate`, `timestamp` and
+/// unknown fields. A failed pose gives a scan with every ray invalid.
+pub fn pseudo_level_scan(scans: &[Scan], est: &LevelEstimate, params: &PseudoLevelParams) -> Scan {
+    let base_index = est
+        .base_scan
+        .or_else(|| {
+            (0..scans.len()).min_by(|&a, &b| {
+                let ea = scans[a].elevation.unwrap_or(0.0).abs();
+                let eb = scans[b].elevation.unwrap_or(0.0).abs();
+                ea.total_cmp(&eb)
+            })
+        })
+        .unwrap_or(0);
+    let Some(base) = scans.get(base_index) else {
+        return Scan::default();
+    };
+    let n = base.nrays();
+    let att = est.attitude.unwrap_or_default();
+    let level_from_robot: Matrix3<f64> = *att.level_from_robot().matrix();
+    let elevation = base.elevation.unwrap_or(0.0);
+    let keep = if est.is_ok() {
+        kept_rays(scans, est, params, base_index, &level_from_robot)
+    } else {
+        vec![false; n]
+    };
+    let mut out = Scan {
+        sequence: base.sequence,
+        odometry: base.odometry.map(planar),
+        true_pose: base.true_pose.map(planar),
+        estimate: base.estimate.map(planar),
+        timestamp: base.timestamp,
+        extra: base.extra.clone(),
+        theta: Vec::with_capacity(n),
+        readings: Vec::with_capacity(n),
+        valid: Vec::with_capacity(n),
+        ..Scan::default()
+    };
+    for (i, &kept) in keep.iter().enumerate() {
+        let dir = level_from_robot * beam_direction(elevation, base.theta[i]);
+        let point = base.point_in_robot(i).map(|p| level_from_robot * p.coords);
+        let bearing = match &point {
+            Some(p) if p.x != 0.0 || p.y != 0.0 => p.y.atan2(p.x),
+            _ => dir.y.atan2(dir.x),
+        };
+        out.theta.push(bearing);
+        match (kept, point) {
+            (true, Some(p)) => {
+                out.readings.push(Some(p.x.hypot(p.y)));
+                out.valid.push(true);
+            }
+            _ => {
+                out.readings.push(None);
+                out.valid.push(false);
+            }
+        }
+    }
+    out
+}
+
+fn planar(p: Pose) -> Pose {
+    Pose::planar(p.x, p.y, p.rz)
+}
+
+/// Which rays of the base scan are wall points (before and after gap filling).
+fn kept_rays(
+    scans: &[Scan],
+    est: &LevelEstimate,
+    params: &PseudoLevelParams,
+    base_index: usize,
+    level_from_robot: &Matrix3<f64>,
+) -> Vec<bool> {
+    let base = &scans[base_index];
+    let n = base.nrays();
+    let Some(grid) = &est.grid else {
+        return vec![false; n];
+    };
+    let Some(row) = grid.scan_index.iter().position(|&s| s == base_index) else {
+        return vec![false; n];
+    };
+    let sigma = est.range_sigma;
+    let level = |p: &Point3<f64>| level_from_robot * p.coords;
+    // Floor and ceiling heights in the level frame, from their patches (median of members).
+    let height_of = |kind: SurfaceKind| -> Option<f64> {
+        let mut z: Vec<f64> = est
+            .patches
+            .iter()
+            .filter(|p| p.kind == kind)
+            .flat_map(|p| p.members.iter())
+            .filter_map(|&i| grid.points[i].as_ref().map(|g| level(&g.p).z))
+            .collect();
+        if z.is_empty() {
+            return None;
+        }
+        let mid = z.len() / 2;
+        let (_, m, _) = z.select_nth_unstable_by(mid, f64::total_cmp);
+        Some(*m)
+    };
+    let floor_z = height_of(SurfaceKind::Floor);
+    let ceiling_z = height_of(SurfaceKind::Ceiling);
+    let mut is_wall = vec![false; n];
+    let mut blocked = vec![false; n];
+    for (c, slot) in is_wall.iter_mut().enumerate() {
+        let i = row * grid.cols + c;
+        let Some(g) = &grid.points[i] else {
+            blocked[c] = true;
+            continue;
+        };
+        let lp = level(&g.p);
+        let dz_noise = 3.0 * sigma * (level_from_robot * g.dir).z.abs();
+        let near =
+            |h: Option<f64>| h.is_some_and(|h| (lp.z - h).abs() < params.floor_margin + dz_noise);
+        let label = est.labels.get(i).copied().unwrap_or(UNLABELLED);
+        let on_flat = label != UNLABELLED && est.patches[label as usize].kind != SurfaceKind::Wall;
+        if near(floor_z) || near(ceiling_z) || on_flat {
+            blocked[c] = true;
+            continue;
+        }
+        if est.wall_mask.get(i).copied().unwrap_or(false) {
+            *slot = true;
+            continue;
+        }
+        if params.vertical_ratio > 0.0 {
+            let neighbours = [
+                row.checked_sub(1),
+                Some(row + 1).filter(|&r| r < grid.rows()),
+            ];
+            *slot = neighbours.into_iter().flatten().any(|r| {
+                grid.at(r, c).is_some_and(|q| {
+                    let d = level(&q.p) - lp;
+                    let dh = d.x.hypot(d.y);
+                    let dz = d.z.abs();
+                    // Wall: the vertical separation the elevation step gives at this range.
+                    let expected = 0.5 * g.range * (grid.elevation[r] - grid.elevation[row]).abs();
+                    dz >= expected && dz >= params.vertical_ratio * (dh - 3.0 * sigma).max(0.0)
+                })
+            });
+        }
+    }
+    // Fill short gaps between wall points, only with rays that had a return and are not known
+    // floor or ceiling points.
+    let mut keep = is_wall.clone();
+    let mut last: Option<usize> = None;
+    for (c, &wall) in is_wall.iter().enumerate() {
+        if !wall {
+            continue;
+        }
+        if let Some(l) = last {
+            let gap = c - l - 1;
+            if gap > 0 && gap <= params.max_gap {
+                for k in l + 1..c {
+                    keep[k] |= !blocked[k];
+                }
+            }
+        }
+        last = Some(c);
+    }
+    keep
+}

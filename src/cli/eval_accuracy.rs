@@ -1,8 +1,197 @@
-//! Not written yet.
+//! `levelscan eval accuracy PLAN...`: the paper's Table I and Fig. 6 (sect. 8.1).
+
+use anyhow::Context;
+use levelscan::eval::accuracy::{AccuracyParams, CellStats, run_accuracy};
+use levelscan::formats::read_plan;
+use levelscan::level::Estimator;
+use levelscan::viz::histogram::{Series, write_histogram};
+use std::fmt::Write as _;
+use std::path::PathBuf;
 
 #[derive(clap::Args, Debug)]
-pub struct Args {}
+pub struct Args {
+    /// Floor plans (.wall); poses are drawn in each and the statistics pooled.
+    #[arg(required = true)]
+    pub plans: Vec<PathBuf>,
+    /// Scan counts per pose.
+    #[arg(long, value_delimiter = ',', default_value = "3,4,5")]
+    pub scans: Vec<usize>,
+    /// Range noise sigmas [m].
+    #[arg(long, value_delimiter = ',', default_value = "0.01,0.05,0.10")]
+    pub noise: Vec<f64>,
+    /// Estimators to compare.
+    #[arg(
+        long,
+        value_enum,
+        value_delimiter = ',',
+        default_value = "paper,robust"
+    )]
+    pub estimators: Vec<Estimator>,
+    /// Random poses per plan.
+    #[arg(long, default_value_t = 100)]
+    pub poses: usize,
+    /// Seed of the poses and the noise.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Elevation step between scans [deg].
+    #[arg(long, default_value_t = 5.0)]
+    pub step: f64,
+    /// Roll and pitch uniform in +-tilt [deg].
+    #[arg(long, default_value_t = 20.0)]
+    pub tilt: f64,
+    /// Write accuracy.json and the Fig. 6 histograms (PNG, SVG) here.
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+}
 
-pub fn run(_args: Args) -> anyhow::Result<()> {
-    anyhow::bail!("this command is not implemented yet")
+pub fn run(args: Args) -> anyhow::Result<()> {
+    anyhow::ensure!(
+        !args.scans.is_empty() && args.scans.iter().all(|&s| s >= 1),
+        "--scans must list scan counts of at least 1"
+    );
+    anyhow::ensure!(
+        args.noise.iter().all(|n| n.is_finite() && *n >= 0.0),
+        "--noise must list non-negative sigmas in metres"
+    );
+    let plans = args
+        .plans
+        .iter()
+        .map(|p| read_plan(p).map_err(anyhow::Error::from))
+        .collect::<anyhow::Result<Vec<_>>>()?;
+    let params = AccuracyParams {
+        scans: args.scans.clone(),
+        noise: args.noise.clone(),
+        estimators: args.estimators.clone(),
+        poses_per_plan: args.poses,
+        seed: args.seed,
+        step_deg: args.step,
+        tilt_deg: args.tilt,
+        ..AccuracyParams::default()
+    };
+    let stats = run_accuracy(&plans, &params)?;
+    print!("{}", markdown(&stats, &params));
+    if let Some(dir) = &args.out {
+        std::fs::create_dir_all(dir)
+            .with_context(|| format!("{}: cannot create", dir.display()))?;
+        let path = dir.join("accuracy.json");
+        let json = serde_json::json!({
+            "plans": args.plans.iter().map(|p| p.display().to_string()).collect::<Vec<_>>(),
+            "poses_per_plan": args.poses,
+            "seed": args.seed,
+            "step_deg": args.step,
+            "tilt_deg": args.tilt,
+            "cells": stats,
+        });
+        std::fs::write(&path, serde_json::to_string_pretty(&json)?)
+            .with_context(|| format!("{}: cannot write", path.display()))?;
+        // Fig. 6 at the noise nearest 5 cm, one file per estimator.
+        let fig_noise = params
+            .noise
+            .iter()
+            .copied()
+            .min_by(|a, b| (a - 0.05).abs().total_cmp(&(b - 0.05).abs()));
+        if let Some(noise) = fig_noise {
+            for est in &params.estimators {
+                let series: Vec<Series> = stats
+                    .iter()
+                    .filter(|s| s.noise == noise && s.estimator == est.to_string())
+                    .map(|s| Series {
+                        label: format!("{} scans", s.scans),
+                        errors_deg: s.errors_deg.clone(),
+                    })
+                    .collect();
+                let title = format!(
+                    "Level estimation error, {} cm noise, {est} estimator",
+                    noise * 100.0
+                );
+                if let Err(e) = write_histogram(dir, &format!("fig6_{est}"), &title, &series) {
+                    eprintln!("warning: histogram not written: {e}");
+                }
+            }
+        }
+        eprintln!("wrote {}", path.display());
+    }
+    Ok(())
+}
+
+fn fmt_deg(x: f64) -> String {
+    if x.is_finite() {
+        format!("{x:.3}")
+    } else {
+        "-".to_string()
+    }
+}
+
+fn fmt_pct(x: f64) -> String {
+    if x.is_finite() {
+        format!("{:.1}%", 100.0 * x)
+    } else {
+        "-".to_string()
+    }
+}
+
+/// Table I per estimator (mean error, the paper's value in parentheses), then every cell's
+/// details.
+fn markdown(stats: &[CellStats], params: &AccuracyParams) -> String {
+    let mut s = String::new();
+    for est in &params.estimators {
+        let name = est.to_string();
+        let _ = writeln!(
+            s,
+            "### Table I, {name} estimator: mean error [deg] (paper's)\n"
+        );
+        let _ = write!(s, "| scans |");
+        for n in &params.noise {
+            let _ = write!(s, " {} cm |", n * 100.0);
+        }
+        let _ = write!(s, "\n|---|");
+        for _ in &params.noise {
+            let _ = write!(s, "---|");
+        }
+        s.push('\n');
+        for &sc in &params.scans {
+            let _ = write!(s, "| {sc} |");
+            for &n in &params.noise {
+                let cell = stats
+                    .iter()
+                    .find(|c| c.scans == sc && c.noise == n && c.estimator == name);
+                let text = cell.map_or("-".to_string(), |c| match c.paper_mean_deg {
+                    Some(p) => format!("{} ({p:.3})", fmt_deg(c.mean_deg)),
+                    None => fmt_deg(c.mean_deg),
+                });
+                let _ = write!(s, " {text} |");
+            }
+            s.push('\n');
+        }
+        s.push('\n');
+    }
+    let _ = writeln!(s, "### Every cell\n");
+    let _ = writeln!(
+        s,
+        "| estimator | scans | noise [m] | leveled | mean | median | p95 | max | ok > 5 deg | within 3 sigma | phantom | coverage | failures |"
+    );
+    let _ = writeln!(s, "|---|---|---|---|---|---|---|---|---|---|---|---|---|");
+    for c in stats {
+        let failures: Vec<String> = c.failures.iter().map(|(k, v)| format!("{k} {v}")).collect();
+        let _ = writeln!(
+            s,
+            "| {} | {} | {} | {}/{} ({}) | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
+            c.estimator,
+            c.scans,
+            c.noise,
+            c.leveled,
+            c.poses,
+            fmt_pct(c.leveled_fraction),
+            fmt_deg(c.mean_deg),
+            fmt_deg(c.median_deg),
+            fmt_deg(c.p95_deg),
+            fmt_deg(c.max_deg),
+            c.wrong_over_5_deg,
+            fmt_pct(c.within_3_sigma),
+            fmt_pct(c.phantom_rate),
+            fmt_pct(c.coverage),
+            failures.join(", ")
+        );
+    }
+    s
 }

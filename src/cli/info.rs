@@ -2,7 +2,7 @@
 //! the file: poses, scans, rays, elevations, valid fraction, which optional fields are present.
 
 use super::{open_input, open_output};
-use levelscan::formats::ParallelScanReader;
+use levelscan::formats::{CarmenParams, read_any};
 use levelscan::scan::Scan;
 use serde_json::{Value, json};
 use std::collections::{BTreeMap, BTreeSet, HashSet};
@@ -11,22 +11,34 @@ use std::path::PathBuf;
 
 #[derive(clap::Args, Debug)]
 pub struct Args {
-    /// Scan file (JSON Lines, optionally gzipped); standard input when absent or `-`.
+    /// Scan file: JSON Lines or a CARMEN log, optionally gzipped; standard input when absent
+    /// or `-`.
     pub scans: Option<PathBuf>,
+    /// CARMEN `FLASER` maximum range [m]; readings at or beyond it are no return. Default: the
+    /// log's `PARAM robot_front_laser_max`, else 50.
+    #[arg(long)]
+    pub max_range: Option<f64>,
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
     let input = open_input(args.scans.as_deref())?;
+    let carmen = CarmenParams {
+        max_range: args.max_range,
+    };
+    let source = read_any(input.reader, &input.name, carmen)?;
+    let format = source.format();
     let mut summary = Summary::default();
-    for item in ParallelScanReader::new(input.reader, &input.name) {
+    for item in source {
         let (_, scan) = item?;
         summary.add(&scan);
     }
-    let mut out = open_output(None)?;
-    let mut report = summary.into_json();
-    if let Value::Object(m) = &mut report {
-        m.insert("file".into(), json!(input.name));
+    let mut report = serde_json::Map::new();
+    report.insert("file".into(), json!(input.name));
+    report.insert("format".into(), json!(format));
+    if let Value::Object(m) = summary.into_json() {
+        report.extend(m);
     }
+    let mut out = open_output(None)?;
     serde_json::to_writer_pretty(&mut out, &report)?;
     out.write_all(b"\n")?;
     out.flush()?;
@@ -47,6 +59,14 @@ struct Summary {
     returning_sequences: u64,
     scans_in_pose: u64,
     scans_per_pose: Option<(u64, u64)>,
+    /// Distinct elevations and ray counts of the pose being read.
+    pose_elevations: BTreeSet<OrdF64>,
+    pose_nrays: BTreeSet<usize>,
+    elevations_per_pose: Option<(usize, usize)>,
+    /// Poses that `level` cannot level: fewer than three distinct elevations (the paper's
+    /// quads span three scans, sect. 5.2), or scans of different `nrays`.
+    poses_with_too_few_elevations: u64,
+    poses_with_mixed_nrays: u64,
     rays_total: u64,
     rays_per_scan: Option<(usize, usize)>,
     valid_rays: u64,
@@ -90,14 +110,19 @@ impl Summary {
         if new_pose {
             self.close_pose();
             self.poses += 1;
-            if let Some(seq) = scan.sequence
-                && !self.sequences_seen.insert(seq)
+            if scan
+                .sequence
+                .is_some_and(|seq| !self.sequences_seen.insert(seq))
             {
                 self.returning_sequences += 1;
             }
         }
         self.scans_in_pose += 1;
         self.last_sequence = Some(scan.sequence);
+        if let Some(e) = scan.elevation {
+            self.pose_elevations.insert(OrdF64(e));
+        }
+        self.pose_nrays.insert(scan.nrays());
 
         let n = scan.nrays();
         self.rays_total += n as u64;
@@ -136,8 +161,14 @@ impl Summary {
     fn close_pose(&mut self) {
         if self.scans_in_pose > 0 {
             self.scans_per_pose = min_max(self.scans_per_pose, self.scans_in_pose);
+            let distinct = self.pose_elevations.len();
+            self.elevations_per_pose = min_max(self.elevations_per_pose, distinct);
+            self.poses_with_too_few_elevations += u64::from(distinct < 3);
+            self.poses_with_mixed_nrays += u64::from(self.pose_nrays.len() > 1);
         }
         self.scans_in_pose = 0;
+        self.pose_elevations.clear();
+        self.pose_nrays.clear();
     }
 
     fn into_json(mut self) -> Value {
@@ -149,6 +180,11 @@ impl Summary {
             "poses": self.poses,
             "scans": self.scans,
             "scans_per_pose": pair(self.scans_per_pose),
+            "elevations_per_pose": self
+                .elevations_per_pose
+                .map(|(lo, hi)| json!({"min": lo, "max": hi})),
+            "poses_with_too_few_elevations": self.poses_with_too_few_elevations,
+            "poses_with_mixed_nrays": self.poses_with_mixed_nrays,
             "returning_sequences": self.returning_sequences,
             "rays": {
                 "total": self.rays_total,
@@ -204,6 +240,9 @@ mod tests {
         assert_eq!(j["scans"], 10);
         assert_eq!(j["returning_sequences"], 1);
         assert_eq!(j["scans_per_pose"], json!({"min": 1, "max": 3}));
+        assert_eq!(j["elevations_per_pose"], json!({"min": 1, "max": 3}));
+        assert_eq!(j["poses_with_too_few_elevations"], 1);
+        assert_eq!(j["poses_with_mixed_nrays"], 0);
         assert_eq!(j["rays"]["total"], 9 * 4 + 2);
         assert_eq!(j["rays"]["per_scan"], json!({"min": 2, "max": 4}));
         assert_eq!(j["valid_rays"], 9 * 3 + 1);
@@ -225,5 +264,17 @@ mod tests {
         assert_eq!(j["poses"], 4);
         assert_eq!(j["elevations"]["scans_without"], 4);
         assert_eq!(j["elevations"]["distinct"], 0);
+        assert_eq!(j["poses_with_too_few_elevations"], 4);
+    }
+
+    #[test]
+    fn pose_with_mixed_ray_counts_is_counted() {
+        let mut sum = Summary::default();
+        for (e, n) in [(-0.1, 3), (0.0, 3), (0.1, 4)] {
+            sum.add(&scan(Some(0), Some(e), &vec![Some(1.0); n]));
+        }
+        let j = sum.into_json();
+        assert_eq!(j["poses_with_mixed_nrays"], 1);
+        assert_eq!(j["poses_with_too_few_elevations"], 0);
     }
 }

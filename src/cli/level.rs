@@ -1,8 +1,269 @@
-//! Not written yet.
+//! `levelscan level [SCANS]`: one pseudo-level scan per pose (paper sect. 5 and 6), in input
+//! order, as the contract's "Output of level" lays it out.
+
+use super::{open_input, open_output};
+use anyhow::Context;
+use levelscan::formats::{InputError, ParallelScanReader, write_scan};
+use levelscan::level::{Estimator, LevelEstimate, LevelParams, SurfaceKind, level_pose};
+use levelscan::pseudo_level::{PseudoLevelParams, pseudo_level_scan};
+use levelscan::scan::Scan;
+use nalgebra::Point3;
+use rayon::prelude::*;
+use serde_json::{Value, json};
+use std::collections::HashSet;
+use std::io::Write;
+use std::path::PathBuf;
 
 #[derive(clap::Args, Debug)]
-pub struct Args {}
+pub struct Args {
+    /// Scan JSON Lines with `sequence` and `elevation`; standard input when absent or `-`.
+    pub input: Option<PathBuf>,
+    /// Write here instead of standard output.
+    #[arg(short, long)]
+    pub output: Option<PathBuf>,
+    /// Range noise sigma [m]; default: the scans' `readings_sigma`, else estimated from the data.
+    #[arg(long)]
+    pub sigma: Option<f64>,
+    /// Up-vector estimator: the paper's cross products over quads, or robust least squares
+    /// over whole-wall patches.
+    #[arg(long, value_enum, default_value_t = Estimator::Robust)]
+    pub estimator: Estimator,
+    /// Quad height [scans].
+    #[arg(long, default_value_t = LevelParams::default().quad_rows)]
+    pub quad_rows: usize,
+    /// Quad width [rays].
+    #[arg(long, default_value_t = LevelParams::default().quad_cols)]
+    pub quad_cols: usize,
+    /// A pose whose attitude sigma exceeds this fails as parallel_walls [deg].
+    #[arg(long, default_value_t = LevelParams::default().max_sigma_deg)]
+    pub max_sigma: f64,
+    /// Gaps of at most this many rays between wall points are filled [rays].
+    #[arg(long, default_value_t = PseudoLevelParams::default().max_gap)]
+    pub max_gap: usize,
+    /// Also write `wall_polygons` (the quads) and `wall_patches` (merged walls), each a list of
+    /// 4 corners [x, y, z] in the robot frame, for the 3D viewer.
+    #[arg(long)]
+    pub polygons: bool,
+}
 
-pub fn run(_args: Args) -> anyhow::Result<()> {
-    anyhow::bail!("this command is not implemented yet")
+/// Poses per parallel batch: bounds memory while keeping both cores busy.
+const BATCH_POSES: usize = 256;
+
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let params = LevelParams {
+        sigma: args.sigma,
+        estimator: args.estimator,
+        quad_rows: args.quad_rows,
+        quad_cols: args.quad_cols,
+        max_sigma_deg: args.max_sigma,
+        ..LevelParams::default()
+    };
+    if let Some(s) = params.sigma {
+        anyhow::ensure!(
+            s >= 0.0 && s.is_finite(),
+            "--sigma must be a non-negative number of metres"
+        );
+    }
+    anyhow::ensure!(
+        params.quad_rows >= 2 && params.quad_cols >= 2,
+        "--quad-rows and --quad-cols must be at least 2"
+    );
+    let pseudo = PseudoLevelParams {
+        max_gap: args.max_gap,
+        ..PseudoLevelParams::default()
+    };
+    let input = open_input(args.input.as_deref())?;
+    let name = input.name.clone();
+    let mut out = open_output(args.output.as_ref())?;
+    let mut reader = ParallelScanReader::new(input.reader, name.clone());
+    let mut grouper = Grouper::default();
+    let mut batch: Vec<Vec<Scan>> = Vec::with_capacity(BATCH_POSES);
+    let mut failure: Option<InputError> = None;
+    loop {
+        let item = reader.next();
+        let exhausted = item.is_none();
+        match item {
+            Some(Ok((line, scan))) => match grouper.push(&name, line, scan) {
+                Ok(Some(pose)) => batch.push(pose),
+                Ok(None) => {}
+                Err(e) => failure = Some(e),
+            },
+            Some(Err(e)) => failure = Some(e),
+            None => {
+                if let Some(pose) = grouper.finish() {
+                    batch.push(pose);
+                }
+            }
+        }
+        let end = exhausted || failure.is_some();
+        if batch.len() >= BATCH_POSES || end {
+            write_batch(&mut out, &batch, &params, &pseudo, args.polygons)?;
+            batch.clear();
+        }
+        if end {
+            break;
+        }
+    }
+    out.flush().context("cannot write output")?;
+    match failure {
+        Some(e) => Err(e.into()),
+        None => Ok(()),
+    }
+}
+
+fn write_batch(
+    out: &mut dyn Write,
+    batch: &[Vec<Scan>],
+    params: &LevelParams,
+    pseudo: &PseudoLevelParams,
+    polygons: bool,
+) -> anyhow::Result<()> {
+    let lines: Vec<Vec<u8>> = batch
+        .par_iter()
+        .map(|scans| {
+            let est = level_pose(scans, params);
+            let record = level_record(scans, &est, pseudo, polygons);
+            let mut buf = Vec::with_capacity(8192);
+            // Writing to a Vec cannot fail.
+            let _ = write_scan(&mut buf, &record);
+            buf
+        })
+        .collect();
+    for l in lines {
+        out.write_all(&l).context("cannot write output")?;
+    }
+    Ok(())
+}
+
+/// The output record of one pose: its pseudo-level scan plus the `level` object (and the
+/// polygons when asked).
+pub fn level_record(
+    scans: &[Scan],
+    est: &LevelEstimate,
+    pseudo: &PseudoLevelParams,
+    polygons: bool,
+) -> Scan {
+    let mut scan = pseudo_level_scan(scans, est, pseudo);
+    let base_elevation = est
+        .base_scan
+        .and_then(|i| scans.get(i))
+        .and_then(|s| s.elevation);
+    let level = json!({
+        "status": if est.is_ok() { "ok" } else { "failed" },
+        "reason": est.failure.map(|r| r.as_str()),
+        "theta_x": est.attitude.map(|a| a.theta_x),
+        "theta_y": est.attitude.map(|a| a.theta_y),
+        "sigma_x": est.sigmas.map(|s| s[0]),
+        "sigma_y": est.sigmas.map(|s| s[1]),
+        "up": est.up.map(|u| [u.x, u.y, u.z]),
+        "polygons": est.wall_polygons(),
+        "base_elevation": base_elevation,
+    });
+    scan.extra.insert("level".to_string(), level);
+    if polygons {
+        let quads: Vec<Value> = est
+            .quads
+            .iter()
+            .filter(|q| q.kind == SurfaceKind::Wall)
+            .map(|q| corners_json(&q.corners))
+            .collect();
+        scan.extra
+            .insert("wall_polygons".to_string(), Value::Array(quads));
+        scan.extra.insert(
+            "wall_patches".to_string(),
+            Value::Array(patch_outlines(est)),
+        );
+    }
+    scan
+}
+
+fn corners_json(c: &[Point3<f64>; 4]) -> Value {
+    Value::Array(c.iter().map(|p| json!([p.x, p.y, p.z])).collect())
+}
+
+/// Each wall patch as the rectangle its points span in its own plane (robot frame).
+fn patch_outlines(est: &LevelEstimate) -> Vec<Value> {
+    let Some(grid) = &est.grid else {
+        return Vec::new();
+    };
+    est.patches
+        .iter()
+        .filter(|p| p.kind == SurfaceKind::Wall)
+        .map(|p| {
+            let c = p.fit.centroid;
+            let (a, b) = (p.fit.in_plane[1].1, p.fit.in_plane[0].1);
+            let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+            for g in p.members.iter().filter_map(|&i| grid.points[i].as_ref()) {
+                let d = g.p - c;
+                let uv = [d.dot(&a), d.dot(&b)];
+                for k in 0..2 {
+                    lo[k] = lo[k].min(uv[k]);
+                    hi[k] = hi[k].max(uv[k]);
+                }
+            }
+            let corner = |u: f64, v: f64| c + a * u + b * v;
+            corners_json(&[
+                corner(lo[0], lo[1]),
+                corner(hi[0], lo[1]),
+                corner(hi[0], hi[1]),
+                corner(lo[0], hi[1]),
+            ])
+        })
+        .collect()
+}
+
+/// Groups consecutive scans by `sequence` (contract: a sequence that comes back later is an
+/// input error; `level` needs `sequence` and `elevation` on every scan).
+#[derive(Default)]
+struct Grouper {
+    current: Vec<Scan>,
+    current_seq: Option<u64>,
+    done: HashSet<u64>,
+}
+
+impl Grouper {
+    fn push(
+        &mut self,
+        file: &str,
+        line: usize,
+        scan: Scan,
+    ) -> Result<Option<Vec<Scan>>, InputError> {
+        let Some(seq) = scan.sequence else {
+            return Err(InputError::at_line(
+                file,
+                line,
+                "sequence is missing (level groups the scans of a pose by it)",
+            ));
+        };
+        if scan.elevation.is_none() {
+            return Err(InputError::at_line(
+                file,
+                line,
+                "elevation is missing (level needs the hinge elevation of every scan)",
+            ));
+        }
+        if self.current_seq == Some(seq) {
+            self.current.push(scan);
+            return Ok(None);
+        }
+        if self.done.contains(&seq) {
+            return Err(InputError::at_line(
+                file,
+                line,
+                format!(
+                    "sequence {seq} comes back after other poses (the scans of one pose must be consecutive)"
+                ),
+            ));
+        }
+        let finished = self.finish();
+        self.current_seq = Some(seq);
+        self.current.push(scan);
+        Ok(finished)
+    }
+
+    fn finish(&mut self) -> Option<Vec<Scan>> {
+        let seq = self.current_seq.take()?;
+        self.done.insert(seq);
+        Some(std::mem::take(&mut self.current))
+    }
 }

@@ -1,8 +1,155 @@
-//! Not written yet.
+//! `levelscan view`: one self-contained HTML page with the 3D viewer (paper sect. 7.2.3).
+//! Each input is sniffed: a JSON object with `walls` is a floor plan; anything else is read as
+//! scans, JSON Lines or a CARMEN log (raw scans, CSM logs, `level` output and `match` output are
+//! told apart per record by `viz::html`).
+
+use super::{open_input, open_output};
+use anyhow::{Context, bail};
+use levelscan::formats::carmen::CarmenParams;
+use levelscan::formats::{parse_plan, read_any};
+use levelscan::plan::Plan;
+use levelscan::viz::html::{Source, ViewParams, build_scene, viewer_page};
+use std::io::{Read, Write};
+use std::path::PathBuf;
 
 #[derive(clap::Args, Debug)]
-pub struct Args {}
+pub struct Args {
+    /// Scan files (simulate, level or match output, CSM or CARMEN logs, gzipped or not) and
+    /// `.wall` floor plans; none or `-` reads standard input.
+    pub files: Vec<PathBuf>,
+    /// A floor plan to overlay (same as giving it among FILES).
+    #[arg(long)]
+    pub plan: Option<PathBuf>,
+    /// Output HTML file (`-` for standard output).
+    #[arg(short, long, default_value = "view.html")]
+    pub output: PathBuf,
+    /// Most scan points embedded in the page; bigger inputs keep every k-th pose.
+    #[arg(long, default_value_t = ViewParams::default().max_points)]
+    pub max_points: usize,
+    /// Scanner height [m] for `level` output whose raw scans are not loaded alongside.
+    #[arg(long, default_value_t = ViewParams::default().default_height)]
+    pub height: f64,
+    /// Page title.
+    #[arg(long, default_value_t = ViewParams::default().title)]
+    pub title: String,
+}
 
-pub fn run(_args: Args) -> anyhow::Result<()> {
-    anyhow::bail!("this command is not implemented yet")
+/// What one input turned out to be.
+enum Loaded {
+    Plan(Plan),
+    Scans(Source),
+}
+
+fn load(path: Option<&std::path::Path>) -> anyhow::Result<Loaded> {
+    let mut input = open_input(path)?;
+    let mut text = String::new();
+    input
+        .reader
+        .read_to_string(&mut text)
+        .with_context(|| format!("{}: cannot read (not UTF-8 text?)", input.name))?;
+    let name = input.name;
+    if is_floor_plan(&text) {
+        return Ok(Loaded::Plan(parse_plan(&text, &name)?));
+    }
+    let mut scans = Vec::new();
+    for item in read_any(text.as_bytes(), name.clone(), CarmenParams::default())? {
+        let (_, scan) = item?;
+        scans.push(scan);
+    }
+    if scans.is_empty() {
+        bail!("{name}: no scans and no floor plan in it");
+    }
+    Ok(Loaded::Scans(Source { name, scans }))
+}
+
+/// Tells a `.wall` floor plan (one JSON object, maybe over many lines, maybe with `//`
+/// comment lines) from scan JSON Lines (one object per line, each with `nrays`): a first line
+/// that is a whole scan object means scans; otherwise a `walls` or `wallheight` key means a plan.
+fn is_floor_plan(text: &str) -> bool {
+    let first = text
+        .lines()
+        .map(str::trim)
+        .find(|l| !l.is_empty() && !l.starts_with("//"));
+    let Some(first) = first else {
+        return false;
+    };
+    if let Ok(v) = serde_json::from_str::<serde_json::Value>(first) {
+        return v.get("walls").is_some() || v.get("wallheight").is_some();
+    }
+    first.starts_with('{') && (text.contains("\"walls\"") || text.contains("\"wallheight\""))
+}
+
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let mut plan: Option<(String, Plan)> = None;
+    if let Some(p) = &args.plan {
+        match load(Some(p))? {
+            Loaded::Plan(plan_read) => plan = Some((p.display().to_string(), plan_read)),
+            Loaded::Scans(_) => bail!("{}: --plan needs a .wall floor plan", p.display()),
+        }
+    }
+    let mut paths: Vec<Option<PathBuf>> = args.files.iter().cloned().map(Some).collect();
+    if paths.is_empty() && plan.is_none() {
+        paths.push(None);
+    }
+    let mut sources = Vec::new();
+    for path in paths {
+        let shown = path
+            .as_ref()
+            .map(|p| p.display().to_string())
+            .unwrap_or_else(|| "<stdin>".into());
+        match load(path.as_deref())? {
+            Loaded::Plan(p) => {
+                if let Some((first, _)) = &plan {
+                    bail!("{shown}: a second floor plan (the first was {first}); give one");
+                }
+                plan = Some((shown, p));
+            }
+            Loaded::Scans(s) => sources.push(s),
+        }
+    }
+    let params = ViewParams {
+        max_points: args.max_points,
+        default_height: args.height,
+        title: args.title,
+    };
+    let scene = build_scene(plan.as_ref().map(|(_, p)| p), &sources, &params);
+    for note in &scene.notes {
+        eprintln!("levelscan view: {note}");
+    }
+    let page = viewer_page(&scene);
+    let mut out = open_output(Some(&args.output))?;
+    out.write_all(page.as_bytes())
+        .and_then(|_| out.flush())
+        .with_context(|| format!("{}: cannot write", args.output.display()))?;
+    if args.output.as_os_str() != "-" {
+        eprintln!(
+            "levelscan view: wrote {} ({} KB)",
+            args.output.display(),
+            page.len().div_ceil(1024)
+        );
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::is_floor_plan;
+
+    #[test]
+    fn commented_multi_line_plan_is_a_plan() {
+        let plan =
+            "// an office\n{\n  \"version\": \"w0.1\",\n  \"wallheight\": 3,\n  \"walls\": []\n}\n";
+        assert!(is_floor_plan(plan));
+        assert!(is_floor_plan(
+            "{\"walls\": [[[0, 0], [1, 0]]], \"wallheight\": 2}"
+        ));
+    }
+
+    #[test]
+    fn scan_lines_are_not_a_plan_even_with_a_walls_field() {
+        let scans = "{\"nrays\": 1, \"readings\": [1], \"theta\": [0], \"note\": \"walls\"}\n{\"nrays\": 1}\n";
+        assert!(!is_floor_plan(scans));
+        assert!(!is_floor_plan("FLASER 3 1 1 1 0 0 0 0 0 0 1 h 1\n"));
+        assert!(!is_floor_plan(""));
+    }
 }

@@ -1,2 +1,4 @@
 //! The paper's experiments (sect. 8) and trajectory metrics.
+
+pub mod accuracy;
 pub mod metrics;

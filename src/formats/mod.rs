@@ -5,14 +5,74 @@
 //! - [`scan_jsonl`]: read ([`ScanReader`], [`ParallelScanReader`]) and write ([`write_scan`])
 //!   scan JSON Lines.
 //! - [`wall`]: read, validate and write `.wall` floor plans.
+//! - [`carmen`]: read CARMEN logs (`FLASER`, `ROBOTLASER1`).
+//! - [`tum`]: write (and read back) TUM trajectories.
+//! - [`read_any`]: scans from either JSON Lines or CARMEN, told apart by the first character.
 
+pub mod carmen;
 pub mod scan_jsonl;
+pub mod tum;
 pub mod wall;
 
+pub use carmen::{CarmenParams, CarmenReader};
 pub use scan_jsonl::{ParallelScanReader, ScanReader, parse_scan_line, write_scan};
+pub use tum::write_tum;
 pub use wall::{parse_plan, read_plan, write_plan};
 
+use crate::scan::Scan;
 use std::fmt;
+use std::io::BufRead;
+
+/// Scans from a file in either format: JSON Lines (parsed in parallel batches) or a CARMEN log.
+/// Yields `(line number, scan)` and stops after the first error, like the readers it wraps.
+pub enum ScanSource<R> {
+    /// Boxed: the parallel reader carries two batches of line buffers.
+    JsonLines(Box<ParallelScanReader<R>>),
+    Carmen(CarmenReader<R>),
+}
+
+impl<R: BufRead + Send> ScanSource<R> {
+    /// The format's name, for summaries: `"jsonl"` or `"carmen"`.
+    pub fn format(&self) -> &'static str {
+        match self {
+            ScanSource::JsonLines(_) => "jsonl",
+            ScanSource::Carmen(_) => "carmen",
+        }
+    }
+}
+
+impl<R: BufRead + Send> Iterator for ScanSource<R> {
+    type Item = Result<(usize, Scan), InputError>;
+
+    fn next(&mut self) -> Option<Self::Item> {
+        match self {
+            ScanSource::JsonLines(r) => r.next(),
+            ScanSource::Carmen(r) => r.next(),
+        }
+    }
+}
+
+/// Opens scans in whichever format `reader` holds: JSON Lines when its first non-blank
+/// character is `{`, a CARMEN log otherwise. Only looks at the reader's buffer, so nothing
+/// is consumed and line numbers stay right; a buffer of nothing but blanks reads as JSON Lines
+/// (no scans either way). `name` is for error messages.
+pub fn read_any<R: BufRead + Send>(
+    mut reader: R,
+    name: impl Into<String>,
+    carmen: CarmenParams,
+) -> Result<ScanSource<R>, InputError> {
+    let name = name.into();
+    let first = reader
+        .fill_buf()
+        .map_err(|e| scan_jsonl::read_error(&name, 1, &e))?
+        .iter()
+        .copied()
+        .find(|b| !b.is_ascii_whitespace());
+    Ok(match first {
+        None | Some(b'{') => ScanSource::JsonLines(Box::new(ParallelScanReader::new(reader, name))),
+        Some(_) => ScanSource::Carmen(CarmenReader::new(reader, name, carmen)),
+    })
+}
 
 /// Bad input: which file, where in it, and what is wrong.
 ///
@@ -76,6 +136,31 @@ pub(crate) fn json_error_message(e: &serde_json::Error) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use std::io::Cursor;
+
+    #[test]
+    fn read_any_tells_json_lines_from_carmen() {
+        let json = "\n  {\"nrays\": 1, \"theta\": [0], \"readings\": [2]}\n";
+        let src = read_any(Cursor::new(json), "a.jsonl", CarmenParams::default()).unwrap();
+        assert_eq!(src.format(), "jsonl");
+        let scans: Vec<_> = src.collect::<Result<_, _>>().unwrap();
+        assert_eq!(scans.len(), 1);
+        assert_eq!(scans[0].0, 2, "the blank first line still counts");
+
+        let log = "# CARMEN\nFLASER 2 1 2 0 0 0 0 0 0 5 h 5\n";
+        let src = read_any(Cursor::new(log), "a.log", CarmenParams::default()).unwrap();
+        assert_eq!(src.format(), "carmen");
+        let scans: Vec<_> = src.collect::<Result<_, _>>().unwrap();
+        assert_eq!(scans.len(), 1);
+        assert_eq!(scans[0].0, 2);
+        assert_eq!(scans[0].1.readings, vec![Some(1.0), Some(2.0)]);
+    }
+
+    #[test]
+    fn read_any_of_empty_input_yields_nothing() {
+        let src = read_any(Cursor::new(""), "e", CarmenParams::default()).unwrap();
+        assert_eq!(src.count(), 0);
+    }
 
     #[test]
     fn input_error_displays_file_line_message() {

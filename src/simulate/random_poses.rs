@@ -2,13 +2,17 @@
 //! per round, sect. 8.1).
 //!
 //! Plans are sets of polylines, not always closed, so "inside the building" takes two tests:
-//! the crossing parity with the CLOSED polylines (a point inside a closed pillar or box is
-//! inside two closed outlines, hence outside), and enclosure: level rays in 16 directions all
-//! meet a wall within range. A plan with no closed polyline relies on enclosure alone.
+//! the crossing parity with the CLOSED polylines, and enclosure: level rays in 16 directions
+//! all meet a wall within range. When the closed polylines outline the whole plan (every other
+//! wall lies within the outermost ones), free space is inside an odd number of them (a point
+//! in a closed pillar or box is inside two, hence not free). When they do not (open outer
+//! walls around closed pillars, or no closed polyline at all), free space is inside an even
+//! number: outside every pillar, and enclosure decides the rest.
 
 use super::raycast::World;
 use super::{SimulateError, Stream, stream_rng};
 use crate::geometry::Pose;
+use crate::plan::{Plan, Segment};
 use nalgebra::{Point2, Point3, Vector3};
 use rand::RngExt;
 use rayon::prelude::*;
@@ -48,8 +52,7 @@ impl Default for RandomPoseParams {
 /// True when `p` is inside the building (parity with closed polylines, and enclosed) and at
 /// least `clearance` metres from every wall.
 pub fn is_free(world: &World, p: &Point2<f64>, clearance: f64, enclosure_range: f64) -> bool {
-    let closed = world.closed_segments();
-    if !closed.is_empty() && !odd_crossings(closed, p) {
+    if odd_crossings(world.closed_segments(), p) != world.outline_closed() {
         return false;
     }
     if world
@@ -73,9 +76,55 @@ pub fn is_free(world: &World, p: &Point2<f64>, clearance: f64, enclosure_range: 
     })
 }
 
+/// The closed polylines of a plan (first point == last point, at least 3 points), as
+/// segments (zero-length pieces skipped).
+pub(crate) fn closed_polylines(plan: &Plan) -> Vec<Vec<Segment>> {
+    plan.walls
+        .iter()
+        .filter(|w| w.len() >= 3 && w.first() == w.last())
+        .map(|w| {
+            w.windows(2)
+                .map(|p| Segment { a: p[0], b: p[1] })
+                .filter(|s| s.length() > 0.0)
+                .collect()
+        })
+        .collect()
+}
+
+/// True when the plan has closed polylines and every wall piece lies within (or on) the
+/// outermost of them: the plan is a closed building.
+pub(crate) fn outline_is_closed(plan: &Plan) -> bool {
+    let closed = closed_polylines(plan);
+    let outer: Vec<&Vec<Segment>> = closed
+        .iter()
+        .enumerate()
+        .filter(|(i, c)| {
+            let first = c[0].a;
+            !closed
+                .iter()
+                .enumerate()
+                .any(|(j, o)| j != *i && odd_crossings(o, &first) && !on_polyline(o, &first))
+        })
+        .map(|(_, c)| c)
+        .collect();
+    if outer.is_empty() {
+        return false;
+    }
+    plan.segments().iter().all(|s| {
+        let mid = nalgebra::center(&s.a, &s.b);
+        outer
+            .iter()
+            .any(|o| on_polyline(o, &mid) || odd_crossings(o, &mid))
+    })
+}
+
+fn on_polyline(segments: &[Segment], p: &Point2<f64>) -> bool {
+    segments.iter().any(|s| s.distance_to(p) <= 1e-9)
+}
+
 /// Crossing parity of a ray from `p` towards +x with the segments (half-open rule on y, so a
 /// ray through a vertex counts it once).
-fn odd_crossings(segments: &[crate::plan::Segment], p: &Point2<f64>) -> bool {
+fn odd_crossings(segments: &[Segment], p: &Point2<f64>) -> bool {
     let mut odd = false;
     for s in segments {
         if (s.a.y > p.y) != (s.b.y > p.y) {
@@ -138,7 +187,6 @@ fn bounds(world: &World) -> Option<(Point2<f64>, Point2<f64>)> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::plan::Plan;
 
     fn square(x0: f64, y0: f64, x1: f64, y1: f64) -> Vec<Point2<f64>> {
         vec![
@@ -197,6 +245,60 @@ mod tests {
         assert!(w.closed_segments().is_empty());
         assert!(is_free(&w, &Point2::new(4.0, 2.0), 0.5, 30.0));
         assert!(!is_free(&w, &Point2::new(4.0, 6.0), 0.5, 30.0));
+    }
+
+    #[test]
+    fn closed_pillar_inside_open_outer_walls_is_not_free_space() {
+        // Outer walls as four open pieces, a closed box inside: the box is solid.
+        let c = |x: f64, y: f64| Point2::new(x, y);
+        let w = World::from_plan(&Plan {
+            wall_height: 3.0,
+            walls: vec![
+                vec![c(0.0, 0.0), c(10.0, 0.0)],
+                vec![c(10.0, 0.0), c(10.0, 8.0)],
+                vec![c(10.0, 8.0), c(0.0, 8.0)],
+                vec![c(0.0, 8.0), c(0.0, 0.0)],
+                square(4.0, 3.0, 6.0, 5.0),
+            ],
+            ceiling: false,
+            poses: vec![],
+        });
+        assert!(!w.outline_closed());
+        assert!(is_free(&w, &c(2.0, 2.0), 0.5, 30.0));
+        assert!(!is_free(&w, &c(5.0, 4.0), 0.5, 30.0), "in the box");
+        assert!(!is_free(&w, &c(-3.0, 4.0), 0.5, 30.0), "outside");
+        let poses = random_poses(&w, 50, &RandomPoseParams::default(), 1).unwrap();
+        assert!(
+            poses
+                .iter()
+                .all(|p| !(4.0..=6.0).contains(&p.x) || !(3.0..=5.0).contains(&p.y))
+        );
+    }
+
+    #[test]
+    fn nested_and_partitioned_closed_outlines_are_recognised() {
+        // A closed building with partitions touching its walls and a pillar: closed.
+        assert!(room_with_pillar().outline_closed());
+        let c = |x: f64, y: f64| Point2::new(x, y);
+        let w = World::from_plan(&Plan {
+            wall_height: 3.0,
+            walls: vec![
+                square(0.0, 0.0, 10.0, 8.0),
+                vec![c(3.0, 0.0), c(3.0, 3.0)],
+                vec![c(0.0, 5.0), c(10.0, 5.0)],
+            ],
+            ceiling: false,
+            poses: vec![],
+        });
+        assert!(w.outline_closed());
+        // A closed box with a fence outside it: not an outline of everything.
+        let w = World::from_plan(&Plan {
+            wall_height: 3.0,
+            walls: vec![square(0.0, 0.0, 4.0, 4.0), vec![c(6.0, 0.0), c(6.0, 4.0)]],
+            ceiling: false,
+            poses: vec![],
+        });
+        assert!(!w.outline_closed());
     }
 
     #[test]

@@ -15,6 +15,7 @@
 //! - A hit farther than the maximum range is no hit.
 
 use super::grid::SegmentGrid;
+use super::random_poses::{closed_polylines, outline_is_closed};
 use crate::plan::{Plan, Segment};
 use crate::scan::Hit;
 use nalgebra::{Point2, Point3, Vector2, Vector3};
@@ -39,6 +40,9 @@ pub struct World {
     segments: Vec<Segment>,
     /// Segments of the closed polylines only (first point == last point), for inside tests.
     closed_segments: Vec<Segment>,
+    /// True when the closed polylines outline the whole plan (every other wall lies within
+    /// them): free space is then inside an odd number of them, else an even number.
+    outline_closed: bool,
     wall_height: f64,
     ceiling: bool,
     grid: SegmentGrid,
@@ -76,15 +80,9 @@ pub(crate) fn ray_segment(p: &Point2<f64>, d: &Vector2<f64>, s: &Segment) -> Opt
 impl World {
     /// Builds the scene of a plan (zero-length wall pieces are skipped).
     pub fn from_plan(plan: &Plan) -> World {
-        let closed_segments = plan
-            .walls
-            .iter()
-            .filter(|w| w.len() >= 3 && w.first() == w.last())
-            .flat_map(|w| w.windows(2).map(|p| Segment { a: p[0], b: p[1] }))
-            .filter(|s| s.length() > 0.0)
-            .collect();
         let mut world = World::from_segments(plan.segments(), plan.wall_height, plan.ceiling);
-        world.closed_segments = closed_segments;
+        world.closed_segments = closed_polylines(plan).into_iter().flatten().collect();
+        world.outline_closed = outline_is_closed(plan);
         world
     }
 
@@ -94,6 +92,7 @@ impl World {
         World {
             segments,
             closed_segments: Vec::new(),
+            outline_closed: false,
             wall_height,
             ceiling,
             grid,
@@ -106,6 +105,11 @@ impl World {
 
     pub fn closed_segments(&self) -> &[Segment] {
         &self.closed_segments
+    }
+
+    /// Whether the plan's closed polylines outline all of it (see [`super::is_free`]).
+    pub fn outline_closed(&self) -> bool {
+        self.outline_closed
     }
 
     pub fn wall_height(&self) -> f64 {

@@ -1,0 +1,385 @@
+//! The paper's accuracy experiment (sect. 8.1, Table I and Fig. 6): random tilted poses in
+//! floor plans, simulated multi-elevation scans, leveled, and compared with the truth.
+//!
+//! Pure: plans in, statistics out. Each pose is simulated once per (scan count, noise) cell and
+//! leveled with every estimator asked for, so the estimators see identical data; its noise comes
+//! from its own random stream (seed, plan, scan count, pose), never from the thread order.
+
+use crate::geometry::Pose;
+use crate::level::{Estimator, FailReason, LevelParams, level_pose};
+use crate::plan::{Plan, Segment};
+use crate::pseudo_level::{PseudoLevelParams, pseudo_level_scan};
+use crate::scan::{Hit, Scan};
+use crate::simulate::{
+    RandomPoseParams, ScannerParams, SimulateError, Stream, World, elevations_centred,
+    random_poses, simulate_pose, stream_rng,
+};
+use nalgebra::Point2;
+use rayon::prelude::*;
+use std::collections::BTreeMap;
+
+/// The paper's Table I, mean error [deg], rows 3 / 4 / 5 scans, columns 1 / 5 / 10 cm.
+pub const PAPER_TABLE_I: [[f64; 3]; 3] = [
+    [0.857, 2.083, 5.724],
+    [0.649, 1.731, 4.260],
+    [0.409, 1.172, 3.742],
+];
+
+/// The paper's mean error for a cell, when it has one.
+pub fn paper_mean(scans: usize, noise: f64) -> Option<f64> {
+    let row = [3, 4, 5].iter().position(|&s| s == scans)?;
+    let col = [0.01, 0.05, 0.10]
+        .iter()
+        .position(|&n| (n - noise).abs() < 1e-9)?;
+    Some(PAPER_TABLE_I[row][col])
+}
+
+/// Protocol of the experiment (issue 3, item 8).
+#[derive(Clone, Debug)]
+pub struct AccuracyParams {
+    /// Scan counts per pose. Default 3, 4, 5.
+    pub scans: Vec<usize>,
+    /// Range noise sigmas [m]. Default 0.01, 0.05, 0.10.
+    pub noise: Vec<f64>,
+    /// Estimators to compare. Default both.
+    pub estimators: Vec<Estimator>,
+    /// Random poses per plan. Default 100.
+    pub poses_per_plan: usize,
+    /// Seed of poses and noise. Default 1.
+    pub seed: u64,
+    /// Elevation step between scans, centred on level [deg]. Default 5.
+    pub step_deg: f64,
+    /// Roll and pitch uniform in +-tilt [deg]. Default 20.
+    pub tilt_deg: f64,
+    /// Smallest distance of a pose from every wall [m]. Default 0.6.
+    pub clearance: f64,
+    /// Scanner height above the floor [m]. Default 0.45.
+    pub height: f64,
+    /// Rays per scan. Default 181.
+    pub rays: usize,
+    /// Field of view [deg]. Default 180.
+    pub fov_deg: f64,
+    /// Maximum range [m]. Default 30.
+    pub max_range: f64,
+    /// A pseudo-level point farther than this from every true wall is a phantom [m].
+    /// Default 0.15.
+    pub phantom_distance: f64,
+    /// Level estimation parameters (the estimator field is overridden per run).
+    pub level: LevelParams,
+    /// Pseudo-level parameters.
+    pub pseudo: PseudoLevelParams,
+}
+
+impl Default for AccuracyParams {
+    fn default() -> Self {
+        Self {
+            scans: vec![3, 4, 5],
+            noise: vec![0.01, 0.05, 0.10],
+            estimators: vec![Estimator::Paper, Estimator::Robust],
+            poses_per_plan: 100,
+            seed: 1,
+            step_deg: 5.0,
+            tilt_deg: 20.0,
+            clearance: 0.6,
+            height: 0.45,
+            rays: 181,
+            fov_deg: 180.0,
+            max_range: 30.0,
+            phantom_distance: 0.15,
+            level: LevelParams::default(),
+            pseudo: PseudoLevelParams::default(),
+        }
+    }
+}
+
+/// What happened at one pose in one cell with one estimator.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PoseOutcome {
+    pub failure: Option<FailReason>,
+    /// The paper's error `max(|dtheta_x|, |dtheta_y|)` [deg], when leveled.
+    pub error_deg: Option<f64>,
+    /// True when leveled and both angle errors lie within 3 reported sigmas.
+    pub within_3_sigma: bool,
+    /// Valid pseudo-level points.
+    pub pseudo_valid: usize,
+    /// Valid pseudo-level points farther than `phantom_distance` from every true wall.
+    pub phantoms: usize,
+    /// Wall hits of the pose's best single scan (most wall hits).
+    pub best_wall_hits: usize,
+}
+
+/// Statistics of one cell of Table I for one estimator.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct CellStats {
+    pub scans: usize,
+    pub noise: f64,
+    pub estimator: String,
+    pub poses: usize,
+    pub leveled: usize,
+    pub leveled_fraction: f64,
+    /// Mean, median, 95th percentile and maximum error over leveled poses [deg].
+    pub mean_deg: f64,
+    pub median_deg: f64,
+    pub p95_deg: f64,
+    pub max_deg: f64,
+    /// Leveled poses with an error above 5 degrees.
+    pub wrong_over_5_deg: usize,
+    /// Fraction of leveled poses whose error lies within 3 reported sigmas.
+    pub within_3_sigma: f64,
+    /// Phantom pseudo-level points over all valid pseudo-level points (leveled poses).
+    pub phantom_rate: f64,
+    /// Valid pseudo-level points over wall hits of each pose's best scan (leveled poses).
+    pub coverage: f64,
+    /// The paper's mean for this cell [deg], when it has one.
+    pub paper_mean_deg: Option<f64>,
+    /// Failed poses by reason.
+    pub failures: BTreeMap<String, usize>,
+    /// Every leveled pose's error [deg], in pose order (for histograms).
+    pub errors_deg: Vec<f64>,
+}
+
+/// Runs the experiment over `plans`. Returns one [`CellStats`] per (scans, noise, estimator),
+/// in that nesting order.
+pub fn run_accuracy(
+    plans: &[Plan],
+    params: &AccuracyParams,
+) -> Result<Vec<CellStats>, SimulateError> {
+    let pose_params = RandomPoseParams {
+        tilt: params.tilt_deg.to_radians(),
+        clearance: params.clearance,
+        height: params.height,
+        ..RandomPoseParams::default()
+    };
+    let mut tasks: Vec<(usize, usize, Pose)> = Vec::new();
+    let mut worlds = Vec::new();
+    let mut segments: Vec<Vec<Segment>> = Vec::new();
+    for (pi, plan) in plans.iter().enumerate() {
+        let world = World::from_plan(plan);
+        let poses = random_poses(
+            &world,
+            params.poses_per_plan,
+            &pose_params,
+            params.seed.wrapping_add(pi as u64),
+        )?;
+        tasks.extend(poses.into_iter().enumerate().map(|(k, p)| (pi, k, p)));
+        worlds.push(world);
+        segments.push(plan.segments());
+    }
+    let cells: Vec<(usize, f64)> = params
+        .scans
+        .iter()
+        .flat_map(|&s| params.noise.iter().map(move |&n| (s, n)))
+        .collect();
+    // outcomes[task][cell][estimator]
+    let outcomes: Vec<Vec<Vec<PoseOutcome>>> = tasks
+        .par_iter()
+        .map(|&(pi, k, pose)| {
+            cells
+                .iter()
+                .map(|&(nscans, noise)| {
+                    let scanner = ScannerParams {
+                        rays: params.rays,
+                        fov: params.fov_deg.to_radians(),
+                        max_range: params.max_range,
+                        noise_sigma: noise,
+                        ..ScannerParams::default()
+                    };
+                    let stream_seed = params
+                        .seed
+                        .wrapping_add((pi as u64) << 32)
+                        .wrapping_add((nscans as u64) << 48);
+                    let mut rng = stream_rng(stream_seed, Stream::Scans, k as u64);
+                    let elevations = elevations_centred(nscans, params.step_deg.to_radians());
+                    let scans = simulate_pose(
+                        &worlds[pi],
+                        k as u64,
+                        &pose,
+                        &elevations,
+                        &scanner,
+                        &mut rng,
+                    );
+                    params
+                        .estimators
+                        .iter()
+                        .map(|&estimator| {
+                            let level = LevelParams {
+                                estimator,
+                                ..params.level.clone()
+                            };
+                            evaluate_pose(&scans, &pose, &segments[pi], &level, params)
+                        })
+                        .collect()
+                })
+                .collect()
+        })
+        .collect();
+    let mut stats = Vec::new();
+    for (ci, &(nscans, noise)) in cells.iter().enumerate() {
+        for (ei, estimator) in params.estimators.iter().enumerate() {
+            let pose_outcomes: Vec<&PoseOutcome> = outcomes.iter().map(|o| &o[ci][ei]).collect();
+            stats.push(cell_stats(nscans, noise, *estimator, &pose_outcomes));
+        }
+    }
+    Ok(stats)
+}
+
+/// Levels one pose's scans and scores the result against the truth.
+pub fn evaluate_pose(
+    scans: &[Scan],
+    truth: &Pose,
+    walls: &[Segment],
+    level: &LevelParams,
+    params: &AccuracyParams,
+) -> PoseOutcome {
+    let est = level_pose(scans, level);
+    let best_wall_hits = scans
+        .iter()
+        .map(|s| {
+            s.hit
+                .as_ref()
+                .map_or(0, |h| h.iter().filter(|&&x| x == Hit::Wall).count())
+        })
+        .max()
+        .unwrap_or(0);
+    let (Some(att), Some(sig)) = (est.attitude, est.sigmas) else {
+        return PoseOutcome {
+            failure: est.failure,
+            error_deg: None,
+            within_3_sigma: false,
+            pseudo_valid: 0,
+            phantoms: 0,
+            best_wall_hits,
+        };
+    };
+    let t = truth.attitude();
+    let (dx, dy) = (
+        (att.theta_x - t.theta_x).abs(),
+        (att.theta_y - t.theta_y).abs(),
+    );
+    let pseudo = pseudo_level_scan(scans, &est, &params.pseudo);
+    let planar = truth.to_pose2();
+    let mut valid = 0;
+    let mut phantoms = 0;
+    for i in 0..pseudo.nrays() {
+        let Some(r) = pseudo.range(i) else { continue };
+        valid += 1;
+        let (s, c) = pseudo.theta[i].sin_cos();
+        let w = planar.transform_point(&Point2::new(r * c, r * s));
+        let d = walls
+            .iter()
+            .map(|seg| seg.distance_to(&w))
+            .fold(f64::INFINITY, f64::min);
+        if d > params.phantom_distance {
+            phantoms += 1;
+        }
+    }
+    PoseOutcome {
+        failure: None,
+        error_deg: Some(dx.max(dy).to_degrees()),
+        within_3_sigma: dx <= 3.0 * sig[0] && dy <= 3.0 * sig[1],
+        pseudo_valid: valid,
+        phantoms,
+        best_wall_hits,
+    }
+}
+
+fn cell_stats(scans: usize, noise: f64, estimator: Estimator, o: &[&PoseOutcome]) -> CellStats {
+    let errors: Vec<f64> = o.iter().filter_map(|p| p.error_deg).collect();
+    let mut sorted = errors.clone();
+    sorted.sort_by(f64::total_cmp);
+    let n = sorted.len();
+    let quantile = |q: f64| -> f64 {
+        if n == 0 {
+            return f64::NAN;
+        }
+        // Nearest rank.
+        let k = ((q * n as f64).ceil() as usize).clamp(1, n) - 1;
+        sorted[k]
+    };
+    let median = if n == 0 {
+        f64::NAN
+    } else if n % 2 == 1 {
+        sorted[n / 2]
+    } else {
+        0.5 * (sorted[n / 2 - 1] + sorted[n / 2])
+    };
+    let mut failures = BTreeMap::new();
+    for p in o {
+        if let Some(f) = p.failure {
+            *failures.entry(f.as_str().to_string()).or_insert(0) += 1;
+        }
+    }
+    let leveled: Vec<&&PoseOutcome> = o.iter().filter(|p| p.error_deg.is_some()).collect();
+    let valid: usize = leveled.iter().map(|p| p.pseudo_valid).sum();
+    let phantoms: usize = leveled.iter().map(|p| p.phantoms).sum();
+    let walls: usize = leveled.iter().map(|p| p.best_wall_hits).sum();
+    let ratio = |a: usize, b: usize| {
+        if b == 0 {
+            f64::NAN
+        } else {
+            a as f64 / b as f64
+        }
+    };
+    CellStats {
+        scans,
+        noise,
+        estimator: estimator.to_string(),
+        poses: o.len(),
+        leveled: n,
+        leveled_fraction: ratio(n, o.len()),
+        mean_deg: if n == 0 {
+            f64::NAN
+        } else {
+            errors.iter().sum::<f64>() / n as f64
+        },
+        median_deg: median,
+        p95_deg: quantile(0.95),
+        max_deg: sorted.last().copied().unwrap_or(f64::NAN),
+        wrong_over_5_deg: errors.iter().filter(|&&e| e > 5.0).count(),
+        within_3_sigma: ratio(leveled.iter().filter(|p| p.within_3_sigma).count(), n),
+        phantom_rate: ratio(phantoms, valid),
+        coverage: ratio(valid, walls),
+        paper_mean_deg: paper_mean(scans, noise),
+        failures,
+        errors_deg: errors,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn paper_table_lookup_matches_the_paper() {
+        assert_eq!(paper_mean(3, 0.01), Some(0.857));
+        assert_eq!(paper_mean(5, 0.10), Some(3.742));
+        assert_eq!(paper_mean(6, 0.10), None);
+    }
+
+    #[test]
+    fn cell_stats_on_known_errors() {
+        let mk = |e: Option<f64>| PoseOutcome {
+            failure: if e.is_none() {
+                Some(FailReason::ParallelWalls)
+            } else {
+                None
+            },
+            error_deg: e,
+            within_3_sigma: e.is_some_and(|x| x < 2.0),
+            pseudo_valid: 10,
+            phantoms: 1,
+            best_wall_hits: 20,
+        };
+        let outcomes = [mk(Some(1.0)), mk(Some(3.0)), mk(None), mk(Some(6.0))];
+        let refs: Vec<&PoseOutcome> = outcomes.iter().collect();
+        let s = cell_stats(3, 0.01, Estimator::Robust, &refs);
+        assert_eq!(s.leveled, 3);
+        assert!((s.mean_deg - 10.0 / 3.0).abs() < 1e-12);
+        assert_eq!(s.median_deg, 3.0);
+        assert_eq!(s.max_deg, 6.0);
+        assert_eq!(s.wrong_over_5_deg, 1);
+        assert_eq!(s.failures.get("parallel_walls"), Some(&1));
+        assert!((s.phantom_rate - 0.1).abs() < 1e-12);
+        assert!((s.coverage - 0.5).abs() < 1e-12);
+    }
+}

@@ -1,0 +1,369 @@
+//! CARMEN logs (the text format of the CARMEN robot toolkit, used by the Radish datasets):
+//! `FLASER` and `ROBOTLASER1` lines become [`Scan`]s; every other line (`ODOM`, `PARAM`,
+//! `NEFF`, `RLASER`, `#` comments, ...) is skipped.
+//!
+//! - `FLASER n r1 .. rn x y theta odom_x odom_y odom_theta timestamp [host logger_timestamp]`:
+//!   the beams spread evenly over 180 degrees from -90 degrees, one degree apart for 180 or 181
+//!   beams, half a degree for 360 or 361 (the step is `pi / (n - 1)` for odd `n`, `pi / n` for
+//!   even `n`, as CARMEN's own tools and GMapping read them). `odometry` is the odom fields.
+//!   The first pose (`x y theta`) is the laser's pose as the log has it; in the corrected logs
+//!   of the Radish datasets that is the SLAM-corrected trajectory, so it is kept as
+//!   `true_pose`: a reference trajectory, good to centimetres, not exact ground truth.
+//! - `ROBOTLASER1 laser_type start_angle fov angular_res max_range accuracy remission_mode
+//!   n r1 .. rn m e1 .. em laser_x laser_y laser_theta robot_x robot_y robot_theta tv rv
+//!   forward_safety side_safety turn_axis timestamp [host logger_timestamp]`: bearings from
+//!   `start_angle` in steps of `angular_res`; `odometry` is the laser's pose (the scan's own
+//!   origin, which is what a matcher aligns); the robot's pose is kept as the extra field
+//!   `robot_pose`.
+//!
+//! A range is invalid (no return) when it is <= 0 or >= the maximum range: the message's own
+//! for `ROBOTLASER1`; for `FLASER` the reader's [`CarmenParams::max_range`], else the log's
+//! `PARAM robot_front_laser_max`, else [`DEFAULT_FLASER_MAX_RANGE`].
+
+use super::InputError;
+use crate::geometry::Pose;
+use crate::scan::{Scan, Timestamp};
+use std::f64::consts::PI;
+use std::io::BufRead;
+
+/// Maximum range of `FLASER` scans when neither the caller nor the log says [m]. SICK scanners
+/// of that era report no return as 50 m or as error codes at 81.83-81.91 m, and real logs
+/// (e.g. ACES) have no `PARAM` saying so: 50 m treats all of those as invalid.
+pub const DEFAULT_FLASER_MAX_RANGE: f64 = 50.0;
+
+/// Options of the CARMEN reader.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct CarmenParams {
+    /// Maximum range of `FLASER` scans [m]; readings at or beyond it are invalid. Default: the
+    /// log's `PARAM robot_front_laser_max`, else [`DEFAULT_FLASER_MAX_RANGE`] (50 m).
+    pub max_range: Option<f64>,
+}
+
+/// Bearings of an `n`-beam `FLASER` scan [rad], from -90 degrees.
+pub fn flaser_bearings(n: usize) -> Vec<f64> {
+    let step = if n % 2 == 1 {
+        PI / (n.max(2) - 1) as f64
+    } else {
+        PI / n as f64
+    };
+    (0..n).map(|i| -PI / 2.0 + step * i as f64).collect()
+}
+
+/// Fields of one line, with the helpers that read them and say what is wrong.
+struct Fields<'a> {
+    kind: &'a str,
+    items: Vec<&'a str>,
+}
+
+impl<'a> Fields<'a> {
+    fn number(&self, i: usize, what: &str) -> Result<f64, String> {
+        let text = self.items.get(i).ok_or_else(|| {
+            format!(
+                "{}: the line ends before {what} (field {})",
+                self.kind,
+                i + 1
+            )
+        })?;
+        match text.parse::<f64>() {
+            Ok(v) if v.is_finite() => Ok(v),
+            _ => Err(format!(
+                "{}: {what} (field {}) is not a number: `{text}`",
+                self.kind,
+                i + 1
+            )),
+        }
+    }
+
+    fn count(&self, i: usize, what: &str) -> Result<usize, String> {
+        let v = self.number(i, what)?;
+        if v >= 0.0 && v.fract() == 0.0 && v < 1e7 {
+            Ok(v as usize)
+        } else {
+            Err(format!(
+                "{}: {what} (field {}) must be a whole number >= 0, not {v}",
+                self.kind,
+                i + 1
+            ))
+        }
+    }
+}
+
+fn set_ranges(scan: &mut Scan, ranges: &[f64], max_range: f64) {
+    for (i, &r) in ranges.iter().enumerate() {
+        if r > 0.0 && r < max_range {
+            scan.readings[i] = Some(r);
+            scan.valid[i] = true;
+        }
+    }
+}
+
+/// Parses one line. `Ok(None)` for lines that are not scans. `flaser_max_range` is the
+/// maximum range for `FLASER` lines [m].
+pub fn parse_carmen_line(line: &str, flaser_max_range: f64) -> Result<Option<Scan>, String> {
+    let mut items = line.split_ascii_whitespace();
+    let kind = match items.next() {
+        Some(k @ ("FLASER" | "ROBOTLASER1")) => k,
+        _ => return Ok(None),
+    };
+    let f = Fields {
+        kind,
+        items: items.collect(),
+    };
+    let scan = if kind == "FLASER" {
+        let n = f.count(0, "the number of readings")?;
+        if n == 0 {
+            return Err("FLASER: the number of readings must be > 0".into());
+        }
+        let ranges = (0..n)
+            .map(|i| f.number(1 + i, &format!("reading {}", i + 1)))
+            .collect::<Result<Vec<_>, _>>()?;
+        let at = 1 + n;
+        let v = (0..7)
+            .map(|k| {
+                let what = [
+                    "x",
+                    "y",
+                    "theta",
+                    "odom_x",
+                    "odom_y",
+                    "odom_theta",
+                    "timestamp",
+                ][k];
+                f.number(at + k, what)
+            })
+            .collect::<Result<Vec<_>, _>>()?;
+        let theta = flaser_bearings(n);
+        let mut scan = Scan {
+            readings: vec![None; n],
+            valid: vec![false; n],
+            theta,
+            true_pose: Some(Pose::planar(v[0], v[1], v[2])),
+            odometry: Some(Pose::planar(v[3], v[4], v[5])),
+            timestamp: Some(Timestamp::from_seconds(v[6])),
+            ..Scan::default()
+        };
+        set_ranges(&mut scan, &ranges, flaser_max_range);
+        scan
+    } else {
+        let start = f.number(1, "start_angle")?;
+        let res = f.number(3, "angular_resolution")?;
+        let max_range = f.number(4, "maximum_range")?;
+        let n = f.count(7, "num_readings")?;
+        if n == 0 {
+            return Err("ROBOTLASER1: num_readings must be > 0".into());
+        }
+        let ranges = (0..n)
+            .map(|i| f.number(8 + i, &format!("reading {}", i + 1)))
+            .collect::<Result<Vec<_>, _>>()?;
+        let m = f.count(8 + n, "num_remissions")?;
+        let at = 9 + n + m;
+        let names = [
+            "laser_x",
+            "laser_y",
+            "laser_theta",
+            "robot_x",
+            "robot_y",
+            "robot_theta",
+            "tv",
+            "rv",
+            "forward_safety",
+            "side_safety",
+            "turn_axis",
+            "timestamp",
+        ];
+        let v = names
+            .iter()
+            .enumerate()
+            .map(|(k, what)| f.number(at + k, what))
+            .collect::<Result<Vec<_>, _>>()?;
+        // A max range of 0 means "not given" in some loggers: then only <= 0 is invalid.
+        let max_range = if max_range > 0.0 {
+            max_range
+        } else {
+            f64::INFINITY
+        };
+        let mut scan = Scan {
+            readings: vec![None; n],
+            valid: vec![false; n],
+            theta: (0..n).map(|i| start + res * i as f64).collect(),
+            odometry: Some(Pose::planar(v[0], v[1], v[2])),
+            timestamp: Some(Timestamp::from_seconds(v[11])),
+            ..Scan::default()
+        };
+        scan.extra
+            .insert("robot_pose".into(), serde_json::json!([v[3], v[4], v[5]]));
+        set_ranges(&mut scan, &ranges, max_range);
+        scan
+    };
+    Ok(Some(scan))
+}
+
+/// Reads the scans of a CARMEN log, one line at a time. Yields `(line number, scan)`; stops
+/// after the first error.
+pub struct CarmenReader<R> {
+    reader: R,
+    name: String,
+    line: usize,
+    buf: String,
+    params: CarmenParams,
+    /// From `PARAM robot_front_laser_max`, when the log has it.
+    logged_max_range: Option<f64>,
+    done: bool,
+}
+
+impl<R: BufRead> CarmenReader<R> {
+    /// `name` is the file's name as the user gave it (or `<stdin>`), for error messages.
+    pub fn new(reader: R, name: impl Into<String>, params: CarmenParams) -> Self {
+        Self {
+            reader,
+            name: name.into(),
+            line: 0,
+            buf: String::new(),
+            params,
+            logged_max_range: None,
+            done: false,
+        }
+    }
+
+    fn flaser_max_range(&self) -> f64 {
+        self.params
+            .max_range
+            .or(self.logged_max_range)
+            .unwrap_or(DEFAULT_FLASER_MAX_RANGE)
+    }
+}
+
+impl<R: BufRead> Iterator for CarmenReader<R> {
+    type Item = Result<(usize, Scan), InputError>;
+
+    fn next(&mut self) -> Option<Self::Item> {
+        while !self.done {
+            self.buf.clear();
+            match self.reader.read_line(&mut self.buf) {
+                Ok(0) => self.done = true,
+                Ok(_) => {
+                    self.line += 1;
+                    let mut words = self.buf.split_ascii_whitespace();
+                    if words.next() == Some("PARAM")
+                        && words.next() == Some("robot_front_laser_max")
+                    {
+                        self.logged_max_range = words
+                            .next()
+                            .and_then(|v| v.parse::<f64>().ok())
+                            .filter(|v| *v > 0.0);
+                        continue;
+                    }
+                    match parse_carmen_line(&self.buf, self.flaser_max_range()) {
+                        Ok(None) => continue,
+                        Ok(Some(scan)) => return Some(Ok((self.line, scan))),
+                        Err(m) => {
+                            self.done = true;
+                            return Some(Err(InputError::at_line(&self.name, self.line, m)));
+                        }
+                    }
+                }
+                Err(e) => {
+                    self.done = true;
+                    return Some(Err(super::scan_jsonl::read_error(
+                        &self.name,
+                        self.line + 1,
+                        &e,
+                    )));
+                }
+            }
+        }
+        None
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::io::Cursor;
+
+    #[test]
+    fn flaser_bearings_follow_carmens_convention() {
+        let b = flaser_bearings(181);
+        assert!((b[0] + PI / 2.0).abs() < 1e-15);
+        assert!((b[180] - PI / 2.0).abs() < 1e-12);
+        let b = flaser_bearings(180);
+        assert!((b[1] - b[0] - PI / 180.0).abs() < 1e-15);
+        assert!((b[179] - (PI / 2.0 - PI / 180.0)).abs() < 1e-12);
+        let b = flaser_bearings(361);
+        assert!((b[1] - b[0] - PI / 360.0).abs() < 1e-15);
+        let b = flaser_bearings(360);
+        assert!((b[1] - b[0] - PI / 360.0).abs() < 1e-15);
+    }
+
+    #[test]
+    fn flaser_line_becomes_a_scan() {
+        let line = "FLASER 4 1.5 81.91 0 2.25 0.5 -1 0.25 0.6 -1.1 0.3 12.75 pippo 12.75";
+        let s = parse_carmen_line(line, 50.0).unwrap().unwrap();
+        assert_eq!(s.nrays(), 4);
+        assert_eq!(s.readings, vec![Some(1.5), None, None, Some(2.25)]);
+        assert_eq!(s.valid, vec![true, false, false, true]);
+        assert_eq!(s.true_pose, Some(Pose::planar(0.5, -1.0, 0.25)));
+        assert_eq!(s.odometry, Some(Pose::planar(0.6, -1.1, 0.3)));
+        assert_eq!(
+            s.timestamp,
+            Some(Timestamp {
+                sec: 12,
+                usec: 750000
+            })
+        );
+        assert!((s.theta[0] + PI / 2.0).abs() < 1e-15);
+        assert!((s.theta[1] - s.theta[0] - PI / 4.0).abs() < 1e-15);
+    }
+
+    #[test]
+    fn robotlaser1_line_becomes_a_scan() {
+        // type start fov res max acc mode n r.. m e.. laser(3) robot(3) tv rv fs ss ta time host lt
+        let line = "ROBOTLASER1 0 -1.5 3.0 1.0 20 0.01 0 4 1 2 25 0 2 7 8 \
+                    1 2 0.1 0.9 2 0.1 0 0 0.5 0.3 0 100.5 host 100.5";
+        let s = parse_carmen_line(line, 50.0).unwrap().unwrap();
+        assert_eq!(s.theta, vec![-1.5, -0.5, 0.5, 1.5]);
+        assert_eq!(s.readings, vec![Some(1.0), Some(2.0), None, None]);
+        assert_eq!(s.odometry, Some(Pose::planar(1.0, 2.0, 0.1)));
+        assert_eq!(s.extra["robot_pose"], serde_json::json!([0.9, 2.0, 0.1]));
+        assert_eq!(s.timestamp.unwrap().seconds(), 100.5);
+        assert_eq!(s.true_pose, None);
+    }
+
+    #[test]
+    fn other_lines_are_skipped_and_bad_lines_name_the_line() {
+        let log = "# comment\nPARAM robot_front_laser_max 2.0 host 0\nODOM 0 0 0 0 0 0 1 h 1\n\
+                   FLASER 2 1.0 3.0 0 0 0 0 0 0 1.0 h 1\n\nFLASER 2 1.0 x 0 0 0 0 0 0 1.0 h 1\n";
+        let items: Vec<_> =
+            CarmenReader::new(Cursor::new(log), "intel.log", CarmenParams::default()).collect();
+        assert_eq!(items.len(), 2);
+        let (line, scan) = items[0].as_ref().unwrap();
+        assert_eq!(*line, 4);
+        // The log's PARAM says 2 m, so the 3 m reading is no return.
+        assert_eq!(scan.readings, vec![Some(1.0), None]);
+        assert_eq!(
+            items[1].as_ref().unwrap_err().to_string(),
+            "intel.log:6: FLASER: reading 2 (field 3) is not a number: `x`"
+        );
+    }
+
+    #[test]
+    fn truncated_flaser_is_an_error() {
+        let e = parse_carmen_line("FLASER 3 1 2 3 0 0", 50.0).unwrap_err();
+        assert_eq!(e, "FLASER: the line ends before theta (field 7)");
+        let e = parse_carmen_line("FLASER -2 1 2", 50.0).unwrap_err();
+        assert!(e.contains("must be a whole number"), "{e}");
+    }
+
+    #[test]
+    fn callers_max_range_wins_over_the_logs() {
+        let log = "PARAM robot_front_laser_max 2.0 host 0\nFLASER 2 1.0 3.0 0 0 0 0 0 0 1.0 h 1\n";
+        let params = CarmenParams {
+            max_range: Some(10.0),
+        };
+        let items: Vec<_> = CarmenReader::new(Cursor::new(log), "a", params).collect();
+        assert_eq!(
+            items[0].as_ref().unwrap().1.readings,
+            vec![Some(1.0), Some(3.0)]
+        );
+    }
+}

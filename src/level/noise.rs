@@ -1,0 +1,99 @@
+//! Range noise from the data itself, so that `level` needs no parameters (contract).
+//!
+//! Three consecutive points of one scan that lie on a straight line (any plane cut by the scan
+//! plane) satisfy, with `u = 1/r`, bearing steps `a = phi_i - phi_{i-1}`, `b = phi_{i+1} - phi_i`:
+//! `e = sin(b) u_{i-1} + sin(a) u_{i+1} - sin(a + b) u_i = 0` (twice the triangle's area over
+//! the product of the ranges). Range noise sigma gives, to first order,
+//! `Var(e) = sigma^2 (sin^2 b / r_{i-1}^4 + sin^2 a / r_{i+1}^4 + sin^2 (a+b) / r_i^4)`, so each
+//! triple yields one standardised residual; corners and jump edges are outliers, hence the
+//! median (MAD) rather than the mean.
+
+use crate::scan::Scan;
+
+/// Median absolute deviation to standard deviation for a Gaussian.
+const MAD_TO_SIGMA: f64 = 1.482_602_218_505_602;
+
+/// Estimates the range noise sigma [m] from the scans of one or more poses; `None` when
+/// there are too few triples of consecutive valid rays (fewer than 20).
+pub fn estimate_range_sigma(scans: &[Scan]) -> Option<f64> {
+    let mut z = Vec::new();
+    for s in scans {
+        standardised_residuals(s, &mut z);
+    }
+    if z.len() < 20 {
+        return None;
+    }
+    let mid = z.len() / 2;
+    let (_, m, _) = z.select_nth_unstable_by(mid, f64::total_cmp);
+    Some(*m * MAD_TO_SIGMA)
+}
+
+/// Appends |e| / (sd of e at sigma = 1) for every triple of consecutive valid rays.
+fn standardised_residuals(s: &Scan, out: &mut Vec<f64>) {
+    let n = s.nrays();
+    for i in 1..n.saturating_sub(1) {
+        let (Some(r0), Some(r1), Some(r2)) = (s.range(i - 1), s.range(i), s.range(i + 1)) else {
+            continue;
+        };
+        if r0 <= 0.0 || r1 <= 0.0 || r2 <= 0.0 {
+            continue;
+        }
+        let a = s.theta[i] - s.theta[i - 1];
+        let b = s.theta[i + 1] - s.theta[i];
+        let (sa, sb, sab) = (a.sin(), b.sin(), (a + b).sin());
+        let e = sb / r0 + sa / r2 - sab / r1;
+        let var = sb * sb / r0.powi(4) + sa * sa / r2.powi(4) + sab * sab / r1.powi(4);
+        if var > 0.0 && e.is_finite() {
+            out.push(e.abs() / var.sqrt());
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::{RngExt, SeedableRng};
+    use rand_distr::{Distribution, Normal};
+
+    /// A level scan of the wall x = d (ranges d / cos phi), with Gaussian range noise.
+    fn wall_scan(d: f64, sigma: f64, seed: u64) -> Scan {
+        let mut s = Scan::with_even_bearings(121, -1.0, 1.0);
+        let mut rng = rand::rngs::ChaCha8Rng::seed_from_u64(seed);
+        let noise = Normal::new(0.0, sigma.max(1e-300)).unwrap();
+        for i in 0..s.nrays() {
+            let r = d / s.theta[i].cos()
+                + if sigma > 0.0 {
+                    noise.sample(&mut rng)
+                } else {
+                    0.0
+                };
+            // A corner every 30 rays: the median must shrug it off.
+            let r = if i % 30 == 0 {
+                r * rng.random_range(1.1..1.5)
+            } else {
+                r
+            };
+            s.readings[i] = Some(r);
+            s.valid[i] = true;
+        }
+        s
+    }
+
+    #[test]
+    fn noise_estimate_recovers_one_and_ten_centimetres() {
+        for &sigma in &[0.01, 0.1] {
+            let scans: Vec<Scan> = (0..5).map(|k| wall_scan(3.0, sigma, k)).collect();
+            let est = estimate_range_sigma(&scans).unwrap();
+            assert!(
+                (est / sigma - 1.0).abs() < 0.15,
+                "sigma {sigma} estimated {est}"
+            );
+        }
+    }
+
+    #[test]
+    fn noise_estimate_is_zero_without_noise() {
+        let est = estimate_range_sigma(&[wall_scan(2.0, 0.0, 1)]).unwrap();
+        assert!(est < 1e-9, "{est}");
+    }
+}

@@ -1,0 +1,145 @@
+//! Surface polygon extraction (paper sect. 5.2): quadrilaterals `rows` scans high and `cols`
+//! rays wide, placed greedily left to right over every band of adjacent rows.
+
+use super::grid::{PlaneAccumulator, PlaneFit, PoseGrid};
+use super::{LevelParams, SurfaceKind};
+use nalgebra::{Point3, Vector3};
+
+/// One extracted quadrilateral.
+#[derive(Clone, Debug)]
+pub struct Polygon {
+    /// First (lowest-elevation) row and first column of its span.
+    pub row: usize,
+    pub col: usize,
+    /// Rows and columns spanned.
+    pub rows: usize,
+    pub cols: usize,
+    /// Corners in order around the quad, robot frame [m].
+    pub corners: [Point3<f64>; 4],
+    /// Area [m^2] (half the cross product of the diagonals).
+    pub area: f64,
+    pub fit: PlaneFit,
+    pub kind: SurfaceKind,
+}
+
+impl Polygon {
+    /// Grid indices of the points in its span.
+    pub fn span(&self, cols_total: usize) -> impl Iterator<Item = usize> + '_ {
+        (self.row..self.row + self.rows)
+            .flat_map(move |r| (self.col..self.col + self.cols).map(move |c| r * cols_total + c))
+    }
+}
+
+/// Classifies a plane by the angle of its normal to the robot's up (0, 0, 1): more than
+/// `wall_min_angle` away is a wall (the paper assumes tilts below 45 degrees), otherwise floor
+/// when the plane passes below the scanner (along its up-pointing normal) and ceiling when above.
+/// (A point's robot-frame z would not do: a beam tilted up in the robot frame still meets the
+/// floor when the robot pitches down.)
+pub fn classify(
+    normal: &Vector3<f64>,
+    centroid: &Point3<f64>,
+    params: &LevelParams,
+) -> SurfaceKind {
+    if normal.z.abs() < params.wall_min_angle_deg.to_radians().cos() {
+        SurfaceKind::Wall
+    } else if normal.dot(&centroid.coords) * normal.z.signum() < 0.0 {
+        SurfaceKind::Floor
+    } else {
+        SurfaceKind::Ceiling
+    }
+}
+
+/// Extracts the paper's quads: a quad is kept when all its points are valid, lie within
+/// `coplanar_k * sigma` of its plane, and it is not close to a triangle. Walls, floors and
+/// ceilings are all returned (with their kind), so that failure detection can tell a robot
+/// facing the floor from one that sees nothing. Greedy per band: after a kept quad the next one
+/// starts on its right edge; after a rejected one, one column further right.
+pub fn extract_quads(grid: &PoseGrid, params: &LevelParams, sigma: f64) -> Vec<Polygon> {
+    extract_quads_sized(grid, params, sigma, params.quad_rows, params.quad_cols)
+}
+
+/// [`extract_quads`] with a given quad size (rows high, columns wide).
+pub fn extract_quads_sized(
+    grid: &PoseGrid,
+    params: &LevelParams,
+    sigma: f64,
+    rows: usize,
+    cols: usize,
+) -> Vec<Polygon> {
+    let qr = rows.max(2);
+    let qc = cols.max(2);
+    let mut out = Vec::new();
+    if grid.rows() < qr || grid.cols < qc {
+        return out;
+    }
+    let tol = params.coplanar_k * sigma.max(params.min_sigma);
+    for r in 0..=grid.rows() - qr {
+        let mut c = 0;
+        while c + qc <= grid.cols {
+            match quad_at(grid, r, c, qr, qc, tol, sigma, params) {
+                Some(q) => {
+                    out.push(q);
+                    c += qc - 1;
+                }
+                None => c += 1,
+            }
+        }
+    }
+    out
+}
+
+#[allow(clippy::too_many_arguments)]
+fn quad_at(
+    grid: &PoseGrid,
+    r: usize,
+    c: usize,
+    qr: usize,
+    qc: usize,
+    tol: f64,
+    sigma: f64,
+    params: &LevelParams,
+) -> Option<Polygon> {
+    let mut acc = PlaneAccumulator::default();
+    for rr in r..r + qr {
+        for cc in c..c + qc {
+            acc.add(grid.at(rr, cc)?);
+        }
+    }
+    let corner = |rr: usize, cc: usize| grid.at(rr, cc).map(|g| g.p);
+    let corners = [
+        corner(r, c)?,
+        corner(r, c + qc - 1)?,
+        corner(r + qr - 1, c + qc - 1)?,
+        corner(r + qr - 1, c)?,
+    ];
+    // Not close to a triangle: opposite sides of comparable length (sect. 5.2).
+    let side = |a: usize, b: usize| (corners[a] - corners[b]).norm();
+    let (bottom, right, top, left) = (side(0, 1), side(1, 2), side(2, 3), side(3, 0));
+    let ratio = |a: f64, b: f64| a.min(b) / a.max(b).max(1e-300);
+    if ratio(bottom, top) < params.min_edge_ratio || ratio(left, right) < params.min_edge_ratio {
+        return None;
+    }
+    let fit = acc.fit(sigma)?;
+    for rr in r..r + qr {
+        for cc in c..c + qc {
+            let p = grid.at(rr, cc)?.p;
+            if fit.distance(&p).abs() > tol {
+                return None;
+            }
+        }
+    }
+    let area = 0.5
+        * (corners[2] - corners[0])
+            .cross(&(corners[3] - corners[1]))
+            .norm();
+    Some(Polygon {
+        row: r,
+        col: c,
+        rows: qr,
+        cols: qc,
+        corners,
+        area,
+        kind: classify(&fit.normal, &fit.centroid, params),
+        fit,
+    })
+}

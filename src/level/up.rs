@@ -1,0 +1,199 @@
+//! The global up vector from wall normals (paper sect. 5.3) and its uncertainty.
+//!
+//! Two estimators:
+//! - [`up_paper`]: the paper's weighted sum of rectified cross products of all pairs of normals,
+//!   `w_ij = a_i a_j (1 - |n_i . n_j|)`.
+//! - [`up_robust`]: the closed-form least squares the paper's sect. 9 asks for: minimise
+//!   `sum_i w_i (n_i . up)^2` over unit `up`, i.e. the eigenvector of the smallest eigenvalue of
+//!   `sum_i w_i n_i n_i^T`, with `w_i = 1 / Var(n_i . up)` from each plane fit's normal covariance
+//!   and Cauchy reweighting of `z_i = (n_i . up) / sd_i` against wrongly extracted planes.
+
+use super::grid::PlaneFit;
+use crate::geometry::Attitude;
+use nalgebra::{Matrix2, Matrix3, Vector2, Vector3};
+
+/// A plane fit with a variance inflation (>= 1) for misfit.
+#[derive(Clone, Copy, Debug)]
+pub struct PlaneObs<'a> {
+    pub fit: &'a PlaneFit,
+    /// Multiplies the fit's normal variance.
+    pub inflate: f64,
+}
+
+impl PlaneObs<'_> {
+    /// Variance of `n . up` at the current `up` [1].
+    fn variance(&self, up: &Vector3<f64>, sigma: f64) -> f64 {
+        let n = &self.fit.normal;
+        let in_plane = up - n * n.dot(up);
+        let u = in_plane.try_normalize(1e-12).unwrap_or(*up);
+        (self.inflate * self.fit.normal_variance_along(&u, sigma)).max(1e-14)
+    }
+}
+
+/// The paper's estimator (eq. of sect. 5.3); `None` when no pair of normals is independent.
+pub fn up_paper(normals: &[(Vector3<f64>, f64)]) -> Option<Vector3<f64>> {
+    let mut sum = Vector3::zeros();
+    for (i, (ni, ai)) in normals.iter().enumerate() {
+        for (nj, aj) in &normals[i + 1..] {
+            let c = ni.cross(nj);
+            let norm = c.norm();
+            if norm < 1e-12 {
+                continue;
+            }
+            let w = ai * aj * (1.0 - ni.dot(nj).abs());
+            // s_ij: the robot is never upside down, so up has a positive z in its frame.
+            let s = if c.z < 0.0 { -1.0 } else { 1.0 };
+            sum += c * (w * s / norm);
+        }
+    }
+    sum.try_normalize(1e-300)
+}
+
+/// An up vector with its uncertainty.
+#[derive(Clone, Copy, Debug)]
+pub struct UpSolution {
+    /// Unit up vector in the robot frame, `z > 0`.
+    pub up: Vector3<f64>,
+    /// Orthonormal basis of the tangent plane at `up`.
+    pub basis: [Vector3<f64>; 2],
+    /// Covariance of up's tangent-plane perturbation in `basis` [rad^2].
+    pub cov: Matrix2<f64>,
+    /// Eigenvalues (smaller, larger) of the information matrix; their ratio says how well the
+    /// walls' directions pin up down in both tangent directions (tiny for parallel walls).
+    pub info_eigenvalues: (f64, f64),
+}
+
+impl UpSolution {
+    pub fn attitude(&self) -> Attitude {
+        Attitude::from_up(&self.up)
+    }
+
+    /// 1-sigma of theta_x and theta_y [rad], propagating `cov` through `Attitude::from_up`.
+    pub fn attitude_sigmas(&self) -> [f64; 2] {
+        let h = 1e-6;
+        let mut j = nalgebra::Matrix2::zeros();
+        for k in 0..2 {
+            let a = Attitude::from_up(&(self.up + self.basis[k] * h));
+            let b = Attitude::from_up(&(self.up - self.basis[k] * h));
+            j[(0, k)] = (a.theta_x - b.theta_x) / (2.0 * h);
+            j[(1, k)] = (a.theta_y - b.theta_y) / (2.0 * h);
+        }
+        let c = j * self.cov * j.transpose();
+        [c[(0, 0)].max(0.0).sqrt(), c[(1, 1)].max(0.0).sqrt()]
+    }
+}
+
+/// Unit vector along the smallest eigenvalue of a symmetric matrix, rectified to `z >= 0`.
+fn smallest_eigenvector(m: &Matrix3<f64>) -> Option<Vector3<f64>> {
+    let eig = nalgebra::SymmetricEigen::new(*m);
+    let k = eig.eigenvalues.imin();
+    let v = eig
+        .eigenvectors
+        .column(k)
+        .into_owned()
+        .try_normalize(1e-300)?;
+    Some(if v.z < 0.0 { -v } else { v })
+}
+
+fn tangent_basis(up: &Vector3<f64>) -> [Vector3<f64>; 2] {
+    // Robot x projected off up, then the third axis: stable for tilts far below 90 degrees.
+    let t1 = (Vector3::x() - up * up.x)
+        .try_normalize(1e-9)
+        .unwrap_or_else(|| (Vector3::y() - up * up.y).normalize());
+    let t2 = up.cross(&t1);
+    [t1, t2]
+}
+
+/// Cauchy scale for the robust weights, in standard deviations.
+const CAUCHY_C: f64 = 2.385;
+
+/// Iteratively reweighted least squares for up over plane fits with range noise `sigma` [m].
+/// `None` with fewer than two planes or when the problem is degenerate.
+pub fn up_robust(planes: &[PlaneObs], sigma: f64, iterations: usize) -> Option<UpSolution> {
+    if planes.len() < 2 {
+        return None;
+    }
+    // Start from point-count weights (no variance model yet).
+    let mut m = Matrix3::zeros();
+    for p in planes {
+        m += p.fit.normal * p.fit.normal.transpose() * p.fit.n as f64;
+    }
+    let mut up = smallest_eigenvector(&m)?;
+    for it in 0..iterations.max(1) {
+        let mut m = Matrix3::zeros();
+        for p in planes {
+            let var = p.variance(&up, sigma);
+            let z = p.fit.normal.dot(&up) / var.sqrt();
+            // The first pass is plain weighted least squares: the start may be poor.
+            let robust = if it == 0 { 1.0 } else { cauchy(z) };
+            m += p.fit.normal * p.fit.normal.transpose() * (robust / var);
+        }
+        let next = smallest_eigenvector(&m)?;
+        let change = (next - up).norm();
+        up = next;
+        if change < 1e-10 {
+            break;
+        }
+    }
+    Some(solution_at(up, planes, sigma, true))
+}
+
+fn cauchy(z: f64) -> f64 {
+    1.0 / (1.0 + (z / CAUCHY_C).powi(2))
+}
+
+/// The information matrix and covariance of `up` given the planes. With `robust`, the
+/// Cauchy weights of the fit are applied. The covariance is inflated by the weighted
+/// chi-square per degree of freedom when that exceeds one, so that a model that explains the
+/// normals worse than their noise predicts reports a larger, honest sigma.
+pub fn solution_at(up: Vector3<f64>, planes: &[PlaneObs], sigma: f64, robust: bool) -> UpSolution {
+    let basis = tangent_basis(&up);
+    let mut h = Matrix2::zeros();
+    let mut chi2 = 0.0;
+    let mut wsum = 0.0;
+    for p in planes {
+        let var = p.variance(&up, sigma);
+        let z = p.fit.normal.dot(&up) / var.sqrt();
+        let w = if robust { cauchy(z) } else { 1.0 };
+        let g = Vector2::new(p.fit.normal.dot(&basis[0]), p.fit.normal.dot(&basis[1]));
+        h += g * g.transpose() * (w / var);
+        chi2 += w * z * z;
+        wsum += w;
+    }
+    let dof = wsum - 2.0;
+    let scale = if dof >= 1.0 {
+        (chi2 / dof).max(1.0)
+    } else {
+        1.0
+    };
+    let eig = nalgebra::SymmetricEigen::new(h);
+    let (lo, hi) = (
+        eig.eigenvalues.min().max(0.0),
+        eig.eigenvalues.max().max(0.0),
+    );
+    let cov = h
+        .try_inverse()
+        .map(|c| c * scale)
+        .unwrap_or_else(|| Matrix2::identity() * f64::INFINITY);
+    UpSolution {
+        up,
+        basis,
+        cov,
+        info_eigenvalues: (lo, hi),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn paper_estimator_on_two_exact_walls_is_exact() {
+        let att = Attitude::new(0.2, -0.1);
+        let r = att.level_from_robot().inverse();
+        let n1 = r * Vector3::x();
+        let n2 = r * Vector3::new(1.0, 1.0, 0.0).normalize();
+        let up = up_paper(&[(n1, 1.0), (n2, 2.0)]).unwrap();
+        assert!((up - att.up_in_robot()).norm() < 1e-12);
+    }
+}

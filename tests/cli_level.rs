@@ -1,0 +1,209 @@
+//! End-to-end runs of `levelscan level` on simulated scans.
+
+use levelscan::formats::write_scan;
+use levelscan::geometry::Pose;
+use levelscan::plan::Plan;
+use levelscan::simulate::{ScannerParams, World, elevations_centred, simulate_pose};
+use nalgebra::Point2;
+use rand::SeedableRng;
+use serde_json::Value;
+use std::path::PathBuf;
+use std::process::Command;
+
+fn room() -> World {
+    let p = |x: f64, y: f64| Point2::new(x, y);
+    World::from_plan(&Plan {
+        wall_height: 3.0,
+        walls: vec![vec![
+            p(0.0, 0.0),
+            p(7.0, 0.0),
+            p(7.0, 5.0),
+            p(3.0, 6.0),
+            p(0.0, 5.0),
+            p(0.0, 0.0),
+        ]],
+        ceiling: false,
+        poses: vec![],
+    })
+}
+
+/// Writes `poses` x 4 scans of the room to a temporary file; returns its path.
+fn scan_file(name: &str, poses: &[Pose]) -> PathBuf {
+    let world = room();
+    let mut buf = Vec::new();
+    let mut rng = rand::rngs::ChaCha8Rng::seed_from_u64(5);
+    let e = elevations_centred(4, 5f64.to_radians());
+    for (k, pose) in poses.iter().enumerate() {
+        for s in simulate_pose(
+            &world,
+            k as u64,
+            pose,
+            &e,
+            &ScannerParams::default(),
+            &mut rng,
+        ) {
+            write_scan(&mut buf, &s).unwrap();
+        }
+    }
+    let path = std::env::temp_dir().join(format!(
+        "levelscan_cli_level_{}_{name}.jsonl",
+        std::process::id()
+    ));
+    std::fs::write(&path, buf).unwrap();
+    path
+}
+
+fn level(args: &[&str]) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_levelscan"))
+        .arg("level")
+        .args(args)
+        .output()
+        .unwrap()
+}
+
+fn poses() -> Vec<Pose> {
+    let d = |a: f64| a.to_radians();
+    vec![
+        Pose::new(3.0, 2.5, 0.45, d(10.0), d(6.0), d(-8.0)),
+        Pose::new(2.0, 2.0, 0.45, d(-60.0), d(-10.0), d(4.0)),
+        Pose::new(4.5, 3.0, 0.45, d(170.0), d(3.0), d(12.0)),
+    ]
+}
+
+#[test]
+fn level_writes_one_contract_record_per_pose_in_order() {
+    let poses = poses();
+    let path = scan_file("layout", &poses);
+    let out = level(&[path.to_str().unwrap(), "--polygons"]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let text = String::from_utf8(out.stdout).unwrap();
+    let records: Vec<Value> = text
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    assert_eq!(records.len(), poses.len());
+    for (k, (r, pose)) in records.iter().zip(&poses).enumerate() {
+        assert_eq!(r["sequence"], k as u64);
+        let n = r["nrays"].as_u64().unwrap() as usize;
+        for key in ["theta", "readings", "valid"] {
+            assert_eq!(r[key].as_array().unwrap().len(), n, "{key}");
+        }
+        for i in 0..n {
+            let valid = r["valid"][i].as_u64().unwrap();
+            assert_eq!(valid == 1, r["readings"][i].is_number(), "ray {i}");
+            assert!(r["theta"][i].is_number());
+        }
+        assert_eq!(r["min_theta"], r["theta"][0]);
+        assert_eq!(
+            r["true_pose"].as_array().unwrap().len(),
+            3,
+            "planar [x, y, rz]"
+        );
+        assert!(r.get("elevation").is_none(), "a 2D scan has no elevation");
+        let lv = &r["level"];
+        assert_eq!(lv["status"], "ok", "{lv}");
+        assert!(lv["reason"].is_null());
+        let err_x = (lv["theta_x"].as_f64().unwrap() - pose.rx).abs();
+        let err_y = (lv["theta_y"].as_f64().unwrap() - pose.ry).abs();
+        assert!(err_x.max(err_y).to_degrees() < 1.0, "pose {k}: {lv}");
+        assert!(lv["sigma_x"].as_f64().unwrap() > 0.0);
+        assert_eq!(lv["up"].as_array().unwrap().len(), 3);
+        assert!(lv["polygons"].as_u64().unwrap() > 0);
+        assert!(lv["base_elevation"].is_number());
+        let polys = r["wall_polygons"].as_array().unwrap();
+        assert_eq!(polys.len() as u64, lv["polygons"].as_u64().unwrap());
+        assert_eq!(polys[0].as_array().unwrap().len(), 4);
+        assert_eq!(polys[0][0].as_array().unwrap().len(), 3);
+        assert!(!r["wall_patches"].as_array().unwrap().is_empty());
+        assert!(
+            r["valid"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .filter(|v| v.as_u64() == Some(1))
+                .count()
+                > 50
+        );
+    }
+    std::fs::remove_file(path).ok();
+}
+
+#[test]
+fn level_reads_standard_input_and_fails_a_two_scan_pose_with_a_reason() {
+    let path = scan_file("stdin", &poses()[..1]);
+    // Keep only the first two scans: too few elevations.
+    let text = std::fs::read_to_string(&path).unwrap();
+    let two: String = text.lines().take(2).map(|l| format!("{l}\n")).collect();
+    let mut child = Command::new(env!("CARGO_BIN_EXE_levelscan"))
+        .arg("level")
+        .stdin(std::process::Stdio::piped())
+        .stdout(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    use std::io::Write;
+    child
+        .stdin
+        .take()
+        .unwrap()
+        .write_all(two.as_bytes())
+        .unwrap();
+    let out = child.wait_with_output().unwrap();
+    assert!(out.status.success());
+    let r: Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(r["level"]["status"], "failed");
+    assert_eq!(r["level"]["reason"], "too_few_scans");
+    assert!(r["level"]["theta_x"].is_null() && r["level"]["up"].is_null());
+    assert!(
+        r["valid"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .all(|v| v.as_u64() == Some(0))
+    );
+    assert!(r["readings"].as_array().unwrap().iter().all(Value::is_null));
+    std::fs::remove_file(path).ok();
+}
+
+#[test]
+fn missing_elevation_is_an_input_error_with_file_and_line() {
+    let path = scan_file("noelev", &poses()[..1]);
+    let text = std::fs::read_to_string(&path).unwrap();
+    let mut lines: Vec<String> = text.lines().map(String::from).collect();
+    let mut v: Value = serde_json::from_str(&lines[2]).unwrap();
+    v.as_object_mut().unwrap().remove("elevation");
+    lines[2] = v.to_string();
+    std::fs::write(&path, lines.join("\n") + "\n").unwrap();
+    let out = level(&[path.to_str().unwrap()]);
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains(&format!("{}:3:", path.display())), "{err}");
+    assert!(err.contains("elevation"), "{err}");
+    std::fs::remove_file(path).ok();
+}
+
+#[test]
+fn a_sequence_that_comes_back_is_an_input_error() {
+    let path = scan_file("seq", &poses()[..2]);
+    let text = std::fs::read_to_string(&path).unwrap();
+    let lines: Vec<&str> = text.lines().collect();
+    // pose 0, pose 1, then pose 0 again.
+    let back = format!("{}\n{}\n", text.trim_end(), lines[0]);
+    std::fs::write(&path, back).unwrap();
+    let out = level(&[path.to_str().unwrap()]);
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains(&format!("{}:9:", path.display())), "{err}");
+    assert!(err.contains("sequence 0"), "{err}");
+    std::fs::remove_file(path).ok();
+}
+
+#[test]
+fn a_missing_file_is_an_error_naming_it() {
+    let out = level(&["/nonexistent/scans.jsonl"]);
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("/nonexistent/scans.jsonl"));
+}

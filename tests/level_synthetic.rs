@@ -1,0 +1,230 @@
+//! Level estimation on analytic rooms: exact recovery, failure reasons, honesty of sigmas.
+#![allow(clippy::needless_range_loop)]
+
+mod common;
+
+use common::{Room, elevations, scans_at};
+use levelscan::geometry::{Attitude, Pose};
+use levelscan::level::{Estimator, FailReason, LevelParams, level_pose};
+use levelscan::pseudo_level::{PseudoLevelParams, pseudo_level_scan};
+use proptest::prelude::*;
+use rand::{RngExt, SeedableRng};
+
+fn deg(a: f64) -> f64 {
+    a.to_radians()
+}
+
+fn params(estimator: Estimator) -> LevelParams {
+    LevelParams {
+        estimator,
+        ..LevelParams::default()
+    }
+}
+
+#[test]
+fn box_room_without_noise_recovers_known_tilt_within_005_deg() {
+    let room = Room::box_room(6.0, 5.0);
+    let pose = Pose::new(2.5, 2.0, 0.45, deg(30.0), deg(8.0), deg(-12.0));
+    let scans = scans_at(&room, &pose, &elevations(3, 5.0), 0.0, 1, 0);
+    for est in [Estimator::Robust, Estimator::Paper] {
+        let e = level_pose(&scans, &params(est));
+        assert!(e.is_ok(), "{est}: {:?}", e.failure);
+        let err = e.attitude.unwrap().max_abs_error(&pose.attitude());
+        assert!(
+            err.to_degrees() < 0.05,
+            "{est}: error {} deg",
+            err.to_degrees()
+        );
+    }
+}
+
+#[test]
+fn corridor_fails_as_parallel_walls() {
+    let room = Room::corridor();
+    let pose = Pose::new(0.0, 1.0, 0.45, deg(0.0), deg(3.0), deg(4.0));
+    let scans = scans_at(&room, &pose, &elevations(5, 5.0), 0.01, 2, 0);
+    for est in [Estimator::Robust, Estimator::Paper] {
+        let e = level_pose(&scans, &params(est));
+        assert_eq!(e.failure, Some(FailReason::ParallelWalls), "{est}");
+        assert!(e.attitude.is_none() && e.sigmas.is_none());
+    }
+}
+
+#[test]
+fn robot_pitched_down_at_the_floor_fails_as_facing_floor() {
+    // Big room, walls beyond where the steeply pitched beams meet the floor.
+    let room = Room::box_room(60.0, 60.0);
+    let pose = Pose::new(30.0, 30.0, 0.45, deg(10.0), deg(35.0), deg(0.0));
+    let scans = scans_at(&room, &pose, &elevations(3, 5.0), 0.01, 3, 0);
+    let e = level_pose(&scans, &LevelParams::default());
+    assert_eq!(e.failure, Some(FailReason::FacingFloor));
+}
+
+#[test]
+fn two_scans_fail_as_too_few_scans() {
+    let room = Room::box_room(6.0, 5.0);
+    let pose = Pose::new(2.5, 2.0, 0.45, 0.0, 0.0, 0.0);
+    let scans = scans_at(&room, &pose, &elevations(2, 5.0), 0.01, 4, 0);
+    assert_eq!(
+        level_pose(&scans, &LevelParams::default()).failure,
+        Some(FailReason::TooFewScans)
+    );
+}
+
+#[test]
+fn scans_with_different_ray_counts_fail_as_inconsistent() {
+    let room = Room::box_room(6.0, 5.0);
+    let pose = Pose::new(2.5, 2.0, 0.45, 0.0, 0.0, 0.0);
+    let mut scans = scans_at(&room, &pose, &elevations(3, 5.0), 0.01, 4, 0);
+    scans[1].theta.pop();
+    scans[1].readings.pop();
+    scans[1].valid.pop();
+    assert_eq!(
+        level_pose(&scans, &LevelParams::default()).failure,
+        Some(FailReason::InconsistentScans)
+    );
+}
+
+fn room_l() -> Room {
+    Room::polygon(
+        &[
+            [0.0, 0.0],
+            [7.0, 0.0],
+            [7.0, 3.0],
+            [4.5, 5.5],
+            [1.0, 5.5],
+            [0.0, 4.0],
+        ],
+        3.0,
+        false,
+    )
+}
+
+/// Random pose at least 0.8 m from the walls of `room_l`, roll and pitch within +-20 deg.
+fn random_pose(rng: &mut rand::rngs::ChaCha8Rng) -> Pose {
+    loop {
+        let x = rng.random_range(0.8..6.2);
+        let y = rng.random_range(0.8..4.7);
+        if y > 2.3 + 0.8 && x > 4.5 + (y - 3.0) {
+            continue;
+        }
+        return Pose::new(
+            x,
+            y,
+            0.45,
+            rng.random_range(-3.1..3.1),
+            deg(rng.random_range(-20.0..20.0)),
+            deg(rng.random_range(-20.0..20.0)),
+        );
+    }
+}
+
+#[test]
+fn reported_sigmas_are_honest_within_three_sigma_for_95_percent() {
+    for &(noise, nscans) in &[(0.01, 3), (0.05, 4), (0.10, 5)] {
+        let mut rng = rand::rngs::ChaCha8Rng::seed_from_u64(77);
+        let (mut ok, mut inside) = (0, 0);
+        for k in 0..60 {
+            let pose = random_pose(&mut rng);
+            let scans = scans_at(
+                &room_l(),
+                &pose,
+                &elevations(nscans, 5.0),
+                noise,
+                1000 + k,
+                k,
+            );
+            let e = level_pose(&scans, &LevelParams::default());
+            let (Some(att), Some(s)) = (e.attitude, e.sigmas) else {
+                continue;
+            };
+            ok += 1;
+            let truth = pose.attitude();
+            if (att.theta_x - truth.theta_x).abs() <= 3.0 * s[0]
+                && (att.theta_y - truth.theta_y).abs() <= 3.0 * s[1]
+            {
+                inside += 1;
+            }
+        }
+        assert!(ok >= 20, "noise {noise}: only {ok} of 60 leveled");
+        assert!(
+            inside as f64 >= 0.95 * ok as f64,
+            "noise {noise}: {inside} of {ok} within 3 sigma"
+        );
+    }
+}
+
+#[test]
+fn pseudo_level_scan_keeps_walls_and_drops_floor_hits() {
+    let room = Room::box_room(6.0, 5.0);
+    let pose = Pose::new(2.0, 2.5, 0.45, deg(20.0), deg(8.0), deg(5.0));
+    let scans = scans_at(&room, &pose, &elevations(5, 5.0), 0.01, 9, 7);
+    let e = level_pose(&scans, &LevelParams::default());
+    assert!(
+        e.is_ok(),
+        "{:?} walls {} patches {}",
+        e.failure,
+        e.wall_polygons(),
+        e.patches.len()
+    );
+    let out = pseudo_level_scan(&scans, &e, &PseudoLevelParams::default());
+    let base = &scans[e.base_scan.unwrap()];
+    assert_eq!(out.nrays(), base.nrays());
+    assert_eq!(out.sequence, Some(7));
+    assert!(out.true_pose.unwrap().is_planar());
+    let hits = base.hit.as_ref().unwrap();
+    let mut walls = 0;
+    for i in 0..out.nrays() {
+        assert_eq!(out.valid[i], out.readings[i].is_some());
+        if out.valid[i] {
+            assert_eq!(
+                hits[i],
+                levelscan::scan::Hit::Wall,
+                "ray {i} kept but not a wall"
+            );
+            // The leveled point lies on the box's walls, seen from the true planar pose.
+            let r = out.readings[i].unwrap();
+            let (s, c) = (pose.rz + out.theta[i]).sin_cos();
+            let (x, y) = (pose.x + r * c, pose.y + r * s);
+            let d = x.min(6.0 - x).abs().min(y.abs()).min((5.0 - y).abs());
+            assert!(d < 0.15, "ray {i} at ({x}, {y}) is {d} m off every wall");
+        }
+        if hits[i] == levelscan::scan::Hit::Wall {
+            walls += 1;
+        }
+    }
+    let kept = out.valid.iter().filter(|&&v| v).count();
+    assert!(
+        kept as f64 >= 0.9 * walls as f64,
+        "kept {kept} of {walls} wall hits"
+    );
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 24, ..ProptestConfig::default() })]
+    #[test]
+    fn attitude_recovered_over_random_poses(seed in 0u64..10_000) {
+        let mut rng = rand::rngs::ChaCha8Rng::seed_from_u64(seed);
+        let pose = random_pose(&mut rng);
+        let scans = scans_at(&room_l(), &pose, &elevations(4, 5.0), 0.01, seed, 0);
+        let e = level_pose(&scans, &LevelParams::default());
+        if let Some(att) = e.attitude {
+            // Within five of its own sigmas (honest), and never far off.
+            let s = e.sigmas.unwrap();
+            let truth = pose.attitude();
+            prop_assert!((att.theta_x - truth.theta_x).abs() <= 5.0 * s[0] + 1e-4, "{:?} {:?}", att, pose);
+            prop_assert!((att.theta_y - truth.theta_y).abs() <= 5.0 * s[1] + 1e-4, "{:?} {:?}", att, pose);
+            prop_assert!(att.max_abs_error(&truth).to_degrees() < 3.0);
+        } else {
+            // Failing is allowed only with a reason that says the view is poor.
+            prop_assert!(e.failure.is_some());
+        }
+    }
+}
+
+#[test]
+fn attitude_from_up_matches_truth_sign_conventions() {
+    let a = Attitude::new(deg(10.0), deg(-5.0));
+    let back = Attitude::from_up(&a.up_in_robot());
+    assert!((back.theta_x - a.theta_x).abs() < 1e-12);
+}
