@@ -198,6 +198,46 @@ fn a_csm_log_line_is_read_as_it_is() {
 }
 
 #[test]
+fn carmen_flaser_and_robotlaser_lines_are_read() {
+    // The same 180-beam scan of a 4 m x 6 m box, twice as FLASER (pose x y theta, odometry,
+    // timestamp, host, logger time) and once as ROBOTLASER1, with comments and other messages
+    // between.
+    let ranges: Vec<String> = (0..180)
+        .map(|i| {
+            let a = -std::f64::consts::FRAC_PI_2 + std::f64::consts::PI * i as f64 / 180.0;
+            let (c, s) = (a.cos(), a.sin());
+            let rx = if c > 1e-9 { 2.0 / c } else { f64::INFINITY };
+            let ry = if s.abs() > 1e-9 {
+                3.0 / s.abs()
+            } else {
+                f64::INFINITY
+            };
+            format!("{:.3}", rx.min(ry).min(81.9))
+        })
+        .collect();
+    let r = ranges.join(" ");
+    let log = format!(
+        "# CARMEN log\nPARAM robot_front_laser_max 50.0 nohost 0\n\
+         FLASER 180 {r} 1.0 2.0 0.5 1.0 2.0 0.5 100.25 nohost 100.25\n\
+         ODOM 1.0 2.0 0.5 0 0 0 100.3 nohost 100.3\n\
+         FLASER 180 {r} 1.0 2.0 0.5 1.01 2.0 0.5 100.5 nohost 100.5\n\
+         ROBOTLASER1 0 -1.5707963 3.1241393 0.0174533 50.0 0.01 0 180 {r} 0 \
+         1.0 2.0 0.5 1.0 2.0 0.5 0 0 0.3 0.3 0 100.75 nohost 100.75\n"
+    );
+    let recs = records(&run_match(&[], log.as_bytes()));
+    assert_eq!(recs.len(), 3);
+    for r in &recs[1..] {
+        assert_eq!(r["match"]["status"], "ok", "{}", r["match"]);
+        let e = pose3(&r["estimate"]);
+        // Identical scans: the match says no motion, whatever the odometry claims.
+        assert!(
+            (e[0] - 1.0).abs() < 1e-3 && (e[1] - 2.0).abs() < 1e-3,
+            "{e:?}"
+        );
+    }
+}
+
+#[test]
 fn a_record_without_valid_rays_falls_back_and_is_still_written() {
     let input = simulated_level_scans(3);
     let text = String::from_utf8(input).unwrap();

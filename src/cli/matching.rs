@@ -4,8 +4,8 @@
 use super::{open_input, open_output};
 use anyhow::Context;
 use clap::ValueEnum;
-use levelscan::formats::ScanReader;
-use levelscan::geometry::{Pose, Pose2};
+use levelscan::formats::{CarmenParams, read_any, write_tum};
+use levelscan::geometry::Pose;
 use levelscan::matching::{
     CheckParams, Coarse, CorrelativeParams, IcpParams, Kernel, MapParams, MatchReport, MatchStatus,
     Matcher, MatcherParams, Metric, Mode, NormalParams, RangeParams, scan_points,
@@ -181,8 +181,8 @@ impl MatchOptions {
 
 #[derive(clap::Args, Debug)]
 pub struct Args {
-    /// 2D scans: `level` output or CSM logs (JSON Lines), optionally gzipped; standard input
-    /// when absent or `-`.
+    /// 2D scans: `level` output or CSM logs (JSON Lines), or CARMEN logs (`FLASER`,
+    /// `ROBOTLASER1`), optionally gzipped; standard input when absent or `-`.
     pub scans: Option<PathBuf>,
     #[command(flatten)]
     pub options: MatchOptions,
@@ -203,7 +203,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         None => None,
     };
     let mut matcher = Matcher::new(params);
-    for (index, item) in ScanReader::new(input.reader, &input.name).enumerate() {
+    let source = read_any(input.reader, &input.name, CarmenParams::default())?;
+    for (index, item) in source.enumerate() {
         let (_, mut scan) = item?;
         let points = scan_points(&scan, &params.ranges);
         let odometry = scan.odometry.map(|p| p.to_pose2());
@@ -212,7 +213,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         levelscan::formats::write_scan(&mut out, &scan)?;
         if let Some(t) = tum.as_mut() {
             let time = scan.timestamp.map_or(index as f64, |t| t.seconds());
-            write_tum_line(t, time, &report.estimate).context("cannot write the trajectory")?;
+            write_tum(t, time, &report.estimate).context("cannot write the trajectory")?;
         }
     }
     out.flush()?;
@@ -242,10 +243,4 @@ pub fn annotate(scan: &mut Scan, report: &MatchReport) {
             "coarse": report.coarse,
         }),
     );
-}
-
-/// One TUM line: `timestamp x y z qx qy qz qw`, z = 0 and the heading as a rotation about z.
-pub fn write_tum_line(w: &mut dyn Write, time: f64, pose: &Pose2) -> std::io::Result<()> {
-    let (s, c) = (0.5 * pose.theta).sin_cos();
-    writeln!(w, "{time:.6} {} {} 0 0 0 {s} {c}", pose.x, pose.y)
 }

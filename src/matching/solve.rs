@@ -123,6 +123,19 @@ fn min_quadratic_on_circle(s: &Matrix2<f64>, h: &Vector2<f64>) -> Vector2<f64> {
     r / r.norm()
 }
 
+/// Eigen-decomposition of a symmetric 2x2 matrix in closed form:
+/// `(λ_min, λ_max, unit eigenvector of λ_min)`. nalgebra's iterative solver costs about a
+/// microsecond, too much for once per reference point.
+pub fn symmetric_eigen_2x2(m: &Matrix2<f64>) -> (f64, f64, Vector2<f64>) {
+    let (a, b, c) = (m[(0, 0)], 0.5 * (m[(0, 1)] + m[(1, 0)]), m[(1, 1)]);
+    let mean = 0.5 * (a + c);
+    let radius = (0.5 * (a - c)).hypot(b);
+    // The major axis is at angle phi = atan2(2b, a - c) / 2; the minor one is perpendicular.
+    let phi = 0.5 * (2.0 * b).atan2(a - c);
+    let (s, co) = phi.sin_cos();
+    (mean - radius, mean + radius, Vector2::new(-s, co))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -215,17 +228,4 @@ mod tests {
             }
         }
     }
-}
-
-/// Eigen-decomposition of a symmetric 2x2 matrix in closed form:
-/// `(λ_min, λ_max, unit eigenvector of λ_min)`. nalgebra's iterative solver costs about a
-/// microsecond, too much for once per reference point.
-pub fn symmetric_eigen_2x2(m: &Matrix2<f64>) -> (f64, f64, Vector2<f64>) {
-    let (a, b, c) = (m[(0, 0)], 0.5 * (m[(0, 1)] + m[(1, 0)]), m[(1, 1)]);
-    let mean = 0.5 * (a + c);
-    let radius = (0.5 * (a - c)).hypot(b);
-    // The major axis is at angle phi = atan2(2b, a - c) / 2; the minor one is perpendicular.
-    let phi = 0.5 * (2.0 * b).atan2(a - c);
-    let (s, co) = phi.sin_cos();
-    (mean - radius, mean + radius, Vector2::new(-s, co))
 }
