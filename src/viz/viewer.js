@@ -127,6 +127,7 @@
       swatch.style.background = rgba(L.color, 1);
       if (L.id === "polygons") swatch.style.background = "linear-gradient(90deg, rgb(30,170,60) 50%, rgb(220,40,40) 50%)";
       if (L.id === "plan") swatch.style.background = "rgba(40,40,48,0.4)";
+      if (L.id === "patches") swatch.style.background = "rgba(240,150,20,0.5)";
       if (L.id === "poses") swatch.style.background = "linear-gradient(90deg, #fff, #000)";
       label.appendChild(box);
       label.appendChild(swatch);
