@@ -484,10 +484,12 @@ fn make_figures(dir: &Path, plan: &Plan, runs: &[MatchedRun], accuracy: &[CellSt
         ],
         (1240, 520),
     );
-    // Side by side in one picture too, for papers and slides.
-    let _ = map_panels_png(
+    // Side by side in one picture too, for papers and slides (the report embeds them apart,
+    // so each keeps its own caption).
+    let _ = map_figure(
+        dir,
+        "maps_raw_vs_leveled",
         &[find("raw", "metascan"), find("leveled", "metascan")],
-        &dir.join("maps_raw_vs_leveled.png"),
         (1240, 520),
     );
     let cells: Vec<AccuracyCell> = accuracy
