@@ -64,6 +64,8 @@ fn demo_writes_a_self_contained_report_where_leveling_beats_raw_scans() {
         "view_pose.html",
         "map_raw_metascan.png",
         "map_leveled_metascan.svg",
+        "maps_raw_vs_leveled.png",
+        "maps_raw_vs_leveled.svg",
         "table1.svg",
         "fig6_histogram.png",
     ] {

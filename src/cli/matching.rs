@@ -1,8 +1,246 @@
-//! Not written yet.
+//! `levelscan match`: pairwise or metascan matching of 2D scans; fills in `estimate` and adds
+//! the contract's `match` object to each record, streaming (one record in, one record out).
+
+use super::{open_input, open_output};
+use anyhow::Context;
+use clap::ValueEnum;
+use levelscan::formats::{CarmenParams, read_any, write_tum};
+use levelscan::geometry::Pose;
+use levelscan::matching::{
+    CheckParams, Coarse, CorrelativeParams, IcpParams, Kernel, MapParams, MatchReport, MatchStatus,
+    Matcher, MatcherParams, Metric, Mode, NormalParams, RangeParams, scan_points,
+};
+use levelscan::scan::Scan;
+use serde_json::json;
+use std::io::Write;
+use std::path::PathBuf;
+
+#[derive(ValueEnum, Clone, Copy, Debug)]
+pub enum ModeArg {
+    /// Each scan against the previous one.
+    Pairwise,
+    /// Each scan against a map of all earlier matched scans.
+    Metascan,
+}
+
+#[derive(ValueEnum, Clone, Copy, Debug)]
+pub enum AlgoArg {
+    /// Point-to-point ICP (Besl & McKay 1992).
+    Icp,
+    /// Point-to-line ICP (Censi 2008).
+    Plicp,
+}
+
+#[derive(ValueEnum, Clone, Copy, Debug)]
+pub enum CoarseArg {
+    /// ICP starts from the odometry guess.
+    Never,
+    /// Only when ICP from the odometry guess looks bad.
+    Auto,
+    /// Before every match.
+    Always,
+}
+
+#[derive(ValueEnum, Clone, Copy, Debug)]
+pub enum KernelArg {
+    None,
+    Huber,
+    Cauchy,
+}
+
+/// The matcher's settings as flags, shared by `match` and the `eval` commands.
+#[derive(clap::Args, Debug, Clone)]
+pub struct MatchOptions {
+    /// Pairwise (each scan against the previous) or metascan (against a map of all earlier).
+    #[arg(long, value_enum, default_value = "pairwise")]
+    pub mode: ModeArg,
+    /// ICP metric: point-to-point (icp) or point-to-line (plicp).
+    #[arg(long, value_enum, default_value = "plicp")]
+    pub algo: AlgoArg,
+    /// Coarse correlative search before ICP (Olson 2009).
+    #[arg(long, value_enum, default_value = "auto")]
+    pub coarse: CoarseArg,
+    /// ICP iteration limit.
+    #[arg(long, default_value_t = IcpParams::default().max_iterations)]
+    pub max_iterations: usize,
+    /// Pairs farther apart are never associated [m].
+    #[arg(long, default_value_t = IcpParams::default().max_correspondence_distance)]
+    pub max_correspondence_distance: f64,
+    /// Smallest fraction of pairs trimming keeps (1 = no trimming) [0-1].
+    #[arg(long, default_value_t = IcpParams::default().min_overlap)]
+    pub min_overlap: f64,
+    /// Robust kernel on the residuals.
+    #[arg(long, value_enum, default_value = "huber")]
+    pub kernel: KernelArg,
+    /// Robust kernel scale [m].
+    #[arg(long, default_value_t = IcpParams::default().kernel_scale)]
+    pub kernel_scale: f64,
+    /// Metascan voxel size [m].
+    #[arg(long, default_value_t = MapParams::default().voxel_size)]
+    pub voxel_size: f64,
+    /// Coarse search: half-width of the translation window [m].
+    #[arg(long, default_value_t = CorrelativeParams::default().window_xy)]
+    pub window_xy: f64,
+    /// Coarse search: half-width of the heading window [deg].
+    #[arg(long, default_value_t = CorrelativeParams::default().window_theta.to_degrees())]
+    pub window_theta: f64,
+    /// Fall back to odometry with fewer kept pairs than this.
+    #[arg(long, default_value_t = CheckParams::default().min_correspondences)]
+    pub min_correspondences: usize,
+    /// Fall back to odometry when the RMS residual is above this [m].
+    #[arg(long, default_value_t = CheckParams::default().max_residual)]
+    pub max_residual: f64,
+    /// Fall back (degenerate, e.g. a corridor) when the pairs' normals pin one direction less
+    /// than this, as λ_min/λ_max of their scatter.
+    #[arg(long, default_value_t = CheckParams::default().min_constraint_ratio)]
+    pub min_constraint_ratio: f64,
+    /// Ignore readings shorter than this [m].
+    #[arg(long, default_value_t = RangeParams::default().min_range)]
+    pub min_range: f64,
+    /// Ignore readings at or beyond this (CARMEN's "no return") [m].
+    #[arg(long, default_value_t = RangeParams::default().max_range)]
+    pub max_range: f64,
+}
+
+impl MatchOptions {
+    pub fn params(&self) -> anyhow::Result<MatcherParams> {
+        let positive = [
+            (
+                "--max-correspondence-distance",
+                self.max_correspondence_distance,
+            ),
+            ("--kernel-scale", self.kernel_scale),
+            ("--voxel-size", self.voxel_size),
+            ("--window-xy", self.window_xy),
+            ("--max-residual", self.max_residual),
+            ("--max-range", self.max_range),
+        ];
+        for (name, v) in positive {
+            if !(v.is_finite() && v > 0.0) {
+                anyhow::bail!("{name} must be a positive number, got {v}");
+            }
+        }
+        if !(self.min_overlap > 0.0 && self.min_overlap <= 1.0) {
+            anyhow::bail!("--min-overlap must be in (0, 1], got {}", self.min_overlap);
+        }
+        if !(self.window_theta.is_finite() && self.window_theta >= 0.0) {
+            anyhow::bail!("--window-theta must be >= 0, got {}", self.window_theta);
+        }
+        if self.max_iterations == 0 {
+            anyhow::bail!("--max-iterations must be at least 1");
+        }
+        Ok(MatcherParams {
+            mode: match self.mode {
+                ModeArg::Pairwise => Mode::Pairwise,
+                ModeArg::Metascan => Mode::Metascan,
+            },
+            icp: IcpParams {
+                metric: match self.algo {
+                    AlgoArg::Icp => Metric::PointToPoint,
+                    AlgoArg::Plicp => Metric::PointToLine,
+                },
+                max_iterations: self.max_iterations,
+                max_correspondence_distance: self.max_correspondence_distance,
+                min_overlap: self.min_overlap,
+                kernel: match self.kernel {
+                    KernelArg::None => Kernel::None,
+                    KernelArg::Huber => Kernel::Huber,
+                    KernelArg::Cauchy => Kernel::Cauchy,
+                },
+                kernel_scale: self.kernel_scale,
+                ..IcpParams::default()
+            },
+            normals: NormalParams::default(),
+            coarse: match self.coarse {
+                CoarseArg::Never => Coarse::Never,
+                CoarseArg::Auto => Coarse::Auto,
+                CoarseArg::Always => Coarse::Always,
+            },
+            correlative: CorrelativeParams {
+                window_xy: self.window_xy,
+                window_theta: self.window_theta.to_radians(),
+                ..CorrelativeParams::default()
+            },
+            map: MapParams {
+                voxel_size: self.voxel_size,
+                ..MapParams::default()
+            },
+            checks: CheckParams {
+                min_correspondences: self.min_correspondences,
+                max_residual: self.max_residual,
+                min_constraint_ratio: self.min_constraint_ratio,
+                ..CheckParams::default()
+            },
+            ranges: RangeParams {
+                min_range: self.min_range,
+                max_range: self.max_range,
+            },
+        })
+    }
+}
 
 #[derive(clap::Args, Debug)]
-pub struct Args {}
+pub struct Args {
+    /// 2D scans: `level` output or CSM logs (JSON Lines), or CARMEN logs (`FLASER`,
+    /// `ROBOTLASER1`), optionally gzipped; standard input when absent or `-`.
+    pub scans: Option<PathBuf>,
+    #[command(flatten)]
+    pub options: MatchOptions,
+    /// Also write the estimated trajectory in TUM format (`timestamp x y z qx qy qz qw`).
+    #[arg(long)]
+    pub trajectory: Option<PathBuf>,
+    /// Output file; standard output when absent or `-`.
+    #[arg(short, long)]
+    pub output: Option<PathBuf>,
+}
 
-pub fn run(_args: Args) -> anyhow::Result<()> {
-    anyhow::bail!("this command is not implemented yet")
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let params = args.options.params()?;
+    let input = open_input(args.scans.as_deref())?;
+    let mut out = open_output(args.output.as_ref())?;
+    let mut tum = match &args.trajectory {
+        Some(p) => Some(open_output(Some(p))?),
+        None => None,
+    };
+    let mut matcher = Matcher::new(params);
+    let source = read_any(input.reader, &input.name, CarmenParams::default())?;
+    for (index, item) in source.enumerate() {
+        let (_, mut scan) = item?;
+        let points = scan_points(&scan, &params.ranges);
+        let odometry = scan.odometry.map(|p| p.to_pose2());
+        let report = matcher.push(&points, odometry);
+        annotate(&mut scan, &report);
+        levelscan::formats::write_scan(&mut out, &scan)?;
+        if let Some(t) = tum.as_mut() {
+            let time = scan.timestamp.map_or(index as f64, |t| t.seconds());
+            write_tum(t, time, &report.estimate).context("cannot write the trajectory")?;
+        }
+    }
+    out.flush()?;
+    if let Some(mut t) = tum {
+        t.flush()?;
+    }
+    Ok(())
+}
+
+/// Fills in `estimate` and the contract's `match` object.
+pub fn annotate(scan: &mut Scan, report: &MatchReport) {
+    let e = report.estimate;
+    scan.estimate = Some(Pose::planar(e.x, e.y, e.theta));
+    let (status, reason) = match report.status {
+        MatchStatus::First => ("ok", Some("first_scan")),
+        MatchStatus::Ok => ("ok", None),
+        MatchStatus::Fallback(r) => ("fallback", Some(r.as_str())),
+    };
+    scan.extra.insert(
+        "match".to_string(),
+        json!({
+            "status": status,
+            "reason": reason,
+            "iterations": report.iterations,
+            "correspondences": report.correspondences,
+            "residual": report.residual,
+            "coarse": report.coarse,
+        }),
+    );
 }

@@ -7,7 +7,7 @@
 //! over iterations). It stops when the pose changes by less than the thresholds.
 
 use super::reference::Target;
-use super::solve::RigidSolver;
+use super::solve::{RigidSolver, symmetric_eigen_2x2};
 use crate::geometry::{Pose2, wrap_angle};
 use nalgebra::{Matrix2, Point2, Vector2};
 
@@ -40,23 +40,27 @@ pub struct IcpParams {
     pub metric: Metric,
     /// Iteration limit. Default 50.
     pub max_iterations: usize,
-    /// Converged when the translation changes by less than this [m]. Default 1e-6.
+    /// Converged when the translation changes by less than this [m]. Default 1e-5.
     pub epsilon_xy: f64,
-    /// Converged when the heading changes by less than this [rad]. Default 1e-6.
+    /// Converged when the heading changes by less than this [rad]. Default 1e-5.
     pub epsilon_theta: f64,
     /// Pairs farther apart than this are never associated [m]. Default 0.5.
     pub max_correspondence_distance: f64,
     /// Smallest fraction of associated pairs kept by trimming (FTrICP's lower bound on the
     /// overlap) [-]. Default 0.6. Set to 1 to switch trimming off.
     pub min_overlap: f64,
-    /// FTrICP's exponent λ in `e(ξ) / ξ^λ` [-]. Default 3. Chetverikov et al. 2002 use 2,
+    /// FTrICP's exponent λ in `e(ξ) / ξ^λ` [-]. Default 6. Chetverikov et al. 2002 use 2,
     /// which with Gaussian range noise always picks the smallest overlap and so discards
-    /// good pairs; 3 keeps about 90% of pairs whose residuals are pure noise.
+    /// good pairs; 6 keeps about 95% of pairs whose residuals are pure noise and still cuts
+    /// off a tail of gross outliers (on the two-room log: RPE median 2.8 mm with 2, 2.1 with 6).
     pub overlap_lambda: f64,
     /// Robust kernel. Default Huber.
     pub kernel: Kernel,
     /// Kernel scale [m]. Default 0.03.
     pub kernel_scale: f64,
+    /// Point-to-line pairs are weighted by `1 / (cos² α + floor)`, α the angle between the
+    /// source ray and the reference normal; `None` weighs all pairs alike [-]. Default 0.2.
+    pub incidence_floor: Option<f64>,
 }
 
 impl Default for IcpParams {
@@ -64,13 +68,14 @@ impl Default for IcpParams {
         Self {
             metric: Metric::PointToLine,
             max_iterations: 50,
-            epsilon_xy: 1e-6,
-            epsilon_theta: 1e-6,
+            epsilon_xy: 1e-5,
+            epsilon_theta: 1e-5,
             max_correspondence_distance: 0.5,
             min_overlap: 0.6,
-            overlap_lambda: 3.0,
+            overlap_lambda: 6.0,
             kernel: Kernel::Huber,
             kernel_scale: 0.03,
+            incidence_floor: Some(0.2),
         }
     }
 }
@@ -87,6 +92,8 @@ pub struct IcpResult {
     pub correspondences: usize,
     /// Source points that found a target point within the association distance.
     pub associated: usize,
+    /// Associated pairs with a residual within the kernel scale: the support of the result.
+    pub inliers: usize,
     /// RMS of the kept residuals in the last iteration [m].
     pub residual: f64,
     /// How well the kept pairs pin the translation: λ_min / λ_max of `Σ n nᵀ` over their
@@ -104,7 +111,7 @@ struct Pair {
     residual: f64,
 }
 
-/// Aligns `source` (points in the source frame) to `target`, starting from `guess`
+/// Aligns `source` (points in the source scanner's frame, the scanner at the origin) to `target`, starting from `guess`
 /// (`target_from_source`). Returns `None` when the target is empty or no point associates.
 pub fn icp(
     source: &[Point2<f64>],
@@ -123,6 +130,7 @@ pub fn icp(
         converged: false,
         correspondences: 0,
         associated: 0,
+        inliers: 0,
         residual: f64::INFINITY,
         constraint_ratio: None,
         degenerate: false,
@@ -133,11 +141,15 @@ pub fn icp(
             return None;
         }
         result.associated = pairs.len();
+        result.inliers = pairs
+            .iter()
+            .filter(|p| p.residual <= params.kernel_scale)
+            .count();
         let kept = trim(&mut pairs, params);
         let kept_pairs = &pairs[..kept];
         let mut solver = RigidSolver::new();
         for pair in kept_pairs {
-            let w = weight(pair.residual, params);
+            let w = weight(pair.residual, params) * incidence_weight(pair, &pose, params);
             match (params.metric, pair.line) {
                 (Metric::PointToLine, Some((n, anchor))) => solver.add_line(n, &pair.p, &anchor, w),
                 _ => solver.add_point(&pair.p, &pair.q, w),
@@ -228,6 +240,27 @@ fn trim(pairs: &mut [Pair], params: &IcpParams) -> usize {
     best.1
 }
 
+/// Range noise acts along the ray, so a point-to-line residual carries only its component
+/// along the normal, `σ cos α` for incidence angle α: weighting by the inverse variance
+/// (Censi 2007, "An accurate closed-form estimate of ICP's covariance", sect. III) trusts
+/// grazing points more. The floor keeps the weight finite and hedges against the larger
+/// sampling error of the reference line along grazing rays.
+fn incidence_weight(pair: &Pair, pose: &Pose2, params: &IcpParams) -> f64 {
+    let (Metric::PointToLine, Some((n, _)), Some(floor)) =
+        (params.metric, pair.line, params.incidence_floor)
+    else {
+        return 1.0;
+    };
+    let norm = pair.p.coords.norm();
+    if norm == 0.0 {
+        return 1.0;
+    }
+    let (s, c) = pose.theta.sin_cos();
+    let ray = Vector2::new(c * pair.p.x - s * pair.p.y, s * pair.p.x + c * pair.p.y) / norm;
+    let cos = n.dot(&ray);
+    1.0 / (cos * cos + floor)
+}
+
 fn weight(residual: f64, params: &IcpParams) -> f64 {
     let k = params.kernel_scale;
     match params.kernel {
@@ -253,8 +286,7 @@ fn constraint_ratio(pairs: &[Pair]) -> Option<f64> {
     if !any {
         return None;
     }
-    let eig = scatter.symmetric_eigen().eigenvalues;
-    let (lo, hi) = (eig[0].min(eig[1]), eig[0].max(eig[1]));
+    let (lo, hi, _) = symmetric_eigen_2x2(&scatter);
     Some(if hi > 0.0 { lo.max(0.0) / hi } else { 0.0 })
 }
 

@@ -131,7 +131,7 @@ pub struct CheckParams {
     /// corridor [-]. Default 0.02.
     pub min_constraint_ratio: f64,
     /// With `Coarse::Auto`, the coarse search runs when fewer than this fraction of the
-    /// source points find a partner [-]. Default 0.8.
+    /// source points are inliers (residual within the kernel scale) [-]. Default 0.8.
     pub coarse_trigger_fraction: f64,
 }
 
@@ -339,21 +339,31 @@ impl Matcher {
             self.remember(points, guess, odometry);
             return self.fallback(points, odometry, guess, FallbackReason::NoReference, None);
         }
-        // The coarse search runs against the last remembered scan (bounded cost), placed in the
-        // world at its estimate; ICP then refines against the whole map.
-        let keyframe = self.keyframe.as_ref();
-        let (result, coarse) = self.align(points, &self.map, guess, |g| {
-            let kf = keyframe?;
-            let local_guess = kf.estimate.between(&g);
-            let (found, _) = correlative_search(
-                points,
-                kf.reference.points(),
-                &Point2::origin(),
-                local_guess,
-                &self.params.correlative,
-            )?;
-            Some(kf.estimate.compose(&found))
-        });
+        // First against the last scan that went into the map (as pairwise, with the coarse
+        // search when needed): one scan has one clear basin, the map may have several near a
+        // poor guess. Then refine against the whole map, which ties the run to earlier visits.
+        let mut start = guess;
+        let mut coarse = false;
+        if let Some(kf) = self.keyframe.as_ref() {
+            let local_guess = kf.estimate.between(&guess);
+            let (local, used_coarse) = self.align(points, &kf.reference, local_guess, |g| {
+                correlative_search(
+                    points,
+                    kf.reference.points(),
+                    &Point2::origin(),
+                    g,
+                    &self.params.correlative,
+                )
+                .map(|c| c.0)
+            });
+            coarse = used_coarse;
+            if let Ok(r) = local {
+                start = kf.estimate.compose(&r.pose);
+            }
+        }
+        let result = icp(points, &self.map, start, &self.params.icp)
+            .ok_or(FallbackReason::TooFewCorrespondences)
+            .and_then(|r| self.check(r));
         self.finish(points, odometry, result, coarse, |r| r.pose, guess)
     }
 
@@ -377,7 +387,7 @@ impl Matcher {
             Coarse::Auto => {
                 let first = run(guess);
                 let looks_good = matches!(&first, Ok(r) if self.check(*r).is_ok()
-                    && r.associated as f64 >= p.checks.coarse_trigger_fraction * points.len() as f64);
+                    && r.inliers as f64 >= p.checks.coarse_trigger_fraction * points.len() as f64);
                 if looks_good {
                     return (first.and_then(|r| self.check(r)), false);
                 }
@@ -474,9 +484,9 @@ impl Matcher {
     }
 }
 
-/// Which of two ICP results to trust: more kept pairs, then the smaller residual.
+/// Which of two ICP results to trust: more inliers, then the smaller residual.
 fn quality(r: &IcpResult) -> (usize, std::cmp::Reverse<u64>) {
-    (r.correspondences, std::cmp::Reverse(r.residual.to_bits()))
+    (r.inliers, std::cmp::Reverse(r.residual.to_bits()))
 }
 
 /// Matches a whole run (convenience over `Matcher` for tests, benchmarks and experiments).

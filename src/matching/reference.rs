@@ -5,6 +5,7 @@
 //! corner the centred window straddles two walls, so the one-sided windows are tried as well
 //! and the flattest fit wins.
 
+use super::solve::symmetric_eigen_2x2;
 use kiddo::{ImmutableKdTree, SquaredEuclidean};
 use nalgebra::{Matrix2, Point2, Vector2};
 
@@ -43,7 +44,7 @@ pub struct Line {
 /// Normal estimation settings.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct NormalParams {
-    /// Neighbours on each side (in ray order) used for the line fit [rays]. Default 3.
+    /// Neighbours on each side (in ray order) used for the line fit [rays]. Default 4.
     pub window: usize,
     /// A larger step between consecutive points ends the neighbourhood [m]. Default 0.3.
     pub max_gap: f64,
@@ -55,7 +56,7 @@ pub struct NormalParams {
 impl Default for NormalParams {
     fn default() -> Self {
         Self {
-            window: 3,
+            window: 4,
             max_gap: 0.3,
             max_thickness: 0.15,
         }
@@ -110,22 +111,12 @@ fn line_fit(pts: &[Point2<f64>]) -> Option<(Vector2<f64>, f64, Point2<f64>)> {
         let d = p.coords - mean;
         cov += d * d.transpose();
     }
-    let eig = cov.symmetric_eigen();
-    let (imin, imax) = if eig.eigenvalues[0] <= eig.eigenvalues[1] {
-        (0, 1)
-    } else {
-        (1, 0)
-    };
-    let lmax = eig.eigenvalues[imax];
+    let (lmin, lmax, normal) = symmetric_eigen_2x2(&cov);
     if lmax <= 0.0 {
         return None;
     }
-    let thickness = (eig.eigenvalues[imin].max(0.0) / lmax).sqrt();
-    Some((
-        eig.eigenvectors.column(imin).into_owned(),
-        thickness,
-        Point2::from(mean),
-    ))
+    let thickness = (lmin.max(0.0) / lmax).sqrt();
+    Some((normal, thickness, Point2::from(mean)))
 }
 
 /// One scan as a match target: its points, their local lines and a kd-tree.

@@ -84,17 +84,8 @@ impl RigidSolver {
 
 /// Minimises `r' S r - 2 h' r` over unit vectors `r` (S symmetric 2x2).
 fn min_quadratic_on_circle(s: &Matrix2<f64>, h: &Vector2<f64>) -> Vector2<f64> {
-    let eig = s.symmetric_eigen();
-    let (i1, i2) = if eig.eigenvalues[0] <= eig.eigenvalues[1] {
-        (0, 1)
-    } else {
-        (1, 0)
-    };
-    let (s1, s2) = (eig.eigenvalues[i1], eig.eigenvalues[i2]);
-    let (v1, v2) = (
-        eig.eigenvectors.column(i1).into_owned(),
-        eig.eigenvectors.column(i2).into_owned(),
-    );
+    let (s1, s2, v1) = symmetric_eigen_2x2(s);
+    let v2 = Vector2::new(-v1.y, v1.x);
     let (h1, h2) = (v1.dot(h), v2.dot(h));
     let hn = h1.hypot(h2);
     if hn == 0.0 {
@@ -130,6 +121,19 @@ fn min_quadratic_on_circle(s: &Matrix2<f64>, h: &Vector2<f64>) -> Vector2<f64> {
     let mu = 0.5 * (lo + hi);
     let r = v1 * (h1 / mu) + v2 * (h2 / (mu + gap));
     r / r.norm()
+}
+
+/// Eigen-decomposition of a symmetric 2x2 matrix in closed form:
+/// `(λ_min, λ_max, unit eigenvector of λ_min)`. nalgebra's iterative solver costs about a
+/// microsecond, too much for once per reference point.
+pub fn symmetric_eigen_2x2(m: &Matrix2<f64>) -> (f64, f64, Vector2<f64>) {
+    let (a, b, c) = (m[(0, 0)], 0.5 * (m[(0, 1)] + m[(1, 0)]), m[(1, 1)]);
+    let mean = 0.5 * (a + c);
+    let radius = (0.5 * (a - c)).hypot(b);
+    // The major axis is at angle phi = atan2(2b, a - c) / 2; the minor one is perpendicular.
+    let phi = 0.5 * (2.0 * b).atan2(a - c);
+    let (s, co) = phi.sin_cos();
+    (mean - radius, mean + radius, Vector2::new(-s, co))
 }
 
 #[cfg(test)]
@@ -171,6 +175,16 @@ mod tests {
     }
 
     proptest! {
+        #[test]
+        fn closed_form_eigen_matches_nalgebra(a in -5.0f64..5.0, b in -5.0f64..5.0, c in -5.0f64..5.0) {
+            let m = Matrix2::new(a, b, b, c);
+            let (lo, hi, v) = symmetric_eigen_2x2(&m);
+            let e = m.symmetric_eigen().eigenvalues;
+            prop_assert!((lo - e[0].min(e[1])).abs() < 1e-9 && (hi - e[0].max(e[1])).abs() < 1e-9);
+            prop_assert!((m * v - v * lo).norm() < 1e-9);
+            prop_assert!((v.norm() - 1.0).abs() < 1e-12);
+        }
+
         #[test]
         fn point_to_line_recovers_motion_from_two_wall_directions(
             x in -1.0f64..1.0, y in -1.0f64..1.0, th in -3.0f64..3.0,

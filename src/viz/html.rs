@@ -155,6 +155,7 @@ const BLUE: [u8; 3] = [20, 70, 220];
 const GREEN_FILL: [u8; 3] = [30, 170, 60];
 const RED_FILL: [u8; 3] = [220, 40, 40];
 const WALL_FILL: [u8; 3] = [40, 40, 48];
+const PATCH_FILL: [u8; 3] = [240, 150, 20];
 
 #[derive(Clone, Copy, PartialEq, Eq)]
 enum Kind {
@@ -195,9 +196,9 @@ fn level_attitude(scan: &Scan) -> Option<Attitude> {
     Some(Attitude::new(tx, ty))
 }
 
-/// The `wall_polygons` of a `level` record: robot-frame corner lists.
-fn wall_polygons(scan: &Scan) -> Vec<Vec<Point3<f64>>> {
-    let Some(list) = scan.extra.get("wall_polygons").and_then(|v| v.as_array()) else {
+/// The `wall_polygons` (or `wall_patches`) of a `level` record: robot-frame corner lists.
+fn wall_polygons(scan: &Scan, key: &str) -> Vec<Vec<Point3<f64>>> {
+    let Some(list) = scan.extra.get(key).and_then(|v| v.as_array()) else {
         return Vec::new();
     };
     list.iter()
@@ -308,6 +309,10 @@ pub fn build_scene(plan: Option<&Plan>, sources: &[Source], params: &ViewParams)
     let mut plan_layer = Layer::new("plan", "Floor plan walls", WALL_FILL, 1.0);
     let mut scans_layer = Layer::new("scans", "Scans (red)", RED, 1.0);
     let mut polys_layer = Layer::new("polygons", "Wall polygons (green/red)", RED_FILL, 1.0);
+    // Merged wall patches (`level --polygons` writes them as `wall_patches`); off at first, as
+    // they cover the quads they were grown from.
+    let mut patches_layer = Layer::new("patches", "Merged wall patches (orange)", PATCH_FILL, 1.0);
+    patches_layer.visible = false;
     let mut pseudo_layer = Layer::new("pseudo", "Pseudo-level scans (blue)", BLUE, 1.6);
     let mut matched_layer = Layer::new("matched", "Matched 2D scans (blue)", BLUE, 1.0);
     let mut truth_layer = Layer::new("truth", "True path (green)", [0, 140, 60], 2.0);
@@ -439,7 +444,18 @@ pub fn build_scene(plan: Option<&Plan>, sources: &[Source], params: &ViewParams)
                     Some(world_from_level.transform_point(&Point3::new(r * c, r * s, 0.0)))
                 }));
                 let world_from_robot = robot_pose.world_from_robot();
-                for (j, poly) in wall_polygons(scan).iter().enumerate() {
+                for poly in wall_polygons(scan, "wall_patches") {
+                    let mut p = Vec::with_capacity(poly.len() * 3);
+                    for c in &poly {
+                        push_mm(&mut p, &world_from_robot.transform_point(c));
+                    }
+                    patches_layer.faces.push(Face {
+                        p,
+                        c: PATCH_FILL,
+                        a: 0.3,
+                    });
+                }
+                for (j, poly) in wall_polygons(scan, "wall_polygons").iter().enumerate() {
                     let mut p = Vec::with_capacity(poly.len() * 3);
                     for c in poly {
                         push_mm(&mut p, &world_from_robot.transform_point(c));
@@ -504,6 +520,7 @@ pub fn build_scene(plan: Option<&Plan>, sources: &[Source], params: &ViewParams)
         plan_layer,
         scans_layer,
         polys_layer,
+        patches_layer,
         pseudo_layer,
         matched_layer,
         truth_layer,
@@ -718,6 +735,10 @@ mod tests {
                 [[2, 0, 0], [2, 1, 0], [2, 1, 1]]
             ]),
         );
+        lev.extra.insert(
+            "wall_patches".into(),
+            json!([[[1, 0, 0], [1, 2, 0], [1, 2, 1], [1, 0, 1]]]),
+        );
         let scene = build_scene(
             None,
             &[
@@ -746,6 +767,12 @@ mod tests {
             pseudo[0],
             [mm(2.0 + 0.3f64.cos()), mm(1.0 + 0.3f64.sin()), 450]
         );
+        let patches = scene.layer("patches").unwrap();
+        assert!(!patches.visible, "patches start hidden");
+        let w = raw_pose
+            .world_from_robot()
+            .transform_point(&Point3::new(1.0, 2.0, 1.0));
+        assert_eq!(&patches.faces[0].p[6..9], &[mm(w.x), mm(w.y), mm(w.z)]);
         // One cone: the raw pose's; the level record does not add a second one.
         assert_eq!(scene.layer("poses").unwrap().cones.len(), 1);
     }
@@ -777,6 +804,8 @@ mod tests {
         let p = &scene.layer("polygons").unwrap().faces[0].p;
         assert_eq!(&p[0..3], &[mm(expect.x), mm(expect.y), mm(expect.z)]);
         assert_eq!(scene.layer("poses").unwrap().cones.len(), 1);
+        // No merged patches in the record: no patch layer.
+        assert!(scene.layer("patches").is_none());
     }
 
     #[test]

@@ -101,9 +101,9 @@
         points: L.lines.reduce(function (s, l) { return s + l.length / 3; }, 0)
       };
     });
-    // The view fits what is shown at first (a hidden floor plan does not shrink the data).
-    var shownAtFirst = layers.filter(function (L) { return L.visible; });
-    var box = bounds(shownAtFirst.length ? shownAtFirst : layers);
+    // The view fits the data shown at first; the floor plan is context, fitted only alone.
+    var data = layers.filter(function (L) { return L.visible && L.id !== "plan"; });
+    var box = bounds(data.length ? data : layers);
     var size = [box.hi[0] - box.lo[0], box.hi[1] - box.lo[1], box.hi[2] - box.lo[2]];
     var diag = Math.max(1e-3, Math.sqrt(size[0] * size[0] + size[1] * size[1] + size[2] * size[2]));
     // Cones scale with the scene, and shrink when there are many so a long run stays readable.
@@ -127,6 +127,7 @@
       swatch.style.background = rgba(L.color, 1);
       if (L.id === "polygons") swatch.style.background = "linear-gradient(90deg, rgb(30,170,60) 50%, rgb(220,40,40) 50%)";
       if (L.id === "plan") swatch.style.background = "rgba(40,40,48,0.4)";
+      if (L.id === "patches") swatch.style.background = "rgba(240,150,20,0.5)";
       if (L.id === "poses") swatch.style.background = "linear-gradient(90deg, #fff, #000)";
       label.appendChild(box);
       label.appendChild(swatch);

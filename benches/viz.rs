@@ -1,0 +1,48 @@
+//! Benchmarks (divan): building the viewer's scene and page for a run of 300 poses of
+//! 5 x 181 rays (about 270,000 points, decimated to the default 250,000 cap).
+//! Run with `cargo bench --bench viz`.
+
+use levelscan::formats::parse_plan;
+use levelscan::simulate::{
+    RandomPoseParams, ScannerParams, World, elevations_centred, random_poses, simulate_poses,
+};
+use levelscan::viz::html::{Source, ViewParams, build_scene, viewer_page};
+
+fn main() {
+    divan::main();
+}
+
+const OFFICE: &str = include_str!("../examples/plans/office.wall");
+
+fn run() -> (levelscan::plan::Plan, Vec<Source>) {
+    let plan = parse_plan(OFFICE, "office.wall").expect("the built-in plan parses");
+    let world = World::from_plan(&plan);
+    let poses = random_poses(&world, 300, &RandomPoseParams::default(), 1).expect("free space");
+    let scans = simulate_poses(
+        &world,
+        &poses,
+        None,
+        0,
+        &elevations_centred(5, 5f64.to_radians()),
+        &ScannerParams::default(),
+        1,
+    );
+    let source = Source {
+        name: "run".into(),
+        scans: scans.into_iter().flatten().collect(),
+    };
+    (plan, vec![source])
+}
+
+#[divan::bench(sample_count = 10)]
+fn scene_300_poses(bencher: divan::Bencher) {
+    let (plan, sources) = run();
+    bencher.bench(|| build_scene(Some(&plan), &sources, &ViewParams::default()));
+}
+
+#[divan::bench(sample_count = 10)]
+fn page_300_poses(bencher: divan::Bencher) {
+    let (plan, sources) = run();
+    let scene = build_scene(Some(&plan), &sources, &ViewParams::default());
+    bencher.bench(|| viewer_page(&scene).len());
+}

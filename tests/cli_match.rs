@@ -1,0 +1,314 @@
+//! End-to-end runs of `levelscan match` (the binary).
+
+use serde_json::Value;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output, Stdio};
+
+fn bin() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_levelscan"))
+}
+
+fn plan(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join(format!("examples/plans/{name}.wall"))
+}
+
+/// A temporary file that is removed when dropped.
+struct TempFile(PathBuf);
+
+impl TempFile {
+    fn new(name: &str, text: &[u8]) -> TempFile {
+        let path =
+            std::env::temp_dir().join(format!("levelscan-match-{}-{name}", std::process::id()));
+        std::fs::File::create(&path)
+            .unwrap()
+            .write_all(text)
+            .unwrap();
+        TempFile(path)
+    }
+}
+
+impl Drop for TempFile {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_file(&self.0);
+    }
+}
+
+fn records(out: &Output) -> Vec<Value> {
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8(out.stdout.clone())
+        .unwrap()
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect()
+}
+
+fn pose3(v: &Value) -> [f64; 3] {
+    let a = v.as_array().unwrap();
+    let f = |i: usize| a[i].as_f64().unwrap();
+    if a.len() == 6 {
+        [f(0), f(1), f(3)]
+    } else {
+        [f(0), f(1), f(2)]
+    }
+}
+
+/// Level 2D scans of the two-room plan's first poses, with odometry off by 2 cm / 1 degree.
+fn simulated_level_scans(poses: usize) -> Vec<u8> {
+    let out = bin()
+        .args(["simulate", plan("two_rooms").to_str().unwrap()])
+        .args(["--flat", "--elevations", "0", "--seed", "3"])
+        .args(["--odo-trans", "0", "--odo-trans-min", "0.02"])
+        .args(["--odo-rot", "0", "--odo-rot-min", "1"])
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let text = String::from_utf8(out.stdout).unwrap();
+    let mut kept = String::new();
+    for line in text.lines().take(poses) {
+        kept.push_str(line);
+        kept.push('\n');
+    }
+    kept.into_bytes()
+}
+
+fn run_match(args: &[&str], stdin: &[u8]) -> Output {
+    let mut child = bin()
+        .arg("match")
+        .args(args)
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    // Feed standard input from a thread: `match` streams, so it writes while we still write.
+    let mut pipe = child.stdin.take().unwrap();
+    let data = stdin.to_vec();
+    let feeder = std::thread::spawn(move || pipe.write_all(&data));
+    let out = child.wait_with_output().unwrap();
+    feeder.join().unwrap().unwrap();
+    out
+}
+
+#[test]
+fn simulated_run_is_matched_close_to_the_truth_in_both_modes() {
+    let input = simulated_level_scans(40);
+    for mode in ["pairwise", "metascan"] {
+        for algo in ["plicp", "icp"] {
+            let out = run_match(&["--mode", mode, "--algo", algo], &input);
+            let recs = records(&out);
+            assert_eq!(recs.len(), 40, "{mode} {algo}: one record per input record");
+            // The first estimate is the first odometry.
+            assert_eq!(pose3(&recs[0]["estimate"]), pose3(&recs[0]["odometry"]));
+            // Each step's error: point-to-line within 1.5 cm (metascan steps also take up the
+            // map's correction of earlier drift); point-to-point (the paper's baseline, biased
+            // by sampling) within three.
+            let tol = if algo == "plicp" { 0.015 } else { 0.03 };
+            for w in recs.windows(2) {
+                assert_eq!(
+                    w[1]["match"]["status"], "ok",
+                    "{mode} {algo}: {}",
+                    w[1]["match"]
+                );
+                let step = |key: &str| {
+                    let (a, b) = (pose3(&w[0][key]), pose3(&w[1][key]));
+                    let (s, c) = a[2].sin_cos();
+                    let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
+                    (c * dx + s * dy, -s * dx + c * dy)
+                };
+                let (e, t) = (step("estimate"), step("true_pose"));
+                let err = (e.0 - t.0).hypot(e.1 - t.1);
+                assert!(
+                    err < tol,
+                    "{mode} {algo}: step off by {err} m: {}",
+                    w[1]["match"]
+                );
+            }
+        }
+    }
+}
+
+#[test]
+fn a_csm_log_line_is_read_as_it_is() {
+    // CSM's own layout: spaces, null estimate entries, readings_sigma, true_alpha; two copies of
+    // one scan, so the match is the identity. Unknown fields pass through.
+    let n = 91;
+    let theta: Vec<String> = (0..n)
+        .map(|i| format!("{}", -1.5 + 3.0 * i as f64 / (n - 1) as f64))
+        .collect();
+    let readings: Vec<String> = (0..n)
+        .map(|i| {
+            let a = -1.5 + 3.0 * i as f64 / (n - 1) as f64;
+            // A 2 m x 3 m box around the scanner: distance to the nearest wall along the ray.
+            let (c, s) = (a.cos(), a.sin());
+            let rx = if c > 1e-9 { 2.0 / c } else { f64::INFINITY };
+            let ry = if s.abs() > 1e-9 {
+                3.0 / s.abs()
+            } else {
+                f64::INFINITY
+            };
+            format!("{}", rx.min(ry))
+        })
+        .collect();
+    let sigma = vec!["0.01"; n].join(", ");
+    let line = format!(
+        "{{ \"nrays\": {n}, \"min_theta\": -1.5, \"max_theta\": 1.5, \"theta\": [ {} ], \
+         \"readings\": [ {} ], \"readings_sigma\": [ {sigma} ], \"valid\": [ {} ], \
+         \"odometry\": [ 1.0, 2.0, 0.5 ], \"estimate\": [ null, null, null ], \
+         \"true_alpha\": [ {} ], \"timestamp\": [ 1234, 500000 ] }}\n",
+        theta.join(", "),
+        readings.join(", "),
+        vec!["1"; n].join(", "),
+        vec!["0"; n].join(", "),
+    );
+    let input = format!("{line}{line}");
+    let traj = TempFile::new("traj.tum", b"");
+    let out = run_match(
+        &["--trajectory", traj.0.to_str().unwrap()],
+        input.as_bytes(),
+    );
+    let recs = records(&out);
+    assert_eq!(recs.len(), 2);
+    for r in &recs {
+        let e = pose3(&r["estimate"]);
+        assert!(
+            (e[0] - 1.0).abs() < 1e-6 && (e[1] - 2.0).abs() < 1e-6 && (e[2] - 0.5).abs() < 1e-6
+        );
+        assert!(r["true_alpha"].is_array(), "unknown fields are kept");
+    }
+    assert_eq!(recs[1]["match"]["status"], "ok", "{}", recs[1]["match"]);
+    // TUM: timestamp x y z qx qy qz qw, the time from `timestamp`.
+    let tum = std::fs::read_to_string(&traj.0).unwrap();
+    let rows: Vec<Vec<f64>> = tum
+        .lines()
+        .map(|l| l.split(' ').map(|v| v.parse().unwrap()).collect())
+        .collect();
+    assert_eq!(rows.len(), 2);
+    assert_eq!(rows[0].len(), 8);
+    assert!((rows[0][0] - 1234.5).abs() < 1e-9);
+    assert!((rows[0][6] - 0.25f64.sin()).abs() < 1e-9 && (rows[0][7] - 0.25f64.cos()).abs() < 1e-9);
+}
+
+#[test]
+fn carmen_flaser_and_robotlaser_lines_are_read() {
+    // The same 180-beam scan of a 4 m x 6 m box, twice as FLASER (pose x y theta, odometry,
+    // timestamp, host, logger time) and once as ROBOTLASER1, with comments and other messages
+    // between.
+    let ranges: Vec<String> = (0..180)
+        .map(|i| {
+            let a = -std::f64::consts::FRAC_PI_2 + std::f64::consts::PI * i as f64 / 180.0;
+            let (c, s) = (a.cos(), a.sin());
+            let rx = if c > 1e-9 { 2.0 / c } else { f64::INFINITY };
+            let ry = if s.abs() > 1e-9 {
+                3.0 / s.abs()
+            } else {
+                f64::INFINITY
+            };
+            format!("{:.3}", rx.min(ry).min(81.9))
+        })
+        .collect();
+    let r = ranges.join(" ");
+    let log = format!(
+        "# CARMEN log\nPARAM robot_front_laser_max 50.0 nohost 0\n\
+         FLASER 180 {r} 1.0 2.0 0.5 1.0 2.0 0.5 100.25 nohost 100.25\n\
+         ODOM 1.0 2.0 0.5 0 0 0 100.3 nohost 100.3\n\
+         FLASER 180 {r} 1.0 2.0 0.5 1.01 2.0 0.5 100.5 nohost 100.5\n\
+         ROBOTLASER1 0 -1.5707963 3.1241393 0.0174533 50.0 0.01 0 180 {r} 0 \
+         1.0 2.0 0.5 1.0 2.0 0.5 0 0 0.3 0.3 0 100.75 nohost 100.75\n"
+    );
+    let recs = records(&run_match(&[], log.as_bytes()));
+    assert_eq!(recs.len(), 3);
+    for r in &recs[1..] {
+        assert_eq!(r["match"]["status"], "ok", "{}", r["match"]);
+        let e = pose3(&r["estimate"]);
+        // Identical scans: the match says no motion, whatever the odometry claims.
+        assert!(
+            (e[0] - 1.0).abs() < 1e-3 && (e[1] - 2.0).abs() < 1e-3,
+            "{e:?}"
+        );
+    }
+}
+
+#[test]
+fn a_record_without_valid_rays_falls_back_and_is_still_written() {
+    let input = simulated_level_scans(3);
+    let text = String::from_utf8(input).unwrap();
+    let mut lines: Vec<Value> = text
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    let n = lines[1]["nrays"].as_u64().unwrap() as usize;
+    lines[1]["valid"] = Value::Array(vec![Value::from(0); n]);
+    let input: String = lines.iter().map(|v| format!("{v}\n")).collect();
+    let recs = records(&run_match(&["--mode", "metascan"], input.as_bytes()));
+    assert_eq!(recs.len(), 3);
+    assert_eq!(recs[1]["match"]["status"], "fallback");
+    assert_eq!(recs[1]["match"]["reason"], "no_valid_rays");
+    assert_eq!(recs[2]["match"]["status"], "ok");
+}
+
+#[test]
+fn a_bad_line_is_reported_with_file_and_line() {
+    let input = simulated_level_scans(2);
+    let mut text = String::from_utf8(input).unwrap();
+    text.push_str("{\"nrays\": 2, \"readings\": [1.0]}\n");
+    let file = TempFile::new("bad.jsonl", text.as_bytes());
+    let out = bin().arg("match").arg(&file.0).output().unwrap();
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.starts_with(&format!("{}:3:", file.0.display())),
+        "message: {err}"
+    );
+}
+
+#[test]
+fn a_missing_file_is_an_error_not_a_panic() {
+    let out = bin()
+        .args(["match", "/nonexistent/scans.jsonl"])
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("/nonexistent/scans.jsonl"), "{err}");
+    assert!(!err.contains("panicked"));
+}
+
+#[test]
+fn help_shows_every_default() {
+    let out = bin().args(["match", "--help"]).output().unwrap();
+    let help = String::from_utf8_lossy(&out.stdout);
+    // One block per option, from its flag line to the next flag line.
+    let mut blocks: Vec<String> = Vec::new();
+    for line in help.lines() {
+        let indent = line.len() - line.trim_start().len();
+        if line.trim_start().starts_with('-') && indent <= 6 {
+            blocks.push(String::new());
+        }
+        if let Some(b) = blocks.last_mut() {
+            b.push_str(line);
+            b.push('\n');
+        }
+    }
+    let without_default = ["--trajectory", "--output", "--help", "--version"];
+    let mut checked = 0;
+    for b in &blocks {
+        if without_default
+            .iter()
+            .any(|f| b.lines().next().unwrap().contains(f))
+        {
+            continue;
+        }
+        assert!(b.contains("[default:"), "no default shown:\n{b}");
+        checked += 1;
+    }
+    assert!(checked >= 15, "only {checked} options found");
+}
