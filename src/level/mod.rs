@@ -18,7 +18,7 @@ pub mod up;
 
 use crate::geometry::Attitude;
 use crate::scan::Scan;
-use grid::{GridError, PoseGrid};
+use grid::{GridError, PlaneFit, PoseGrid};
 use nalgebra::Vector3;
 use patches::{Patch, UNLABELLED};
 use polygons::Polygon;
@@ -127,6 +127,27 @@ pub struct LevelParams {
     pub sigma_inflation: f64,
     /// Reweighting iterations of the robust estimator. Default 10.
     pub iterations: usize,
+    /// Take the floor and ceiling planes seen as level, as extra evidence of up beside the
+    /// walls (robust estimator). Default true: the contract's world has a level floor (z = 0)
+    /// and ceiling, and the robot is tilted by what it stands on, not by the floor it sees
+    /// metres away. The floor's grazing rays put their range noise almost along it, so it
+    /// pins up down well even at 10 cm noise, and it still levels a robot that faces the floor
+    /// or sees only parallel walls. Walls outvote a floor that disagrees (robust weights).
+    /// Turn off where the visible floor itself slopes (long ramps, rubble).
+    pub level_surfaces: bool,
+    /// A floor or ceiling patch is used as level only with at least this many points.
+    /// Default 30.
+    pub min_level_points: usize,
+    /// ... and only when its points fit one plane within this multiple of the residual the
+    /// noise explains [1]. Default 3. A patch that is no plane (a wall's strip seen through
+    /// heavy noise, a wall foot) can fit a normal near the robot's own z axis; along that
+    /// normal the grazing rays carry little noise, so its variance would claim a confidence
+    /// it has not earned.
+    pub max_level_misfit: f64,
+    /// Factor on a level plane's normal variance [1]. The noise model does not see what
+    /// cleaning leaves of a wall's foot in a floor patch; simulations at 1-10 cm noise show its
+    /// sigmas about this much too small. Default 4 (twice the standard deviation).
+    pub level_inflation: f64,
 }
 
 impl Default for LevelParams {
@@ -158,6 +179,10 @@ impl Default for LevelParams {
             max_sigma_deg: 1.7,
             sigma_inflation: 1.2,
             iterations: 10,
+            level_surfaces: true,
+            min_level_points: 30,
+            max_level_misfit: 3.0,
+            level_inflation: 4.0,
         }
     }
 }
@@ -444,14 +469,16 @@ fn solve(est: &LevelEstimate, params: &LevelParams, sigma: f64) -> Result<UpSolu
             otherwise
         }
     };
-    if walls < params.min_polygons {
+    let levels = level_fits(est, params);
+    if walls < params.min_polygons && levels.is_empty() {
         return Err(facing(FailReason::TooFewPolygons));
     }
-    solve_up(est, params, sigma).map_err(facing)
+    solve_up(est, &levels, params, sigma).map_err(facing)
 }
 
 fn solve_up(
     est: &LevelEstimate,
+    levels: &[PlaneFit],
     params: &LevelParams,
     sigma: f64,
 ) -> Result<UpSolution, FailReason> {
@@ -469,10 +496,7 @@ fn solve_up(
             let up = up::up_paper(&normals).ok_or(FailReason::ParallelWalls)?;
             let obs: Vec<PlaneObs> = wall_quads
                 .iter()
-                .map(|q| PlaneObs {
-                    fit: &q.fit,
-                    inflate: misfit(&q.fit),
-                })
+                .map(|q| PlaneObs::wall(&q.fit, misfit(&q.fit)))
                 .collect();
             up::solution_at(up, &obs, sigma_eff, false)
         }
@@ -492,15 +516,17 @@ fn solve_up(
                                 && p.fit.normal.z.abs() < strict
                                 && est.grid.as_ref().is_some_and(|g| steep(g, p)))
                     })
-                    .map(|p| PlaneObs {
-                        fit: &p.fit,
-                        inflate: misfit(&p.fit),
-                    })
+                    .map(|p| PlaneObs::wall(&p.fit, misfit(&p.fit)))
+                    .chain(
+                        levels
+                            .iter()
+                            .map(|f| PlaneObs::level(f, misfit(f) * params.level_inflation)),
+                    )
                     .collect()
             };
             let first = obs_with(false);
             let attempt = up::up_robust(&first, sigma_eff, params.iterations)
-                .filter(|sol| acceptable(sol, params).is_ok());
+                .filter(|sol| acceptable(sol, params, !levels.is_empty()).is_ok());
             match attempt {
                 Some(sol) => sol,
                 None if !params.two_row_seeds => {
@@ -521,8 +547,80 @@ fn solve_up(
             }
         }
     };
-    acceptable(&sol, params)?;
+    acceptable(&sol, params, !levels.is_empty())?;
     Ok(sol)
+}
+
+/// Floor and ceiling planes usable as level (when `level_surfaces` is on): each floor or
+/// ceiling patch cleaned of the points that do not behave like a level surface, and refitted.
+///
+/// At high noise a patch grown on the floor can run up the foot of a wall (the two meet within
+/// the growing tolerance), and the mixture's plane is tilted by degrees. A level surface is
+/// told from a wall by how its range changes from scan to scan in one column: by more than
+/// `r de` per elevation step `de` (`r cot(a) de` for a surface seen `a` < 45 degrees off the
+/// beams' plane, against `r tan(b) de` on a wall). Only points with such a step to a
+/// neighbouring scan, in the patch's prevailing direction, are kept. A patch mostly in one scan
+/// line is dropped: it fits that scan's own plane, whose normal is near the robot's z axis
+/// whatever the surface.
+fn level_fits(est: &LevelEstimate, params: &LevelParams) -> Vec<PlaneFit> {
+    let (Some(grid), true) = (
+        est.grid.as_ref(),
+        params.level_surfaces && params.estimator == Estimator::Robust,
+    ) else {
+        return Vec::new();
+    };
+    let sigma = est.range_sigma.max(params.min_sigma);
+    est.patches
+        .iter()
+        .filter(|p| p.kind != SurfaceKind::Wall && p.fit.n >= params.min_level_points)
+        .filter_map(|p| clean_level_fit(grid, p, sigma, params))
+        .collect()
+}
+
+fn clean_level_fit(
+    grid: &PoseGrid,
+    p: &Patch,
+    sigma: f64,
+    params: &LevelParams,
+) -> Option<PlaneFit> {
+    let cols = grid.cols;
+    let member = |i: usize| p.members.binary_search(&i).is_ok();
+    // Signed scan-to-scan range steps in units of `r de`, keyed by the lower point.
+    let step = |i: usize| -> Option<f64> {
+        let j = i + cols;
+        if j >= grid.points.len() || !member(j) {
+            return None;
+        }
+        let (a, b) = (grid.points[i].as_ref()?, grid.points[j].as_ref()?);
+        let de = grid.elevation[j / cols] - grid.elevation[i / cols];
+        let scale = 0.5 * (a.range + b.range) * de;
+        (scale.abs() > 1e-9).then(|| (b.range - a.range) / scale)
+    };
+    let mut steps: Vec<f64> = p.members.iter().filter_map(|&i| step(i)).collect();
+    if steps.len() < 10 {
+        return None;
+    }
+    let mid = steps.len() / 2;
+    let sign = steps.select_nth_unstable_by(mid, f64::total_cmp).1.signum();
+    let levelish = |i: usize| step(i).is_some_and(|x| x * sign > 1.0);
+    let mut acc = grid::PlaneAccumulator::default();
+    let mut per_row = vec![0usize; grid.rows()];
+    for &i in &p.members {
+        let from_below = i >= cols && member(i - cols) && levelish(i - cols);
+        if levelish(i) || from_below {
+            if let Some(g) = &grid.points[i] {
+                acc.add(g);
+                per_row[i / cols] += 1;
+            }
+        }
+    }
+    let supported = per_row.iter().filter(|&&n| 5 * n >= acc.n).count();
+    if acc.n < params.min_level_points || supported < 2 {
+        return None;
+    }
+    let fit = acc.fit(sigma)?;
+    let floorlike = fit.normal.z.abs() > params.wall_min_angle_deg.to_radians().cos();
+    (floorlike && fit.misfit_ratio(sigma) <= params.max_level_misfit).then_some(fit)
 }
 
 /// True when the patch's points rise steeply from scan to scan, as on a wall: in each column
@@ -575,9 +673,12 @@ fn attitude_sigmas(sol: &UpSolution, params: &LevelParams) -> [f64; 2] {
 }
 
 /// The parallel-walls test: up must be pinned down in both tangent directions.
-fn acceptable(sol: &UpSolution, params: &LevelParams) -> Result<(), FailReason> {
+///
+/// The eigenvalue-ratio test speaks of walls: with a level plane in the fit, up is pinned in
+/// both directions however unequal they are, and only the sigma test applies.
+fn acceptable(sol: &UpSolution, params: &LevelParams, with_level: bool) -> Result<(), FailReason> {
     let (lo, hi) = sol.info_eigenvalues;
-    if hi.is_nan() || hi <= 0.0 || lo < params.parallel_ratio * hi {
+    if hi.is_nan() || hi <= 0.0 || (!with_level && lo < params.parallel_ratio * hi) {
         return Err(FailReason::ParallelWalls);
     }
     let s = attitude_sigmas(sol, params);

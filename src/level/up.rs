@@ -13,20 +13,69 @@ use crate::geometry::Attitude;
 use nalgebra::{Matrix2, Matrix3, Vector2, Vector3};
 
 /// A plane fit with a variance inflation (>= 1) for misfit.
+///
+/// A wall plane is vertical, so it observes `n . up = 0` (one residual). A level plane (the floor
+/// or a ceiling, when they are taken as level) has up along its normal, so it observes
+/// `e_k . up = 0` for both of its in-plane axes `e_k` (two residuals).
 #[derive(Clone, Copy, Debug)]
 pub struct PlaneObs<'a> {
     pub fit: &'a PlaneFit,
     /// Multiplies the fit's normal variance.
     pub inflate: f64,
+    /// True for a floor or ceiling plane taken as level; false for a wall.
+    pub level: bool,
 }
 
+/// One scalar residual `a . up` with its variance.
+type Term = (Vector3<f64>, f64);
+
 impl PlaneObs<'_> {
-    /// Variance of `n . up` at the current `up` [1].
-    fn variance(&self, up: &Vector3<f64>, sigma: f64) -> f64 {
-        let n = &self.fit.normal;
-        let in_plane = up - n * n.dot(up);
-        let u = in_plane.try_normalize(1e-12).unwrap_or(*up);
-        (self.inflate * self.fit.normal_variance_along(&u, sigma)).max(1e-14)
+    /// A wall plane.
+    pub fn wall(fit: &PlaneFit, inflate: f64) -> PlaneObs<'_> {
+        PlaneObs {
+            fit,
+            inflate,
+            level: false,
+        }
+    }
+
+    /// A floor or ceiling plane taken as level.
+    pub fn level(fit: &PlaneFit, inflate: f64) -> PlaneObs<'_> {
+        PlaneObs {
+            fit,
+            inflate,
+            level: true,
+        }
+    }
+
+    /// The residual directions of this plane and their variances at the current `up`.
+    fn terms(&self, up: &Vector3<f64>, sigma: f64) -> ([Term; 2], usize) {
+        let var =
+            |u: &Vector3<f64>| (self.inflate * self.fit.normal_variance_along(u, sigma)).max(1e-14);
+        if self.level {
+            let [(_, e1), (_, e2)] = self.fit.in_plane;
+            ([(e1, var(&e1)), (e2, var(&e2))], 2)
+        } else {
+            let n = &self.fit.normal;
+            let in_plane = up - n * n.dot(up);
+            let u = in_plane.try_normalize(1e-12).unwrap_or(*up);
+            ([(*n, var(&u)), (*n, f64::INFINITY)], 1)
+        }
+    }
+
+    /// Squared Mahalanobis distance of `up` from this plane's constraint, per residual.
+    fn z2(&self, up: &Vector3<f64>, sigma: f64) -> f64 {
+        let (terms, k) = self.terms(up, sigma);
+        terms[..k]
+            .iter()
+            .map(|(a, v)| a.dot(up).powi(2) / v)
+            .sum::<f64>()
+            / k as f64
+    }
+
+    /// The direction this plane proposes for up on its own, if any: a level plane's normal.
+    fn proposal(&self) -> Option<Vector3<f64>> {
+        self.level.then_some(self.fit.normal)
     }
 }
 
@@ -120,40 +169,44 @@ const MAX_TILT: f64 = 50.0 * std::f64::consts::PI / 180.0;
 /// 50 degrees of the robot's own up are considered. `None` with fewer than two planes or when
 /// no proposal qualifies.
 pub fn up_robust(planes: &[PlaneObs], sigma: f64, iterations: usize) -> Option<UpSolution> {
-    if planes.len() < 2 {
+    let constraints: usize = planes.iter().map(|p| if p.level { 2 } else { 1 }).sum();
+    if constraints < 2 {
         return None;
     }
     let min_z = MAX_TILT.cos();
-    let mut candidates: Vec<Vector3<f64>> = Vec::new();
+    let mut candidates: Vec<Vector3<f64>> = planes.iter().filter_map(|p| p.proposal()).collect();
     let mut m = Matrix3::zeros();
     for p in planes {
-        m += p.fit.normal * p.fit.normal.transpose() * p.fit.n as f64;
+        if p.level {
+            let [(_, e1), (_, e2)] = p.fit.in_plane;
+            m += (e1 * e1.transpose() + e2 * e2.transpose()) * p.fit.n as f64;
+        } else {
+            m += p.fit.normal * p.fit.normal.transpose() * p.fit.n as f64;
+        }
     }
     if let Some(v) = smallest_eigenvector(&m) {
         candidates.push(v);
     }
-    for (i, a) in planes.iter().enumerate() {
-        for b in &planes[i + 1..] {
+    let walls: Vec<&PlaneObs> = planes.iter().filter(|p| !p.level).collect();
+    for (i, a) in walls.iter().enumerate() {
+        for b in &walls[i + 1..] {
             let c = a.fit.normal.cross(&b.fit.normal);
             // Nearly parallel normals propose nothing reliable.
             if c.norm() < 0.17 {
                 continue;
             }
-            let c = c.normalize();
-            candidates.push(if c.z < 0.0 { -c } else { c });
+            candidates.push(c.normalize());
         }
     }
     let loss = |up: &Vector3<f64>| -> f64 {
         planes
             .iter()
-            .map(|p| {
-                let z = p.fit.normal.dot(up) / p.variance(up, sigma).sqrt();
-                (1.0 + (z / CAUCHY_C).powi(2)).ln()
-            })
+            .map(|p| (1.0 + p.z2(up, sigma) / (CAUCHY_C * CAUCHY_C)).ln())
             .sum()
     };
     let mut up = candidates
         .into_iter()
+        .map(|c| if c.z < 0.0 { -c } else { c })
         .filter(|c| c.z >= min_z)
         .map(|c| (loss(&c), c))
         .min_by(|a, b| a.0.total_cmp(&b.0))?
@@ -161,9 +214,11 @@ pub fn up_robust(planes: &[PlaneObs], sigma: f64, iterations: usize) -> Option<U
     for _ in 0..iterations.max(1) {
         let mut m = Matrix3::zeros();
         for p in planes {
-            let var = p.variance(&up, sigma);
-            let z = p.fit.normal.dot(&up) / var.sqrt();
-            m += p.fit.normal * p.fit.normal.transpose() * (cauchy(z) / var);
+            let w = cauchy2(p.z2(&up, sigma));
+            let (terms, k) = p.terms(&up, sigma);
+            for (a, var) in &terms[..k] {
+                m += a * a.transpose() * (w / var);
+            }
         }
         let next = smallest_eigenvector(&m)?;
         let change = (next - up).norm();
@@ -178,8 +233,9 @@ pub fn up_robust(planes: &[PlaneObs], sigma: f64, iterations: usize) -> Option<U
     Some(solution_at(up, planes, sigma, true))
 }
 
-fn cauchy(z: f64) -> f64 {
-    1.0 / (1.0 + (z / CAUCHY_C).powi(2))
+/// Cauchy weight for a squared standardised residual.
+fn cauchy2(z2: f64) -> f64 {
+    1.0 / (1.0 + z2 / (CAUCHY_C * CAUCHY_C))
 }
 
 /// The information matrix and covariance of `up` given the planes. With `robust`, the
@@ -192,13 +248,18 @@ pub fn solution_at(up: Vector3<f64>, planes: &[PlaneObs], sigma: f64, robust: bo
     let mut chi2 = 0.0;
     let mut wsum = 0.0;
     for p in planes {
-        let var = p.variance(&up, sigma);
-        let z = p.fit.normal.dot(&up) / var.sqrt();
-        let w = if robust { cauchy(z) } else { 1.0 };
-        let g = Vector2::new(p.fit.normal.dot(&basis[0]), p.fit.normal.dot(&basis[1]));
-        h += g * g.transpose() * (w / var);
-        chi2 += w * z * z;
-        wsum += w;
+        let w = if robust {
+            cauchy2(p.z2(&up, sigma))
+        } else {
+            1.0
+        };
+        let (terms, k) = p.terms(&up, sigma);
+        for (a, var) in &terms[..k] {
+            let g = Vector2::new(a.dot(&basis[0]), a.dot(&basis[1]));
+            h += g * g.transpose() * (w / var);
+            chi2 += w * a.dot(&up).powi(2) / var;
+            wsum += w;
+        }
     }
     let dof = wsum - 2.0;
     let scale = if dof >= 1.0 {

@@ -1,0 +1,79 @@
+//! The floor and ceiling taken as level planes (`LevelParams::level_surfaces`), beside the
+//! paper's walls-only estimate.
+
+mod common;
+
+use common::{Room, elevations, scans_at};
+use levelscan::geometry::Pose;
+use levelscan::level::{FailReason, LevelParams, level_pose};
+
+fn deg(a: f64) -> f64 {
+    a.to_radians()
+}
+
+fn walls_only() -> LevelParams {
+    LevelParams {
+        level_surfaces: false,
+        ..LevelParams::default()
+    }
+}
+
+/// Big room: the steeply pitched beams meet the floor long before any wall.
+fn facing_floor_scans(noise: f64) -> (Pose, Vec<levelscan::scan::Scan>) {
+    let room = Room::box_room(60.0, 60.0);
+    let pose = Pose::new(30.0, 30.0, 0.45, deg(10.0), deg(35.0), deg(-6.0));
+    let scans = scans_at(&room, &pose, &elevations(3, 5.0), noise, 3, 0);
+    (pose, scans)
+}
+
+#[test]
+fn robot_facing_the_floor_is_leveled_from_the_floor_exactly_without_noise() {
+    let (pose, scans) = facing_floor_scans(0.0);
+    let e = level_pose(&scans, &LevelParams::default());
+    assert!(e.is_ok(), "{:?}", e.failure);
+    let err = e
+        .attitude
+        .unwrap()
+        .max_abs_error(&pose.attitude())
+        .to_degrees();
+    assert!(err < 0.05, "error {err} deg");
+}
+
+#[test]
+fn robot_facing_the_floor_is_leveled_within_its_sigma_at_1cm() {
+    let (pose, scans) = facing_floor_scans(0.01);
+    let e = level_pose(&scans, &LevelParams::default());
+    let (att, sig) = (e.attitude.unwrap(), e.sigmas.unwrap());
+    let t = pose.attitude();
+    assert!((att.theta_x - t.theta_x).abs() < 3.0 * sig[0]);
+    assert!((att.theta_y - t.theta_y).abs() < 3.0 * sig[1]);
+    assert!(sig[0].to_degrees() < 0.5 && sig[1].to_degrees() < 0.5);
+}
+
+#[test]
+fn walls_only_keeps_the_papers_facing_floor_failure() {
+    let (_, scans) = facing_floor_scans(0.01);
+    assert_eq!(
+        level_pose(&scans, &walls_only()).failure,
+        Some(FailReason::FacingFloor)
+    );
+}
+
+#[test]
+fn corridor_is_parallel_walls_on_walls_alone_and_leveled_with_the_floor() {
+    let room = Room::corridor();
+    let pose = Pose::new(0.0, 1.0, 0.45, deg(0.0), deg(9.0), deg(4.0));
+    let scans = scans_at(&room, &pose, &elevations(5, 5.0), 0.01, 2, 0);
+    assert_eq!(
+        level_pose(&scans, &walls_only()).failure,
+        Some(FailReason::ParallelWalls)
+    );
+    let e = level_pose(&scans, &LevelParams::default());
+    assert!(e.is_ok(), "{:?}", e.failure);
+    let err = e
+        .attitude
+        .unwrap()
+        .max_abs_error(&pose.attitude())
+        .to_degrees();
+    assert!(err < 0.5, "error {err} deg");
+}
