@@ -74,9 +74,8 @@ impl PoseGrid {
             let robot_from_scanner = rot_y(e);
             let offset = s.hinge_offset_vector();
             let origin = beam_origin(e, &offset);
-            for c in 0..cols {
+            for (c, &(sp, cp)) in trig.iter().enumerate().take(cols) {
                 points.push(s.range(c).filter(|&r| r > 0.0).map(|range| {
-                    let (sp, cp) = trig[c];
                     let dir = robot_from_scanner * Vector3::new(cp, sp, 0.0);
                     let p = origin + dir * range;
                     GridPoint { p, dir, range }
