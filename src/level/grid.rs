@@ -1,7 +1,7 @@
 //! Data collection (paper sect. 5.1): the scans of one pose as a grid of robot-frame points,
 //! rows sorted by elevation (the paper's "scans as rows, equal bearings as columns").
 
-use crate::geometry::beam_origin;
+use crate::geometry::{beam_origin, rot_y};
 use crate::scan::Scan;
 use nalgebra::{Point3, Vector3};
 
@@ -60,19 +60,25 @@ impl PoseGrid {
             return Err(GridError::InconsistentScans);
         }
         let mut points = Vec::with_capacity(order.len() * cols);
+        // Scans of one pose nearly always share their bearings: one sincos per bearing.
+        let mut trig: Vec<(f64, f64)> = Vec::new();
+        let mut trig_of: Option<&[f64]> = None;
         for &(i, e) in &order {
             let s = &scans[i];
-            let origin = beam_origin(e, &s.hinge_offset_vector());
-            for c in 0..cols {
-                points.push(s.point_in_robot(c).and_then(|p| {
-                    let range = s.range(c)?;
-                    let d = p - origin;
-                    let n = d.norm();
-                    (n > 0.0 && range > 0.0).then(|| GridPoint {
-                        p,
-                        dir: d / n,
-                        range,
-                    })
+            if trig_of != Some(&s.theta[..]) {
+                trig = s.theta.iter().map(|t| t.sin_cos()).collect();
+                trig_of = Some(&s.theta[..]);
+            }
+            // Same geometry as `Scan::point_in_robot` (contract: `Ry(e) (o + r (cos phi, sin
+            // phi, 0))`), with the rotation built once per scan rather than once per ray.
+            let robot_from_scanner = rot_y(e);
+            let offset = s.hinge_offset_vector();
+            let origin = beam_origin(e, &offset);
+            for (c, &(sp, cp)) in trig.iter().enumerate().take(cols) {
+                points.push(s.range(c).filter(|&r| r > 0.0).map(|range| {
+                    let dir = robot_from_scanner * Vector3::new(cp, sp, 0.0);
+                    let p = origin + dir * range;
+                    GridPoint { p, dir, range }
                 }));
             }
         }
