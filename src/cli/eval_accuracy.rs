@@ -42,6 +42,9 @@ pub struct Args {
     /// A pose whose attitude sigma exceeds this fails as parallel_walls [deg].
     #[arg(long, default_value_t = levelscan::level::LevelParams::default().max_sigma_deg)]
     pub max_sigma: f64,
+    /// Take the scans with the adaptive robot (cleverRobot), as the paper's Table I did.
+    #[arg(long)]
+    pub adaptive: bool,
     /// Write accuracy.json and the Fig. 6 histograms (PNG, SVG) here.
     #[arg(long)]
     pub out: Option<PathBuf>,
@@ -69,6 +72,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         seed: args.seed,
         step_deg: args.step,
         tilt_deg: args.tilt,
+        adaptive: args.adaptive,
         level: levelscan::level::LevelParams {
             max_sigma_deg: args.max_sigma,
             ..levelscan::level::LevelParams::default()
@@ -87,6 +91,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             "seed": args.seed,
             "step_deg": args.step,
             "tilt_deg": args.tilt,
+            "adaptive": args.adaptive,
             "cells": stats,
         });
         std::fs::write(&path, serde_json::to_string_pretty(&json)?)

@@ -1,15 +1,275 @@
-//! Not written yet.
+//! `levelscan eval matching` (paper Figs. 8-10, 12) and `levelscan eval real` (real CARMEN logs
+//! with perturbed odometry).
+
+use super::matching::MatchOptions;
+use super::open_input;
+use anyhow::Context;
+use levelscan::eval::matching::{ExperimentParams, RunResult, matching_experiment};
+use levelscan::eval::real::{RealLog, RealResult, evaluate_real};
+use levelscan::formats::{CarmenParams, read_any, read_plan};
+use levelscan::geometry::Pose2;
+use levelscan::matching::{Mode, scan_points};
+use levelscan::plan::Plan;
+use levelscan::simulate::{OdometryParams, ScannerParams, elevations_centred};
+use levelscan::viz::plots::{MapPanel, map_panels_png, map_panels_svg};
+use std::fmt::Write as _;
+use std::path::PathBuf;
 
 #[derive(clap::Args, Debug)]
-pub struct MatchingArgs {}
-
-#[derive(clap::Args, Debug)]
-pub struct RealArgs {}
-
-pub fn run_matching(_args: MatchingArgs) -> anyhow::Result<()> {
-    anyhow::bail!("this command is not implemented yet")
+pub struct MatchingArgs {
+    /// Floor plans (.wall) with a path of `poses` (tilted; the level-floor run zeroes the tilt).
+    #[arg(required = true)]
+    pub plans: Vec<PathBuf>,
+    /// Directory for `matching.md`, `matching.json` and the maps (PNG and SVG).
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Seed of the simulation.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Range noise of the simulated scanner [m].
+    #[arg(long, default_value_t = ScannerParams::default().noise_sigma)]
+    pub noise: f64,
+    /// Scans per pose of the tilted run, at elevations --step apart centred on level.
+    #[arg(long, default_value_t = 3)]
+    pub scans: usize,
+    /// Elevation step between the tilted run's scans [deg].
+    #[arg(long, default_value_t = 5.0)]
+    pub step: f64,
+    #[command(flatten)]
+    pub options: MatchOptions,
 }
 
-pub fn run_real(_args: RealArgs) -> anyhow::Result<()> {
-    anyhow::bail!("this command is not implemented yet")
+pub fn run_matching(args: MatchingArgs) -> anyhow::Result<()> {
+    anyhow::ensure!(
+        args.scans >= 3,
+        "--scans: leveling needs at least 3 scans per pose"
+    );
+    anyhow::ensure!(
+        args.noise.is_finite() && args.noise >= 0.0,
+        "--noise must be >= 0"
+    );
+    let params = ExperimentParams {
+        seed: args.seed,
+        scanner: ScannerParams {
+            noise_sigma: args.noise,
+            ..ScannerParams::default()
+        },
+        elevations: elevations_centred(args.scans, args.step.to_radians()),
+        matcher: args.options.params()?,
+        ..ExperimentParams::default()
+    };
+    if let Some(dir) = &args.out {
+        std::fs::create_dir_all(dir)
+            .with_context(|| format!("{}: cannot create", dir.display()))?;
+    }
+    let mut table = String::from(
+        "| plan | scans | mode | ATE [m] | RPE median [mm] | RPE p95 [mm] | bad pairs | fallbacks |\n\
+         |---|---|---|---:|---:|---:|---:|---:|\n",
+    );
+    let mut all = Vec::new();
+    for path in &args.plans {
+        let plan = read_plan(path)?;
+        anyhow::ensure!(
+            plan.poses.len() >= 2,
+            "{}: the experiment needs a path of at least 2 poses",
+            path.display()
+        );
+        let stem = path
+            .file_stem()
+            .map_or("plan".to_string(), |s| s.to_string_lossy().into_owned());
+        let (truth, runs) = matching_experiment(&plan, &params);
+        for r in &runs {
+            let _ = writeln!(
+                table,
+                "| {stem} | {} | {} | {} | {} | {} | {} | {} |",
+                r.kind.label(),
+                mode_label(r.mode),
+                r.ate.map_or("-".into(), |a| format!("{:.4}", a.rmse)),
+                r.rpe
+                    .map_or("-".into(), |x| format!("{:.2}", x.median_translation * 1e3)),
+                r.rpe
+                    .map_or("-".into(), |x| format!("{:.2}", x.p95_translation * 1e3)),
+                r.rpe.map_or("-".into(), |x| x.bad_pairs.to_string()),
+                r.fallbacks
+            );
+        }
+        if let Some(dir) = &args.out {
+            for mode in [Mode::Pairwise, Mode::Metascan] {
+                let panels: Vec<MapPanel> = runs
+                    .iter()
+                    .filter(|r| r.mode == mode)
+                    .map(|r| map_panel(&plan, r, &truth))
+                    .collect();
+                let name = format!("{stem}_{}", mode_label(mode));
+                let size = (600 * panels.len() as u32, 520);
+                map_panels_png(&panels, &dir.join(format!("{name}.png")), size)
+                    .map_err(|e| anyhow::anyhow!("{name}.png: {e}"))?;
+                let svg = map_panels_svg(&panels, size)
+                    .map_err(|e| anyhow::anyhow!("{name}.svg: {e}"))?;
+                std::fs::write(dir.join(format!("{name}.svg")), svg)?;
+            }
+        }
+        all.push(serde_json::json!({"plan": stem, "poses": truth.len(), "runs": runs}));
+    }
+    print!("{table}");
+    if let Some(dir) = &args.out {
+        std::fs::write(dir.join("matching.md"), &table)?;
+        std::fs::write(
+            dir.join("matching.json"),
+            serde_json::to_string_pretty(&all)? + "\n",
+        )?;
+    }
+    Ok(())
+}
+
+fn mode_label(mode: Mode) -> &'static str {
+    match mode {
+        Mode::Pairwise => "pairwise",
+        Mode::Metascan => "metascan",
+    }
+}
+
+/// A top-down map of one run: the plan's walls, every scan placed at its (aligned) estimate,
+/// and the true and estimated paths.
+pub fn map_panel(plan: &Plan, run: &RunResult, truth: &[Pose2]) -> MapPanel {
+    MapPanel {
+        title: format!(
+            "{}, {}: ATE {}",
+            run.kind.label(),
+            mode_label(run.mode),
+            run.ate.map_or("-".into(), |a| format!("{:.3} m", a.rmse))
+        ),
+        walls: plan
+            .segments()
+            .iter()
+            .map(|s| [s.a.x, s.a.y, s.b.x, s.b.y])
+            .collect(),
+        points: run
+            .aligned
+            .iter()
+            .zip(&run.points)
+            .flat_map(|(pose, pts)| {
+                pts.iter().map(|p| {
+                    let w = pose.transform_point(p);
+                    [w.x, w.y]
+                })
+            })
+            .collect(),
+        truth: truth.iter().map(|p| [p.x, p.y]).collect(),
+        estimate: run.aligned.iter().map(|p| [p.x, p.y]).collect(),
+    }
+}
+
+#[derive(clap::Args, Debug)]
+pub struct RealArgs {
+    /// Logs whose poses are a reference trajectory (CARMEN corrected logs, or JSON Lines with
+    /// `true_pose`), optionally gzipped.
+    #[arg(required = true)]
+    pub logs: Vec<PathBuf>,
+    /// Seed of the odometry perturbation.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Odometry noise: translation sigma per step, fraction of the step's length (x and y each).
+    #[arg(long, default_value_t = OdometryParams::default().trans_per_m)]
+    pub odo_trans: f64,
+    /// Odometry noise: translation sigma added to every step [m].
+    #[arg(long, default_value_t = OdometryParams::default().trans_const)]
+    pub odo_trans_min: f64,
+    /// Odometry noise: heading sigma per step, fraction of the step's rotation.
+    #[arg(long, default_value_t = OdometryParams::default().rot_per_rad)]
+    pub odo_rot: f64,
+    /// Odometry noise: heading sigma added to every step [deg].
+    #[arg(long, default_value_t = OdometryParams::default().rot_const.to_degrees())]
+    pub odo_rot_min: f64,
+    /// Also write `real.md` and `real.json` into this directory.
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    #[command(flatten)]
+    pub options: MatchOptions,
+}
+
+/// Reads a log's scans and reference poses.
+fn load_real_log(
+    path: &std::path::Path,
+    ranges: &levelscan::matching::RangeParams,
+) -> anyhow::Result<RealLog> {
+    let input = open_input(Some(path))?;
+    let name = input.name.clone();
+    let mut log = RealLog {
+        name: path
+            .file_name()
+            .map_or(name.clone(), |n| n.to_string_lossy().into_owned()),
+        points: Vec::new(),
+        reference: Vec::new(),
+    };
+    for item in read_any(input.reader, &input.name, CarmenParams::default())? {
+        let (line, scan) = item?;
+        let reference = scan.true_pose.with_context(|| {
+            format!("{name}:{line}: no reference pose (a CARMEN pose or `true_pose`)")
+        })?;
+        log.points.push(scan_points(&scan, ranges));
+        log.reference.push(reference.to_pose2());
+    }
+    Ok(log)
+}
+
+pub fn run_real(args: RealArgs) -> anyhow::Result<()> {
+    let params = args.options.params()?;
+    let noise = OdometryParams {
+        trans_per_m: args.odo_trans,
+        trans_const: args.odo_trans_min,
+        rot_per_rad: args.odo_rot,
+        rot_const: args.odo_rot_min.to_radians(),
+    };
+    anyhow::ensure!(noise.is_valid(), "odometry noise must be finite and >= 0");
+    let mut results: Vec<RealResult> = Vec::new();
+    for path in &args.logs {
+        let log = load_real_log(path, &params.ranges)?;
+        let result = evaluate_real(&log, &params, &noise, args.seed)
+            .with_context(|| format!("{}: fewer than two scans", path.display()))?;
+        eprintln!(
+            "{}: {} scans, RPE median {:.2} mm (odometry {:.2} mm)",
+            result.name,
+            result.scans,
+            result.matched.median_translation * 1e3,
+            result.odometry.median_translation * 1e3
+        );
+        results.push(result);
+    }
+    let table = real_table(&results);
+    print!("{table}");
+    if let Some(dir) = &args.out {
+        std::fs::create_dir_all(dir)
+            .with_context(|| format!("{}: cannot create", dir.display()))?;
+        std::fs::write(dir.join("real.md"), &table)?;
+        std::fs::write(
+            dir.join("real.json"),
+            serde_json::to_string_pretty(&results)? + "\n",
+        )?;
+    }
+    Ok(())
+}
+
+/// The results as a markdown table.
+fn real_table(results: &[RealResult]) -> String {
+    let mut s = String::from(
+        "| log | scans | RPE median [mm] | RPE p95 [mm] | bad pairs | odometry median [mm] | odometry bad pairs | fallbacks | coarse |\n\
+         |---|---:|---:|---:|---:|---:|---:|---:|---:|\n",
+    );
+    for r in results {
+        let _ = writeln!(
+            s,
+            "| {} | {} | {:.2} | {:.2} | {} | {:.2} | {} | {} | {} |",
+            r.name,
+            r.scans,
+            r.matched.median_translation * 1e3,
+            r.matched.p95_translation * 1e3,
+            r.matched.bad_pairs,
+            r.odometry.median_translation * 1e3,
+            r.odometry.bad_pairs,
+            r.fallbacks,
+            r.coarse
+        );
+    }
+    s
 }

@@ -6,9 +6,10 @@ use anyhow::{Context, bail};
 use levelscan::formats::{read_plan, write_scan};
 use levelscan::geometry::Pose;
 use levelscan::simulate::{
-    OdometryParams, RandomPoseParams, ScannerParams, World, elevations_centred, odometry,
-    random_poses, simulate_poses,
+    AdaptiveParams, OdometryParams, RandomPoseParams, ScannerParams, Stream, World,
+    elevations_centred, odometry, random_poses, simulate_pose_adaptive, simulate_poses, stream_rng,
 };
+use rayon::prelude::*;
 use std::io::Write;
 use std::path::PathBuf;
 
@@ -85,6 +86,16 @@ pub struct Args {
     /// Odometry: heading noise added to every step [deg].
     #[arg(long, default_value_t = 0.5)]
     pub odo_rot_min: f64,
+
+    /// The adaptive robot, cleverRobot (paper sect. 7.2.2): level each pose's scans as the
+    /// robot would and, when they face the floor or the ceiling, retake them tilted the other
+    /// way. Retaken scans keep the pose's `sequence`; every scan records
+    /// `"adaptive": {"attempt": k, "shift": rad}`.
+    #[arg(long)]
+    pub adaptive: bool,
+    /// Adaptive robot: retakes allowed per pose.
+    #[arg(long, default_value_t = levelscan::simulate::AdaptiveParams::default().max_retakes)]
+    pub max_retakes: usize,
 
     /// Write each scan's `readings_sigma` (the noise sigma). Off by default: `level` estimates
     /// the noise itself.
@@ -164,15 +175,43 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let bar = progress_bar(poses.len() as u64, "simulate");
     for (c, chunk) in poses.chunks(CHUNK).enumerate() {
         let first = c * CHUNK;
-        let scans = simulate_poses(
-            &world,
-            chunk,
-            Some(&odometry[first..first + chunk.len()]),
-            first as u64,
-            &elevations,
-            &scanner,
-            args.seed,
-        );
+        let scans = if args.adaptive {
+            let params = AdaptiveParams {
+                max_retakes: args.max_retakes,
+                ..AdaptiveParams::default()
+            };
+            chunk
+                .par_iter()
+                .enumerate()
+                .map(|(k, pose)| {
+                    let sequence = (first + k) as u64;
+                    let mut rng = stream_rng(args.seed, Stream::Scans, sequence);
+                    let mut scans = simulate_pose_adaptive(
+                        &world,
+                        sequence,
+                        pose,
+                        &elevations,
+                        &scanner,
+                        &params,
+                        &mut rng,
+                    );
+                    for s in &mut scans {
+                        s.odometry = Some(odometry[first + k]);
+                    }
+                    scans
+                })
+                .collect()
+        } else {
+            simulate_poses(
+                &world,
+                chunk,
+                Some(&odometry[first..first + chunk.len()]),
+                first as u64,
+                &elevations,
+                &scanner,
+                args.seed,
+            )
+        };
         for scan in scans.iter().flatten() {
             write_scan(&mut out, scan)?;
         }

@@ -11,8 +11,8 @@ use crate::plan::{Plan, Segment};
 use crate::pseudo_level::{PseudoLevelParams, pseudo_level_scan};
 use crate::scan::{Hit, Scan};
 use crate::simulate::{
-    RandomPoseParams, ScannerParams, SimulateError, Stream, World, elevations_centred,
-    random_poses, simulate_pose, stream_rng,
+    AdaptiveParams, RandomPoseParams, ScannerParams, SimulateError, Stream, World,
+    elevations_centred, random_poses, simulate_pose, simulate_pose_adaptive, stream_rng,
 };
 use nalgebra::Point2;
 use rayon::prelude::*;
@@ -64,6 +64,9 @@ pub struct AccuracyParams {
     /// A pseudo-level point farther than this from every true wall is a phantom [m].
     /// Default 0.15.
     pub phantom_distance: f64,
+    /// Take the scans with the adaptive robot, cleverRobot (sect. 7.2.2), as the paper's
+    /// Table I did. Default false.
+    pub adaptive: bool,
     /// Level estimation parameters (the estimator field is overridden per run).
     pub level: LevelParams,
     /// Pseudo-level parameters.
@@ -86,6 +89,7 @@ impl Default for AccuracyParams {
             fov_deg: 180.0,
             max_range: 30.0,
             phantom_distance: 0.15,
+            adaptive: false,
             level: LevelParams::default(),
             pseudo: PseudoLevelParams::default(),
         }
@@ -190,14 +194,30 @@ pub fn run_accuracy(
                         .wrapping_add((nscans as u64) << 48);
                     let mut rng = stream_rng(stream_seed, Stream::Scans, k as u64);
                     let elevations = elevations_centred(nscans, params.step_deg.to_radians());
-                    let scans = simulate_pose(
-                        &worlds[pi],
-                        k as u64,
-                        &pose,
-                        &elevations,
-                        &scanner,
-                        &mut rng,
-                    );
+                    let scans = if params.adaptive {
+                        let adaptive = AdaptiveParams {
+                            level: params.level.clone(),
+                            ..AdaptiveParams::default()
+                        };
+                        simulate_pose_adaptive(
+                            &worlds[pi],
+                            k as u64,
+                            &pose,
+                            &elevations,
+                            &scanner,
+                            &adaptive,
+                            &mut rng,
+                        )
+                    } else {
+                        simulate_pose(
+                            &worlds[pi],
+                            k as u64,
+                            &pose,
+                            &elevations,
+                            &scanner,
+                            &mut rng,
+                        )
+                    };
                     params
                         .estimators
                         .iter()

@@ -1,4 +1,6 @@
 //! The paper's experiments (sect. 8) and trajectory metrics.
 
 pub mod accuracy;
+pub mod matching;
 pub mod metrics;
+pub mod real;

@@ -1,7 +1,7 @@
 //! Data collection (paper sect. 5.1): the scans of one pose as a grid of robot-frame points,
 //! rows sorted by elevation (the paper's "scans as rows, equal bearings as columns").
 
-use crate::geometry::beam_origin;
+use crate::geometry::{beam_origin, rot_y};
 use crate::scan::Scan;
 use nalgebra::{Point3, Vector3};
 
@@ -60,19 +60,25 @@ impl PoseGrid {
             return Err(GridError::InconsistentScans);
         }
         let mut points = Vec::with_capacity(order.len() * cols);
+        // Scans of one pose nearly always share their bearings: one sincos per bearing.
+        let mut trig: Vec<(f64, f64)> = Vec::new();
+        let mut trig_of: Option<&[f64]> = None;
         for &(i, e) in &order {
             let s = &scans[i];
-            let origin = beam_origin(e, &s.hinge_offset_vector());
-            for c in 0..cols {
-                points.push(s.point_in_robot(c).and_then(|p| {
-                    let range = s.range(c)?;
-                    let d = p - origin;
-                    let n = d.norm();
-                    (n > 0.0 && range > 0.0).then(|| GridPoint {
-                        p,
-                        dir: d / n,
-                        range,
-                    })
+            if trig_of != Some(&s.theta[..]) {
+                trig = s.theta.iter().map(|t| t.sin_cos()).collect();
+                trig_of = Some(&s.theta[..]);
+            }
+            // Same geometry as `Scan::point_in_robot` (contract: `Ry(e) (o + r (cos phi, sin
+            // phi, 0))`), with the rotation built once per scan rather than once per ray.
+            let robot_from_scanner = rot_y(e);
+            let offset = s.hinge_offset_vector();
+            let origin = beam_origin(e, &offset);
+            for (c, &(sp, cp)) in trig.iter().enumerate().take(cols) {
+                points.push(s.range(c).filter(|&r| r > 0.0).map(|range| {
+                    let dir = robot_from_scanner * Vector3::new(cp, sp, 0.0);
+                    let p = origin + dir * range;
+                    GridPoint { p, dir, range }
                 }));
             }
         }
@@ -125,8 +131,8 @@ impl PlaneAccumulator {
         self.n += 1;
         self.weight += w;
         self.sum += p * w;
-        add_outer(&mut self.sum_pp, &(p * w.sqrt()));
-        add_outer(&mut self.sum_dd, &(d * w.sqrt()));
+        add_outer_weighted(&mut self.sum_pp, &p, w);
+        add_outer_weighted(&mut self.sum_dd, &d, w);
     }
 
     pub fn merge(&mut self, o: &PlaneAccumulator) {
@@ -174,10 +180,8 @@ impl PlaneAccumulator {
         let dd = sym(&self.sum_dd);
         let noise = dd * (sigma * sigma * (nf - 1.0) / nf);
         let corrected = raw - noise;
-        let eig = nalgebra::SymmetricEigen::new(corrected);
-        let mut idx = [0usize, 1, 2];
-        idx.sort_by(|&a, &b| eig.eigenvalues[a].total_cmp(&eig.eigenvalues[b]));
-        let normal = eig.eigenvectors.column(idx[0]).into_owned();
+        let eig = super::eigen3::sym_eigen3(&corrected);
+        let normal = eig.vectors[0];
         let normal = normal.try_normalize(1e-300)?;
         // Noise along the normal: sigma^2 * mean (d . n)^2.
         let dn2 = (normal.transpose() * dd * normal)[0] / nf;
@@ -186,14 +190,8 @@ impl PlaneAccumulator {
             centroid: Point3::from(c),
             normal,
             in_plane: [
-                (
-                    eig.eigenvalues[idx[1]],
-                    eig.eigenvectors.column(idx[1]).into_owned(),
-                ),
-                (
-                    eig.eigenvalues[idx[2]],
-                    eig.eigenvectors.column(idx[2]).into_owned(),
-                ),
+                (eig.values[1], eig.vectors[1]),
+                (eig.values[2], eig.vectors[2]),
             ],
             n: self.n,
             weight: nf,
@@ -203,13 +201,14 @@ impl PlaneAccumulator {
     }
 }
 
-fn add_outer(a: &mut [f64; 6], v: &Vector3<f64>) {
-    a[0] += v.x * v.x;
-    a[1] += v.x * v.y;
-    a[2] += v.x * v.z;
-    a[3] += v.y * v.y;
-    a[4] += v.y * v.z;
-    a[5] += v.z * v.z;
+fn add_outer_weighted(a: &mut [f64; 6], v: &Vector3<f64>, w: f64) {
+    let wv = v * w;
+    a[0] += wv.x * v.x;
+    a[1] += wv.x * v.y;
+    a[2] += wv.x * v.z;
+    a[3] += wv.y * v.y;
+    a[4] += wv.y * v.z;
+    a[5] += wv.z * v.z;
 }
 
 fn sym(a: &[f64; 6]) -> nalgebra::Matrix3<f64> {

@@ -10,6 +10,7 @@
 //!   attitude with its uncertainty (5.4);
 //! - failure detection (5.5) here in [`level_pose`].
 
+pub mod eigen3;
 pub mod grid;
 pub mod noise;
 pub mod patches;
@@ -98,13 +99,13 @@ pub struct LevelParams {
     /// Patches spanning only two scans are used only when the others cannot fix up, and only
     /// when their normal is at least this far from the robot's up [deg]. Default 60.
     pub two_row_min_angle_deg: f64,
-    /// Robust reweighting passes of each patch's plane. Default 3.
+    /// Robust reweighting passes of each patch's plane. Default 1.
     pub plane_iterations: usize,
     /// Cauchy scale of those passes, in sigmas of each point's noise along the normal [1].
     /// Default 2.5.
     pub plane_cauchy: f64,
     /// Grow the patches a second time without the points at the floor's or ceiling's height
-    /// (robust estimator). Default true.
+    /// (robust estimator). Default false: it did not measurably help and costs a growth.
     pub flat_pass: bool,
     /// Height band around the floor and ceiling left out of walls in that pass, on top of
     /// three sigmas of the range noise along the vertical [m]. Default 0.02.
@@ -166,8 +167,8 @@ impl Default for LevelParams {
             split_misfit: 1.1,
             two_row_seeds: false,
             two_row_min_angle_deg: 60.0,
-            plane_iterations: 3,
-            flat_pass: true,
+            plane_iterations: 1,
+            flat_pass: false,
             flat_margin: 0.02,
             plane_cauchy: 2.5,
             split_f: 20.0,

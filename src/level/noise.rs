@@ -17,8 +17,15 @@ const MAD_TO_SIGMA: f64 = 1.482_602_218_505_602;
 /// there are too few triples of consecutive valid rays (fewer than 20).
 pub fn estimate_range_sigma(scans: &[Scan]) -> Option<f64> {
     let mut z = Vec::new();
+    let mut trig: Vec<(f64, f64)> = Vec::new();
+    let mut trig_of: Option<&[f64]> = None;
     for s in scans {
-        standardised_residuals(s, &mut z);
+        // Scans of one pose nearly always share their bearings: one sincos per bearing.
+        if trig_of != Some(&s.theta[..]) {
+            trig = s.theta.iter().map(|t| t.sin_cos()).collect();
+            trig_of = Some(&s.theta[..]);
+        }
+        standardised_residuals(s, &trig, &mut z);
     }
     if z.len() < 20 {
         return None;
@@ -29,8 +36,11 @@ pub fn estimate_range_sigma(scans: &[Scan]) -> Option<f64> {
 }
 
 /// Appends |e| / (sd of e at sigma = 1) for every triple of consecutive valid rays.
-fn standardised_residuals(s: &Scan, out: &mut Vec<f64>) {
+/// `sc` holds `(sin, cos)` of the scan's bearings.
+fn standardised_residuals(s: &Scan, sc: &[(f64, f64)], out: &mut Vec<f64>) {
     let n = s.nrays();
+    // sin(phi_j - phi_i) = s_j c_i - c_j s_i: no sines per triple.
+    let sin_diff = |i: usize, j: usize| sc[j].0 * sc[i].1 - sc[j].1 * sc[i].0;
     for i in 1..n.saturating_sub(1) {
         let (Some(r0), Some(r1), Some(r2)) = (s.range(i - 1), s.range(i), s.range(i + 1)) else {
             continue;
@@ -38,11 +48,14 @@ fn standardised_residuals(s: &Scan, out: &mut Vec<f64>) {
         if r0 <= 0.0 || r1 <= 0.0 || r2 <= 0.0 {
             continue;
         }
-        let a = s.theta[i] - s.theta[i - 1];
-        let b = s.theta[i + 1] - s.theta[i];
-        let (sa, sb, sab) = (a.sin(), b.sin(), (a + b).sin());
-        let e = sb / r0 + sa / r2 - sab / r1;
-        let var = sb * sb / r0.powi(4) + sa * sa / r2.powi(4) + sab * sab / r1.powi(4);
+        let (sa, sb, sab) = (
+            sin_diff(i - 1, i),
+            sin_diff(i, i + 1),
+            sin_diff(i - 1, i + 1),
+        );
+        let (u0, u1, u2) = (1.0 / r0, 1.0 / r1, 1.0 / r2);
+        let e = sb * u0 + sa * u2 - sab * u1;
+        let var = sb * sb * u0.powi(4) + sa * sa * u2.powi(4) + sab * sab * u1.powi(4);
         if var > 0.0 && e.is_finite() {
             out.push(e.abs() / var.sqrt());
         }

@@ -9,12 +9,14 @@
 //! Everything here is pure; randomness comes from [`stream_rng`], one stream per pose, so a
 //! run's output depends on its seed only, never on the thread count.
 
+pub mod adaptive;
 mod grid;
 pub mod odometry;
 pub mod random_poses;
 pub mod raycast;
 pub mod scanner;
 
+pub use adaptive::{AdaptiveParams, simulate_pose_adaptive};
 pub use odometry::{OdometryParams, odometry};
 pub use random_poses::{RandomPoseParams, is_free, random_poses};
 pub use raycast::{RayHit, World};

@@ -1,0 +1,184 @@
+//! The adaptive robot, the paper's "cleverRobot" (sect. 7.2.2): after taking its scans at a
+//! pose it levels them with what a robot knows (the scans themselves, never `true_pose` or
+//! `hit`), and when too few wall polygons were found because the scanner faces the floor or the
+//! ceiling (sect. 5.5), it takes more scans with the hinge tilted the other way, up to a limit.
+
+use super::raycast::World;
+use super::scanner::{ScannerParams, simulate_pose};
+use crate::geometry::Pose;
+use crate::level::{FailReason, LevelParams, level_pose};
+use crate::scan::Scan;
+use rand::Rng;
+use serde_json::json;
+
+/// Parameters of the adaptive robot.
+#[derive(Clone, Debug, PartialEq)]
+pub struct AdaptiveParams {
+    /// Retakes allowed per pose after the first set of scans. Default 2.
+    pub max_retakes: usize,
+    /// How far each retake shifts the elevations [rad]; the direction comes from the failure
+    /// (facing the floor: tilt up, i.e. negative; facing the ceiling: positive). Default 0:
+    /// the span of the elevation set plus one step, so a retake adds new elevations next to
+    /// the old ones.
+    pub shift: f64,
+    /// Leveling used to judge the scans.
+    pub level: LevelParams,
+}
+
+impl Default for AdaptiveParams {
+    fn default() -> Self {
+        Self {
+            max_retakes: 2,
+            shift: 0.0,
+            level: LevelParams::default(),
+        }
+    }
+}
+
+/// The shift that moves a set of elevations just past itself: its span plus one step (for a
+/// single elevation, 5 degrees).
+fn default_shift(elevations: &[f64]) -> f64 {
+    let lo = elevations.iter().copied().fold(f64::INFINITY, f64::min);
+    let hi = elevations.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    let step = if elevations.len() > 1 {
+        (hi - lo) / (elevations.len() - 1) as f64
+    } else {
+        5f64.to_radians()
+    };
+    (hi - lo) + step
+}
+
+/// Scans at one pose the way cleverRobot takes them. Every scan keeps the pose's `sequence`
+/// and gets `"adaptive": {"attempt": k, "shift": rad}` (attempt 0 is the first set, shift its
+/// offset from the requested elevations). Retakes stop as soon as the pose levels, or fails for
+/// a reason a retake cannot cure.
+pub fn simulate_pose_adaptive<R: Rng + ?Sized>(
+    world: &World,
+    sequence: u64,
+    world_from_robot: &Pose,
+    elevations: &[f64],
+    scanner: &ScannerParams,
+    params: &AdaptiveParams,
+    rng: &mut R,
+) -> Vec<Scan> {
+    let step = if params.shift > 0.0 {
+        params.shift
+    } else {
+        default_shift(elevations)
+    };
+    let mut all: Vec<Scan> = Vec::new();
+    let mut offset = 0.0;
+    for attempt in 0..=params.max_retakes {
+        let shifted: Vec<f64> = elevations.iter().map(|e| e + offset).collect();
+        let mut scans = simulate_pose(world, sequence, world_from_robot, &shifted, scanner, rng);
+        for s in &mut scans {
+            s.extra.insert(
+                "adaptive".to_string(),
+                json!({"attempt": attempt, "shift": offset}),
+            );
+        }
+        all.extend(scans);
+        if attempt == params.max_retakes {
+            break;
+        }
+        // Judge with what the robot has: its scans, stripped of the simulator's truth.
+        let seen: Vec<Scan> = all.iter().map(robot_view).collect();
+        let est = level_pose(&seen, &params.level);
+        offset = match est.failure {
+            // Positive elevation tilts the beams down: facing the floor, look up.
+            Some(FailReason::FacingFloor) => offset.min(0.0) - step,
+            Some(FailReason::FacingCeiling) => offset.max(0.0) + step,
+            _ => break,
+        };
+    }
+    all
+}
+
+/// A scan as the robot knows it: without the simulator's `true_pose` and `hit`.
+fn robot_view(s: &Scan) -> Scan {
+    Scan {
+        true_pose: None,
+        hit: None,
+        ..s.clone()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::plan::Plan;
+    use crate::simulate::elevations_centred;
+    use nalgebra::Point2;
+    use rand::SeedableRng;
+
+    fn big_room() -> World {
+        let p = |x: f64, y: f64| Point2::new(x, y);
+        World::from_plan(&Plan {
+            wall_height: 3.0,
+            walls: vec![vec![
+                p(0.0, 0.0),
+                p(12.0, 0.0),
+                p(12.0, 12.0),
+                p(0.0, 12.0),
+                p(0.0, 0.0),
+            ]],
+            ceiling: false,
+            poses: vec![],
+        })
+    }
+
+    #[test]
+    fn a_robot_pitched_at_the_floor_retakes_looking_up_and_levels() {
+        let world = big_room();
+        let pose = Pose::new(6.0, 6.0, 0.45, 0.3, 25f64.to_radians(), 3f64.to_radians());
+        let e = elevations_centred(3, 5f64.to_radians());
+        let scanner = ScannerParams::default();
+        let mut rng = rand::rngs::ChaCha8Rng::seed_from_u64(3);
+        let plain = simulate_pose(&world, 4, &pose, &e, &scanner, &mut rng);
+        let first = level_pose(&plain, &LevelParams::default());
+        assert_eq!(first.failure, Some(FailReason::FacingFloor));
+        let mut rng = rand::rngs::ChaCha8Rng::seed_from_u64(3);
+        let scans = simulate_pose_adaptive(
+            &world,
+            4,
+            &pose,
+            &e,
+            &scanner,
+            &AdaptiveParams::default(),
+            &mut rng,
+        );
+        assert!(scans.len() > 3, "no retake");
+        assert!(scans.iter().all(|s| s.sequence == Some(4)));
+        let last = &scans[scans.len() - 1];
+        assert!(last.elevation.unwrap() < e[0], "the retake looks up");
+        assert!(last.extra["adaptive"]["attempt"].as_u64().unwrap() >= 1);
+        assert!(last.extra["adaptive"]["shift"].as_f64().unwrap() < 0.0);
+        let est = level_pose(&scans, &LevelParams::default());
+        assert!(est.is_ok(), "{:?}", est.failure);
+        let err = est
+            .attitude
+            .unwrap()
+            .max_abs_error(&pose.attitude())
+            .to_degrees();
+        assert!(err < 1.0, "{err}");
+    }
+
+    #[test]
+    fn a_pose_that_levels_first_time_is_not_retaken() {
+        let world = big_room();
+        let pose = Pose::new(3.0, 3.0, 0.45, 0.8, 0.05, -0.05);
+        let e = elevations_centred(3, 5f64.to_radians());
+        let mut rng = rand::rngs::ChaCha8Rng::seed_from_u64(1);
+        let scans = simulate_pose_adaptive(
+            &world,
+            0,
+            &pose,
+            &e,
+            &ScannerParams::default(),
+            &AdaptiveParams::default(),
+            &mut rng,
+        );
+        assert_eq!(scans.len(), 3);
+        assert!(scans.iter().all(|s| s.extra["adaptive"]["attempt"] == 0));
+    }
+}
