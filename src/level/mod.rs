@@ -259,6 +259,25 @@ impl LevelEstimate {
         self.failure.is_none()
     }
 
+    /// Whether the scanner looks mostly at the floor or the ceiling (sect. 5.5): more floor
+    /// (or ceiling) quads than wall quads. A pose can level from the floor and still be facing
+    /// it, with few wall points for its pseudo-level scan; cleverRobot retakes such scans.
+    pub fn facing(&self) -> Option<FailReason> {
+        let count = |k: SurfaceKind| self.quads.iter().filter(|q| q.kind == k).count();
+        let (walls, floors, ceilings) = (
+            count(SurfaceKind::Wall),
+            count(SurfaceKind::Floor),
+            count(SurfaceKind::Ceiling),
+        );
+        if floors > walls && floors >= ceilings {
+            Some(FailReason::FacingFloor)
+        } else if ceilings > walls {
+            Some(FailReason::FacingCeiling)
+        } else {
+            None
+        }
+    }
+
     fn failed(reason: FailReason, range_sigma: f64) -> Self {
         LevelEstimate {
             failure: Some(reason),

@@ -51,7 +51,8 @@ fn default_shift(elevations: &[f64]) -> f64 {
 /// Scans at one pose the way cleverRobot takes them. Every scan keeps the pose's `sequence`
 /// and gets `"adaptive": {"attempt": k, "shift": rad}` (attempt 0 is the first set, shift its
 /// offset from the requested elevations). Retakes stop as soon as the pose levels, or fails for
-/// a reason a retake cannot cure.
+/// a reason a retake cannot cure. A pose that levels (from the floor) while facing the floor
+/// is retaken too: its pseudo-level scan needs walls.
 pub fn simulate_pose_adaptive<R: Rng + ?Sized>(
     world: &World,
     sequence: u64,
@@ -84,7 +85,11 @@ pub fn simulate_pose_adaptive<R: Rng + ?Sized>(
         // Judge with what the robot has: its scans, stripped of the simulator's truth.
         let seen: Vec<Scan> = all.iter().map(robot_view).collect();
         let est = level_pose(&seen, &params.level);
-        offset = match est.failure {
+        let facing = match est.failure {
+            Some(f @ (FailReason::FacingFloor | FailReason::FacingCeiling)) => Some(f),
+            _ => est.facing(),
+        };
+        offset = match facing {
             // Positive elevation tilts the beams down: facing the floor, look up.
             Some(FailReason::FacingFloor) => offset.min(0.0) - step,
             Some(FailReason::FacingCeiling) => offset.max(0.0) + step,
@@ -136,7 +141,7 @@ mod tests {
         let mut rng = rand::rngs::ChaCha8Rng::seed_from_u64(3);
         let plain = simulate_pose(&world, 4, &pose, &e, &scanner, &mut rng);
         let first = level_pose(&plain, &LevelParams::default());
-        assert_eq!(first.failure, Some(FailReason::FacingFloor));
+        assert_eq!(first.facing(), Some(FailReason::FacingFloor));
         let mut rng = rand::rngs::ChaCha8Rng::seed_from_u64(3);
         let scans = simulate_pose_adaptive(
             &world,
