@@ -42,6 +42,10 @@ pub struct Args {
     /// A pose whose attitude sigma exceeds this fails as parallel_walls [deg].
     #[arg(long, default_value_t = levelscan::level::LevelParams::default().max_sigma_deg)]
     pub max_sigma: f64,
+    /// Use walls alone, as the paper does: do not take the floor and ceiling seen as level.
+    /// For places where the visible floor itself slopes (long ramps, rubble).
+    #[arg(long)]
+    pub walls_only: bool,
     /// Take the scans with the adaptive robot (cleverRobot), as the paper's Table I did.
     #[arg(long)]
     pub adaptive: bool,
@@ -75,6 +79,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         adaptive: args.adaptive,
         level: levelscan::level::LevelParams {
             max_sigma_deg: args.max_sigma,
+            level_surfaces: !args.walls_only,
             ..levelscan::level::LevelParams::default()
         },
         ..AccuracyParams::default()

@@ -37,6 +37,10 @@ pub struct Args {
     /// A pose whose attitude sigma exceeds this fails as parallel_walls [deg].
     #[arg(long, default_value_t = LevelParams::default().max_sigma_deg)]
     pub max_sigma: f64,
+    /// Use walls alone, as the paper does: do not take the floor and ceiling seen as level.
+    /// For places where the visible floor itself slopes (long ramps, rubble).
+    #[arg(long)]
+    pub walls_only: bool,
     /// Gaps of at most this many rays between wall points are filled [rays].
     #[arg(long, default_value_t = PseudoLevelParams::default().max_gap)]
     pub max_gap: usize,
@@ -56,6 +60,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         quad_rows: args.quad_rows,
         quad_cols: args.quad_cols,
         max_sigma_deg: args.max_sigma,
+        level_surfaces: !args.walls_only,
         ..LevelParams::default()
     };
     if let Some(s) = params.sigma {
