@@ -82,12 +82,13 @@ impl Scan {
         self.theta.len()
     }
 
-    /// The range of ray `i` when it is valid and finite.
+    /// The range of ray `i` when it is valid, finite and positive (some logs write -1 or 0
+    /// for "no return" and still mark the ray valid).
     pub fn range(&self, i: usize) -> Option<f64> {
         if !self.valid[i] {
             return None;
         }
-        self.readings[i].filter(|r| r.is_finite())
+        self.readings[i].filter(|r| r.is_finite() && *r > 0.0)
     }
 
     pub fn valid_count(&self) -> usize {
@@ -178,6 +179,8 @@ mod tests {
         s.readings[1] = Some(2.0);
         s.valid[1] = true;
         s.readings[2] = Some(2.0); // a reading that is marked invalid stays invalid
+        s.readings[0] = Some(-1.0); // "no return" in some logs, even when marked valid
+        s.valid[0] = true;
         assert!(s.point_in_robot(0).is_none());
         assert!(s.point_in_robot(2).is_none());
         let p = s.point_in_robot(1).unwrap();

@@ -39,7 +39,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         report.extend(m);
     }
     let mut out = open_output(None)?;
-    serde_json::to_writer_pretty(&mut out, &report)?;
+    serde_json::to_writer(&mut out, &report)?;
     out.write_all(b"\n")?;
     out.flush()?;
     Ok(())

@@ -3,14 +3,15 @@
 
 use super::{open_output, progress_bar};
 use anyhow::{Context, bail};
-use levelscan::formats::{read_plan, write_scan};
+use levelscan::formats::{InputError, parse_plan, write_scan};
 use levelscan::geometry::Pose;
+use levelscan::plan::Plan;
 use levelscan::simulate::{
     AdaptiveParams, OdometryParams, RandomPoseParams, ScannerParams, Stream, World,
     elevations_centred, odometry, random_poses, simulate_pose_adaptive, simulate_poses, stream_rng,
 };
 use rayon::prelude::*;
-use std::io::Write;
+use std::io::{Read, Write};
 use std::path::PathBuf;
 
 /// Poses simulated in parallel between writes: bounds memory, and fixed so that the output
@@ -19,8 +20,9 @@ const CHUNK: usize = 64;
 
 #[derive(clap::Args, Debug)]
 pub struct Args {
-    /// Floor plan (.wall); its `poses` are used unless --random is given.
-    pub plan: PathBuf,
+    /// Floor plan (.wall); its `poses` are used unless --random is given. Standard input
+    /// when absent or `-`.
+    pub plan: Option<PathBuf>,
 
     /// Rays per scan, spread evenly over the field of view.
     #[arg(long, default_value_t = 181)]
@@ -133,8 +135,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         bail!("--height must be a finite number of metres");
     }
 
-    let plan = read_plan(&args.plan)?;
-    let name = args.plan.display().to_string();
+    let (plan, name) = load_plan(args.plan.as_deref())?;
     let world = World::from_plan(&plan);
     let poses: Vec<Pose> = match args.random {
         Some(n) => {
@@ -152,7 +153,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
         None => {
             if plan.poses.is_empty() {
-                bail!("{name}: poses: the plan has no poses; give --random N to draw some");
+                return Err(InputError::new(
+                    &name,
+                    "poses",
+                    "the plan has no poses; give --random N to draw some",
+                )
+                .into());
             }
             let mut poses = plan.poses.clone();
             if let Some(h) = args.height {
@@ -238,4 +244,19 @@ fn scanner_params(args: &Args) -> anyhow::Result<ScannerParams> {
     };
     params.validate()?;
     Ok(params)
+}
+
+/// Reads and validates the floor plan from a file, or standard input for `None` or `-`.
+fn load_plan(path: Option<&std::path::Path>) -> anyhow::Result<(Plan, String)> {
+    let mut input = super::open_input(path)?;
+    let mut text = String::new();
+    input.reader.read_to_string(&mut text).map_err(|e| {
+        let what = if e.kind() == std::io::ErrorKind::InvalidData {
+            "is not valid UTF-8 text".to_string()
+        } else {
+            format!("cannot read: {e}")
+        };
+        InputError::new(&input.name, "", what)
+    })?;
+    Ok((parse_plan(&text, &input.name)?, input.name))
 }

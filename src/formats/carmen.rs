@@ -97,13 +97,30 @@ fn set_ranges(scan: &mut Scan, ranges: &[f64], max_range: f64) {
     }
 }
 
+/// A CARMEN message name: capitals, digits and underscores, starting with a capital
+/// (`ODOM`, `PARAM`, `ROBOTLASER1`, `NEFF`, ...).
+fn is_message_name(w: &str) -> bool {
+    w.starts_with(|c: char| c.is_ascii_uppercase())
+        && w.chars()
+            .all(|c| c.is_ascii_uppercase() || c.is_ascii_digit() || c == '_')
+}
+
 /// Parses one line. `Ok(None)` for lines that are not scans. `flaser_max_range` is the
 /// maximum range for `FLASER` lines [m].
 pub fn parse_carmen_line(line: &str, flaser_max_range: f64) -> Result<Option<Scan>, String> {
     let mut items = line.split_ascii_whitespace();
     let kind = match items.next() {
         Some(k @ ("FLASER" | "ROBOTLASER1")) => k,
-        _ => return Ok(None),
+        None => return Ok(None),
+        Some(w) if w.starts_with('#') || is_message_name(w) => return Ok(None),
+        // Anything else is not a CARMEN log at all; saying so beats reading zero scans.
+        Some(w) => {
+            return Err(format!(
+                "not a CARMEN log line (starts with {:?}; expected a message name such as \
+                 FLASER, or a JSON object for scan JSON Lines)",
+                w.chars().take(20).collect::<String>()
+            ));
+        }
     };
     let f = Fields {
         kind,
@@ -327,6 +344,16 @@ mod tests {
         assert_eq!(s.extra["robot_pose"], serde_json::json!([0.9, 2.0, 0.1]));
         assert_eq!(s.timestamp.unwrap().seconds(), 100.5);
         assert_eq!(s.true_pose, None);
+    }
+
+    #[test]
+    fn lines_that_are_no_carmen_at_all_are_errors() {
+        for line in ["hello", "[1,2,3]", "42 1 2", "null"] {
+            let err = parse_carmen_line(line, 50.0).unwrap_err();
+            assert!(err.contains("not a CARMEN log line"), "{line}: {err}");
+        }
+        assert_eq!(parse_carmen_line("ODOM 1 2 3", 50.0), Ok(None));
+        assert_eq!(parse_carmen_line("# comment", 50.0), Ok(None));
     }
 
     #[test]

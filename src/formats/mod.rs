@@ -62,6 +62,14 @@ pub fn read_any<R: BufRead + Send>(
     carmen: CarmenParams,
 ) -> Result<ScanSource<R>, InputError> {
     let name = name.into();
+    // A UTF-8 byte order mark (some editors write one) is not part of the first line.
+    if reader
+        .fill_buf()
+        .map_err(|e| scan_jsonl::read_error(&name, 1, &e))?
+        .starts_with(b"\xEF\xBB\xBF")
+    {
+        reader.consume(3);
+    }
     let first = reader
         .fill_buf()
         .map_err(|e| scan_jsonl::read_error(&name, 1, &e))?
