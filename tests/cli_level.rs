@@ -207,3 +207,104 @@ fn a_missing_file_is_an_error_naming_it() {
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr).contains("/nonexistent/scans.jsonl"));
 }
+
+/// A small room with a pillar as a `.wall` file in the temporary directory.
+fn plan_file(name: &str) -> PathBuf {
+    let path = std::env::temp_dir().join(format!(
+        "levelscan_cli_level_{}_{name}.wall",
+        std::process::id()
+    ));
+    std::fs::write(
+        &path,
+        r#"{"version": "w0.1", "wallheight": 3.0, "walls": [
+            [[0, 0], [8, 0], [8, 6], [3, 7], [0, 6], [0, 0]],
+            [[5, 2], [5.5, 2], [5.5, 2.5], [5, 2.5], [5, 2]]]}"#,
+    )
+    .unwrap();
+    path
+}
+
+#[test]
+fn eval_accuracy_writes_table_i_json_and_fig6() {
+    let plan = plan_file("eval");
+    let dir = std::env::temp_dir().join(format!("levelscan_eval_acc_{}", std::process::id()));
+    let out = Command::new(env!("CARGO_BIN_EXE_levelscan"))
+        .args(["eval", "accuracy", plan.to_str().unwrap(), "--poses", "6"])
+        .args(["--scans", "3,5", "--noise", "0.01,0.05", "--seed", "2"])
+        .args(["--out", dir.to_str().unwrap()])
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let md = String::from_utf8(out.stdout).unwrap();
+    assert!(md.contains("### Table I, robust estimator"), "{md}");
+    assert!(md.contains("### Table I, paper estimator"), "{md}");
+    assert!(
+        md.contains("(0.857)"),
+        "the paper's 3-scan 1 cm mean beside ours: {md}"
+    );
+    let json: Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("accuracy.json")).unwrap()).unwrap();
+    let cells = json["cells"].as_array().unwrap();
+    assert_eq!(cells.len(), 2 * 2 * 2, "scans x noise x estimators");
+    for c in cells {
+        assert_eq!(c["poses"], 6);
+        let leveled = c["leveled"].as_u64().unwrap() as usize;
+        assert_eq!(c["errors_deg"].as_array().unwrap().len(), leveled);
+    }
+    for f in ["fig6_robust.png", "fig6_robust.svg", "fig6_paper.svg"] {
+        assert!(dir.join(f).exists(), "{f}");
+    }
+    std::fs::remove_dir_all(dir).ok();
+    std::fs::remove_file(plan).ok();
+}
+
+#[test]
+fn adaptive_simulation_levels_and_records_its_attempts() {
+    let plan = plan_file("adaptive");
+    let sim = Command::new(env!("CARGO_BIN_EXE_levelscan"))
+        .args([
+            "simulate",
+            plan.to_str().unwrap(),
+            "--random",
+            "12",
+            "--scans",
+            "3",
+        ])
+        .args(["--adaptive", "--seed", "4"])
+        .output()
+        .unwrap();
+    assert!(
+        sim.status.success(),
+        "{}",
+        String::from_utf8_lossy(&sim.stderr)
+    );
+    let text = String::from_utf8(sim.stdout).unwrap();
+    let scans: Vec<Value> = text
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    assert!(scans.len() >= 36);
+    assert!(scans.iter().all(|s| s["adaptive"]["attempt"].is_u64()));
+    // Retakes keep their pose's sequence, so sequences stay consecutive and run 0..12.
+    let mut seqs: Vec<u64> = scans
+        .iter()
+        .map(|s| s["sequence"].as_u64().unwrap())
+        .collect();
+    assert!(seqs.windows(2).all(|w| w[0] <= w[1]));
+    seqs.dedup();
+    assert_eq!(seqs, (0..12).collect::<Vec<u64>>());
+    let path = std::env::temp_dir().join(format!(
+        "levelscan_cli_level_{}_adaptive.jsonl",
+        std::process::id()
+    ));
+    std::fs::write(&path, &text).unwrap();
+    let out = level(&[path.to_str().unwrap()]);
+    assert!(out.status.success());
+    assert_eq!(String::from_utf8(out.stdout).unwrap().lines().count(), 12);
+    std::fs::remove_file(path).ok();
+    std::fs::remove_file(plan).ok();
+}

@@ -75,40 +75,58 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let input = open_input(args.input.as_deref())?;
     let name = input.name.clone();
     let mut out = open_output(args.output.as_ref())?;
-    let mut reader = ParallelScanReader::new(input.reader, name.clone());
-    let mut grouper = Grouper::default();
-    let mut batch: Vec<Vec<Scan>> = Vec::with_capacity(BATCH_POSES);
-    let mut failure: Option<InputError> = None;
-    loop {
-        let item = reader.next();
-        let exhausted = item.is_none();
-        match item {
-            Some(Ok((line, scan))) => match grouper.push(&name, line, scan) {
-                Ok(Some(pose)) => batch.push(pose),
-                Ok(None) => {}
-                Err(e) => failure = Some(e),
-            },
-            Some(Err(e)) => failure = Some(e),
-            None => {
-                if let Some(pose) = grouper.finish() {
-                    batch.push(pose);
+    // Reading and grouping run on their own thread, a couple of batches ahead, so that the
+    // serial part of reading overlaps with leveling (both use the rayon pool for the heavy work).
+    let (tx, rx) = std::sync::mpsc::sync_channel::<(Vec<Vec<Scan>>, Option<InputError>)>(2);
+    let reader_thread = std::thread::spawn(move || {
+        let mut reader = ParallelScanReader::new(input.reader, name.clone());
+        let mut grouper = Grouper::default();
+        let mut batch: Vec<Vec<Scan>> = Vec::with_capacity(BATCH_POSES);
+        loop {
+            let item = reader.next();
+            let exhausted = item.is_none();
+            let mut failure = None;
+            match item {
+                Some(Ok((line, scan))) => match grouper.push(&name, line, scan) {
+                    Ok(Some(pose)) => batch.push(pose),
+                    Ok(None) => {}
+                    Err(e) => failure = Some(e),
+                },
+                Some(Err(e)) => failure = Some(e),
+                None => {
+                    if let Some(pose) = grouper.finish() {
+                        batch.push(pose);
+                    }
                 }
             }
+            let end = exhausted || failure.is_some();
+            if batch.len() >= BATCH_POSES || end {
+                let full = std::mem::replace(&mut batch, Vec::with_capacity(BATCH_POSES));
+                // A closed channel means the writer stopped (e.g. a broken pipe): stop too.
+                if tx.send((full, failure)).is_err() {
+                    return;
+                }
+            }
+            if end {
+                return;
+            }
         }
-        let end = exhausted || failure.is_some();
-        if batch.len() >= BATCH_POSES || end {
-            write_batch(&mut out, &batch, &params, &pseudo, args.polygons)?;
-            batch.clear();
+    });
+    let mut result = Ok(());
+    for (batch, failure) in rx {
+        if let Err(e) = write_batch(&mut out, &batch, &params, &pseudo, args.polygons) {
+            result = Err(e);
+            break;
         }
-        if end {
+        if let Some(e) = failure {
+            result = Err(e.into());
             break;
         }
     }
-    out.flush().context("cannot write output")?;
-    match failure {
-        Some(e) => Err(e.into()),
-        None => Ok(()),
-    }
+    let flushed = out.flush().context("cannot write output");
+    // The reader ends on its own once the channel is dropped.
+    drop(reader_thread);
+    result.and(flushed)
 }
 
 fn write_batch(
