@@ -8,7 +8,7 @@ use levelscan::formats::{CarmenParams, read_any, write_tum};
 use levelscan::geometry::Pose;
 use levelscan::matching::{
     CheckParams, Coarse, CorrelativeParams, IcpParams, Kernel, MapParams, MatchReport, MatchStatus,
-    Matcher, MatcherParams, Metric, Mode, NormalParams, RangeParams, scan_points,
+    Matcher, MatcherParams, Metric, Mode, NormalParams, OdometryPrior, RangeParams, scan_points,
 };
 use levelscan::scan::Scan;
 use serde_json::json;
@@ -100,6 +100,25 @@ pub struct MatchOptions {
     /// Ignore readings at or beyond this (CARMEN's "no return") [m].
     #[arg(long, default_value_t = RangeParams::default().max_range)]
     pub max_range: f64,
+    /// Weigh the odometry as a Gaussian prior in ICP (MAP instead of scans alone), with the
+    /// noise model of the --prior-* flags.
+    #[arg(long)]
+    pub odometry_prior: bool,
+    /// Odometry prior: translation sigma per metre of the step (x and y each).
+    #[arg(long, default_value_t = OdometryPrior::default().trans_per_m)]
+    pub prior_trans: f64,
+    /// Odometry prior: translation sigma added to every step [m].
+    #[arg(long, default_value_t = OdometryPrior::default().trans_const)]
+    pub prior_trans_min: f64,
+    /// Odometry prior: heading sigma per radian of the step.
+    #[arg(long, default_value_t = OdometryPrior::default().rot_per_rad)]
+    pub prior_rot: f64,
+    /// Odometry prior: heading sigma added to every step [deg].
+    #[arg(long, default_value_t = OdometryPrior::default().rot_const.to_degrees())]
+    pub prior_rot_min: f64,
+    /// Odometry prior: sigma of one ICP residual, the scale between scans and odometry [m].
+    #[arg(long, default_value_t = OdometryPrior::default().residual_sigma)]
+    pub prior_residual_sigma: f64,
 }
 
 impl MatchOptions {
@@ -114,7 +133,19 @@ impl MatchOptions {
             ("--window-xy", self.window_xy),
             ("--max-residual", self.max_residual),
             ("--max-range", self.max_range),
+            ("--prior-residual-sigma", self.prior_residual_sigma),
         ];
+        let prior_sigmas = [
+            self.prior_trans,
+            self.prior_trans_min,
+            self.prior_rot,
+            self.prior_rot_min,
+        ];
+        if prior_sigmas.iter().any(|v| !(v.is_finite() && *v >= 0.0))
+            || self.prior_trans_min + self.prior_rot_min <= 0.0
+        {
+            anyhow::bail!("--prior-*: sigmas must be >= 0 with positive constant parts");
+        }
         for (name, v) in positive {
             if !(v.is_finite() && v > 0.0) {
                 anyhow::bail!("{name} must be a positive number, got {v}");
@@ -175,6 +206,13 @@ impl MatchOptions {
                 min_range: self.min_range,
                 max_range: self.max_range,
             },
+            odometry_prior: self.odometry_prior.then_some(OdometryPrior {
+                trans_per_m: self.prior_trans,
+                trans_const: self.prior_trans_min,
+                rot_per_rad: self.prior_rot,
+                rot_const: self.prior_rot_min.to_radians(),
+                residual_sigma: self.prior_residual_sigma,
+            }),
         })
     }
 }

@@ -111,12 +111,36 @@ struct Pair {
     residual: f64,
 }
 
+/// A Gaussian prior on the result (e.g. from odometry), as weights in the ICP cost's units.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PosePrior {
+    /// The prior pose (`target_from_source`).
+    pub pose: Pose2,
+    /// Weight of the squared translation difference [1/m² in residual units: (σ_r/σ_xy)²].
+    pub weight_xy: f64,
+    /// Weight of the squared heading difference [(σ_r/σ_θ)², m²/rad²].
+    pub weight_theta: f64,
+}
+
 /// Aligns `source` (points in the source scanner's frame, the scanner at the origin) to `target`, starting from `guess`
 /// (`target_from_source`). Returns `None` when the target is empty or no point associates.
 pub fn icp(
     source: &[Point2<f64>],
     target: &dyn Target,
     guess: Pose2,
+    params: &IcpParams,
+) -> Option<IcpResult> {
+    icp_with_prior(source, target, guess, None, params)
+}
+
+/// [`icp`] with a Gaussian prior on the pose added to every solve (maximum a posteriori
+/// rather than maximum likelihood), as real-time correlative matchers weigh the odometry
+/// (Olson 2009, eq. 2; Cartographer's translation and rotation weights).
+pub fn icp_with_prior(
+    source: &[Point2<f64>],
+    target: &dyn Target,
+    guess: Pose2,
+    prior: Option<PosePrior>,
     params: &IcpParams,
 ) -> Option<IcpResult> {
     if target.is_empty() || source.is_empty() {
@@ -154,6 +178,9 @@ pub fn icp(
                 (Metric::PointToLine, Some((n, anchor))) => solver.add_line(n, &pair.p, &anchor, w),
                 _ => solver.add_point(&pair.p, &pair.q, w),
             }
+        }
+        if let Some(prior) = prior {
+            solver.add_prior(&prior.pose, prior.weight_xy, prior.weight_theta);
         }
         result.iterations = iteration;
         result.correspondences = kept;

@@ -6,7 +6,7 @@
 //! trustworthy the step falls back to the odometry and the report says why (CSM issue #17).
 
 use super::correlative::{CorrelativeParams, correlative_search};
-use super::icp::{IcpParams, IcpResult, icp};
+use super::icp::{IcpParams, IcpResult, PosePrior, icp_with_prior};
 use super::map::{MapParams, VoxelMap};
 use super::reference::{Line, NormalParams, ScanReference, Target, estimate_lines};
 use crate::geometry::Pose2;
@@ -99,6 +99,51 @@ pub struct MatcherParams {
     pub map: MapParams,
     pub checks: CheckParams,
     pub ranges: RangeParams,
+    /// Weigh the odometry as a prior in every ICP solve; `None` (the default) trusts the scans
+    /// alone and uses the odometry only as the first guess.
+    pub odometry_prior: Option<OdometryPrior>,
+}
+
+/// The odometry's noise per step, for the odometry prior: sigma = per-unit part x the step +
+/// constant part, the model `simulate::odometry` and `eval real` use.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct OdometryPrior {
+    /// Translation sigma per metre of the step, x and y each [m/m].
+    pub trans_per_m: f64,
+    /// Translation sigma added to every step [m].
+    pub trans_const: f64,
+    /// Heading sigma per radian of the step [rad/rad].
+    pub rot_per_rad: f64,
+    /// Heading sigma added to every step [rad].
+    pub rot_const: f64,
+    /// Sigma of one weighted ICP residual, which sets the scale between the two [m].
+    pub residual_sigma: f64,
+}
+
+impl Default for OdometryPrior {
+    /// Issue 4's perturbation: 2% + 5 mm, 2% + 0.5 degree; residuals of 1 cm.
+    fn default() -> Self {
+        Self {
+            trans_per_m: 0.02,
+            trans_const: 0.005,
+            rot_per_rad: 0.02,
+            rot_const: 0.5f64.to_radians(),
+            residual_sigma: 0.01,
+        }
+    }
+}
+
+impl OdometryPrior {
+    /// The prior centred on `at` for an odometry step `step`.
+    pub fn around(&self, at: Pose2, step: &Pose2) -> PosePrior {
+        let s_xy = self.trans_per_m * step.translation().norm() + self.trans_const;
+        let s_th = self.rot_per_rad * step.theta.abs() + self.rot_const;
+        PosePrior {
+            pose: at,
+            weight_xy: (self.residual_sigma / s_xy.max(1e-9)).powi(2),
+            weight_theta: (self.residual_sigma / s_th.max(1e-9)).powi(2),
+        }
+    }
 }
 
 /// Which readings are used. Units in brackets.
@@ -182,6 +227,8 @@ pub struct Matcher {
     previous: Option<(Pose2, Option<Pose2>)>,
     keyframe: Option<Keyframe>,
     map: VoxelMap,
+    /// Whether the current and previous scans both have odometry (for the prior).
+    has_odometry: bool,
 }
 
 impl Matcher {
@@ -191,6 +238,7 @@ impl Matcher {
             previous: None,
             keyframe: None,
             map: VoxelMap::new(params.map),
+            has_odometry: false,
         }
     }
 
@@ -202,6 +250,8 @@ impl Matcher {
     /// Matches the next scan: `points` in its robot frame (ray order), `odometry` its dead
     /// reckoning pose if known.
     pub fn push(&mut self, points: &[Point2<f64>], odometry: Option<Pose2>) -> MatchReport {
+        self.has_odometry =
+            odometry.is_some() && self.previous.is_some_and(|(_, prev)| prev.is_some());
         let report = match self.previous {
             None => self.first(points, odometry),
             Some((prev_estimate, prev_odometry)) => match self.params.mode {
@@ -371,7 +421,13 @@ impl Matcher {
             epsilon_theta: self.params.icp.epsilon_theta * 10.0,
             ..self.params.icp
         };
-        let result = icp(points, &self.map, start, &refine)
+        let step = odometry_step(prev_odometry, odometry);
+        let prior = self
+            .params
+            .odometry_prior
+            .filter(|_| self.has_odometry)
+            .map(|o| o.around(guess, &step));
+        let result = icp_with_prior(points, &self.map, start, prior, &refine)
             .ok_or(FallbackReason::TooFewCorrespondences)
             .and_then(|r| self.check(r));
         self.finish(points, odometry, result, coarse, |r| r.pose, guess)
@@ -386,8 +442,15 @@ impl Matcher {
         coarse_search: impl Fn(Pose2) -> Option<Pose2>,
     ) -> (Result<IcpResult, FallbackReason>, bool) {
         let p = &self.params;
-        let run =
-            |g: Pose2| icp(points, target, g, &p.icp).ok_or(FallbackReason::TooFewCorrespondences);
+        // Only a real odometry step makes a prior (identity means "no odometry").
+        let prior = p
+            .odometry_prior
+            .filter(|_| self.has_odometry)
+            .map(|o| o.around(guess, &guess));
+        let run = |g: Pose2| {
+            icp_with_prior(points, target, g, prior, &p.icp)
+                .ok_or(FallbackReason::TooFewCorrespondences)
+        };
         match p.coarse {
             Coarse::Never => (run(guess).and_then(|r| self.check(r)), false),
             Coarse::Always => {

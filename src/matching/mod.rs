@@ -18,10 +18,10 @@ pub mod reference;
 pub mod solve;
 
 pub use correlative::{CorrelativeParams, correlative_search};
-pub use icp::{IcpParams, IcpResult, Kernel, Metric, icp};
+pub use icp::{IcpParams, IcpResult, Kernel, Metric, PosePrior, icp, icp_with_prior};
 pub use map::{MapParams, VoxelMap};
 pub use matcher::{
     CheckParams, Coarse, FallbackReason, MatchReport, MatchStatus, Matcher, MatcherParams, Mode,
-    RangeParams, match_run, odometry_step, scan_points,
+    OdometryPrior, RangeParams, match_run, odometry_step, scan_points,
 };
 pub use reference::{Line, NormalParams, ScanReference, Target, estimate_lines};

@@ -56,6 +56,18 @@ impl RigidSolver {
         self.add_row(n, p, q, w);
     }
 
+    /// A Gaussian prior on the solution: `w_xy |t - t_p|² + w_theta |r - r_p|²` with
+    /// `r = (cos θ, sin θ)`, which is `w_theta (θ - θ_p)²` near the prior. Still exact: the
+    /// rotation part only adds a constant on the unit circle plus a linear pull.
+    pub fn add_prior(&mut self, prior: &Pose2, w_xy: f64, w_theta: f64) {
+        let (s, c) = prior.theta.sin_cos();
+        self.m[(0, 0)] += w_xy;
+        self.m[(1, 1)] += w_xy;
+        self.m[(2, 2)] += w_theta;
+        self.m[(3, 3)] += w_theta;
+        self.g += Vector4::new(w_xy * prior.x, w_xy * prior.y, w_theta * c, w_theta * s);
+    }
+
     pub fn rows(&self) -> usize {
         self.rows
     }
@@ -162,6 +174,28 @@ mod tests {
         assert!((est.x - truth.x).abs() < 1e-12);
         assert!((est.y - truth.y).abs() < 1e-12);
         assert!((est.theta - truth.theta).abs() < 1e-12);
+    }
+
+    #[test]
+    fn a_prior_alone_is_its_own_solution_and_pulls_a_weak_fit() {
+        let prior = Pose2::new(0.4, -0.3, 0.2);
+        let mut s = RigidSolver::new();
+        s.add_prior(&prior, 1.0, 1.0);
+        let est = s.solve().unwrap();
+        assert!((est.x - 0.4).abs() < 1e-12 && (est.y + 0.3).abs() < 1e-12);
+        assert!((est.theta - 0.2).abs() < 1e-9);
+        // A corridor pins y only; the prior supplies x.
+        let mut s = RigidSolver::new();
+        for i in 0..10 {
+            let p = Point2::new(i as f64, 1.0);
+            s.add_line(Vector2::y(), &p, &Point2::new(0.0, 1.5), 1.0);
+        }
+        s.add_prior(&Pose2::new(0.7, 0.0, 0.0), 1e-3, 1e-3);
+        let est = s.solve().unwrap();
+        assert!(
+            (est.x - 0.7).abs() < 1e-6 && (est.y - 0.5).abs() < 1e-3,
+            "{est:?}"
+        );
     }
 
     #[test]
