@@ -10,11 +10,11 @@
 //! Points at the floor's or ceiling's height (from floor/ceiling patches) are never kept.
 //! Then gaps of at most `max_gap` rays between kept points are filled, for rays with a return.
 
-use crate::geometry::{Pose, beam_direction};
+use crate::geometry::{Pose, rot_y};
 use crate::level::patches::UNLABELLED;
 use crate::level::{LevelEstimate, SurfaceKind};
 use crate::scan::Scan;
-use nalgebra::{Matrix3, Point3};
+use nalgebra::{Matrix3, Point3, Vector3};
 
 /// Parameters of the pseudo-level scan.
 #[derive(Clone, Debug, PartialEq)]
@@ -61,6 +61,9 @@ pub fn pseudo_level_scan(scans: &[Scan], est: &LevelEstimate, params: &PseudoLev
     let att = est.attitude.unwrap_or_default();
     let level_from_robot: Matrix3<f64> = *att.level_from_robot().matrix();
     let elevation = base.elevation.unwrap_or(0.0);
+    // Beam directions: `level_from_robot · Ry(e) · (cos phi, sin phi, 0)` (contract), with the
+    // rotations composed once.
+    let level_from_scanner: Matrix3<f64> = level_from_robot * rot_y(elevation).matrix();
     let keep = if est.is_ok() {
         kept_rays(scans, est, params, base_index, &level_from_robot)
     } else {
@@ -79,7 +82,8 @@ pub fn pseudo_level_scan(scans: &[Scan], est: &LevelEstimate, params: &PseudoLev
         ..Scan::default()
     };
     for (i, &kept) in keep.iter().enumerate() {
-        let dir = level_from_robot * beam_direction(elevation, base.theta[i]);
+        let (sp, cp) = base.theta[i].sin_cos();
+        let dir = level_from_scanner * Vector3::new(cp, sp, 0.0);
         let point = base.point_in_robot(i).map(|p| level_from_robot * p.coords);
         let bearing = match &point {
             Some(p) if p.x != 0.0 || p.y != 0.0 => p.y.atan2(p.x),

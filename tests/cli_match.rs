@@ -300,7 +300,7 @@ fn help_shows_every_default() {
     }
     let without_default = ["--trajectory", "--output", "--help", "--version"];
     // Switches (flags without a value) have no default to show.
-    let switches = ["--odometry-prior"];
+    let switches = ["--odometry-prior", "--one-way"];
     let mut checked = 0;
     for b in &blocks {
         let flag_line = b.lines().next().unwrap().trim();

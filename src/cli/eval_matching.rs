@@ -35,6 +35,18 @@ pub struct MatchingArgs {
     /// Elevation step between the tilted run's scans [deg].
     #[arg(long, default_value_t = 5.0)]
     pub step: f64,
+    /// Odometry noise: translation sigma per step, fraction of the step's length (x and y each).
+    #[arg(long, default_value_t = OdometryParams::default().trans_per_m)]
+    pub odo_trans: f64,
+    /// Odometry noise: translation sigma added to every step [m].
+    #[arg(long, default_value_t = OdometryParams::default().trans_const)]
+    pub odo_trans_min: f64,
+    /// Odometry noise: heading sigma per step, fraction of the step's rotation.
+    #[arg(long, default_value_t = OdometryParams::default().rot_per_rad)]
+    pub odo_rot: f64,
+    /// Odometry noise: heading sigma added to every step [deg].
+    #[arg(long, default_value_t = OdometryParams::default().rot_const.to_degrees())]
+    pub odo_rot_min: f64,
     #[command(flatten)]
     pub options: MatchOptions,
 }
@@ -48,8 +60,19 @@ pub fn run_matching(args: MatchingArgs) -> anyhow::Result<()> {
         args.noise.is_finite() && args.noise >= 0.0,
         "--noise must be >= 0"
     );
+    let odometry = OdometryParams {
+        trans_per_m: args.odo_trans,
+        trans_const: args.odo_trans_min,
+        rot_per_rad: args.odo_rot,
+        rot_const: args.odo_rot_min.to_radians(),
+    };
+    anyhow::ensure!(
+        odometry.is_valid(),
+        "odometry noise must be finite and >= 0"
+    );
     let params = ExperimentParams {
         seed: args.seed,
+        odometry,
         scanner: ScannerParams {
             noise_sigma: args.noise,
             ..ScannerParams::default()

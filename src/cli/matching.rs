@@ -100,6 +100,10 @@ pub struct MatchOptions {
     /// Ignore readings at or beyond this (CARMEN's "no return") [m].
     #[arg(long, default_value_t = RangeParams::default().max_range)]
     pub max_range: f64,
+    /// Pairwise: match each scan one way only (the default also matches the previous scan
+    /// against it and takes the midpoint of the two motions).
+    #[arg(long)]
+    pub one_way: bool,
     /// Weigh the odometry as a Gaussian prior in ICP (MAP instead of scans alone), with the
     /// noise model of the --prior-* flags.
     #[arg(long)]
@@ -206,6 +210,7 @@ impl MatchOptions {
                 min_range: self.min_range,
                 max_range: self.max_range,
             },
+            symmetric: !self.one_way,
             odometry_prior: self.odometry_prior.then_some(OdometryPrior {
                 trans_per_m: self.prior_trans,
                 trans_const: self.prior_trans_min,

@@ -145,6 +145,11 @@ impl PlaneAccumulator {
         }
     }
 
+    /// The weighted mean of the points added.
+    pub fn centroid(&self) -> Point3<f64> {
+        Point3::from(self.sum / self.weight.max(1e-300))
+    }
+
     /// The accumulator of the points in `self` but not in `part` (a subset of them).
     pub fn minus(&self, part: &PlaneAccumulator) -> PlaneAccumulator {
         let mut out = *self;

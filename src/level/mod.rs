@@ -119,8 +119,8 @@ pub struct LevelParams {
     /// matrix is below this fraction of the larger [1]. Default 0.01.
     pub parallel_ratio: f64,
     /// The pose fails as parallel_walls when either attitude sigma exceeds this [deg]: the
-    /// walls seen do not pin the attitude down. Default 1.7, so that an accepted attitude is
-    /// within 5 degrees at three sigmas.
+    /// walls seen do not pin the attitude down. Default 1.5, so that an accepted attitude is
+    /// within 4.5 degrees at three sigmas (measured: no accepted pose off by more than 5).
     pub max_sigma_deg: f64,
     /// Factor on the propagated attitude sigmas [1]: the noise model does not see
     /// segmentation errors (a few floor points in a wall, a corner split a little off), which
@@ -177,7 +177,7 @@ impl Default for LevelParams {
             min_patch_points: 20,
             min_polygons: 3,
             parallel_ratio: 0.01,
-            max_sigma_deg: 1.7,
+            max_sigma_deg: 1.5,
             sigma_inflation: 1.2,
             iterations: 10,
             level_surfaces: true,

@@ -267,6 +267,10 @@ fn robust_fit(
 ) -> Option<PlaneFit> {
     let mut fit = accumulate(grid, members).fit(sigma)?;
     let s = sigma.max(params.min_sigma);
+    // A plane its noise already explains has no outliers worth reweighting.
+    if fit.misfit_ratio(s) <= params.split_misfit {
+        return Some(fit);
+    }
     for _ in 0..params.plane_iterations {
         let mut acc = PlaneAccumulator::default();
         for g in members.iter().filter_map(|&i| grid.points[i].as_ref()) {
@@ -308,34 +312,40 @@ pub fn split_members(
         return whole;
     };
     let rss1 = fit_all.residual_ss;
-    let mut best: Option<(f64, Vec<usize>, Vec<usize>)> = None;
-    for by_row in [false, true] {
+    // Best split so far: (RSS of the two planes, which ordering, boundary index).
+    let mut best: Option<(f64, usize, usize)> = None;
+    let mut orders: [Vec<usize>; 2] = [members.to_vec(), members.to_vec()];
+    for (which, sorted) in orders.iter_mut().enumerate() {
+        let by_row = which == 1;
         let key = |i: usize| if by_row { i / cols } else { i % cols };
-        let mut sorted: Vec<usize> = members.to_vec();
         sorted.sort_by_key(|&i| (key(i), i));
-        // Group boundaries where the key changes.
-        let bounds: Vec<usize> = (1..sorted.len())
-            .filter(|&k| key(sorted[k]) != key(sorted[k - 1]))
-            .collect();
-        let mut prefix = Vec::with_capacity(sorted.len() + 1);
+        let n = sorted.len();
+        // Prefix plane sums, and the rows spanned by every prefix and suffix.
+        let mut prefix = Vec::with_capacity(n + 1);
         let mut acc = PlaneAccumulator::default();
         prefix.push(acc);
-        for &i in &sorted {
+        let (mut pre_lo, mut pre_hi) = (vec![usize::MAX; n + 1], vec![0usize; n + 1]);
+        for (k, &i) in sorted.iter().enumerate() {
             if let Some(g) = &grid.points[i] {
                 acc.add(g);
             }
             prefix.push(acc);
+            pre_lo[k + 1] = pre_lo[k].min(i / cols);
+            pre_hi[k + 1] = pre_hi[k].max(i / cols);
+        }
+        let (mut suf_lo, mut suf_hi) = (vec![usize::MAX; n + 1], vec![0usize; n + 1]);
+        for k in (0..n).rev() {
+            suf_lo[k] = suf_lo[k + 1].min(sorted[k] / cols);
+            suf_hi[k] = suf_hi[k + 1].max(sorted[k] / cols);
         }
         let total = acc;
-        for &b in &bounds {
-            let (left, right) = (&sorted[..b], &sorted[b..]);
-            if left.len() < params.min_patch_points / 2 || right.len() < params.min_patch_points / 2
-            {
+        let half = params.min_patch_points / 2;
+        for b in half.max(1)..n.saturating_sub(half).max(1) {
+            // Only where the key changes (column or row boundaries).
+            if key(sorted[b]) == key(sorted[b - 1]) {
                 continue;
             }
-            let (l_lo, l_hi) = rows_span(left, cols);
-            let (r_lo, r_hi) = rows_span(right, cols);
-            if l_hi <= l_lo || r_hi <= r_lo {
+            if pre_hi[b] <= pre_lo[b] || suf_hi[b] <= suf_lo[b] {
                 continue;
             }
             let l = prefix[b];
@@ -344,14 +354,15 @@ pub fn split_members(
                 continue;
             };
             let rss2 = fl.residual_ss + fr.residual_ss;
-            if best.as_ref().is_none_or(|(br, _, _)| rss2 < *br) {
-                best = Some((rss2, left.to_vec(), right.to_vec()));
+            if best.is_none_or(|(br, _, _)| rss2 < br) {
+                best = Some((rss2, which, b));
             }
         }
     }
-    let Some((_, a, b)) = best else {
+    let Some((_, which, cut)) = best else {
         return whole;
     };
+    let (a, b) = (orders[which][..cut].to_vec(), orders[which][cut..].to_vec());
     let ok = |m: &[usize]| {
         let (lo, hi) = rows_span(m, cols);
         m.len() >= params.min_patch_points / 2 && hi > lo

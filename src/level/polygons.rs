@@ -119,6 +119,21 @@ fn quad_at(
     if ratio(bottom, top) < params.min_edge_ratio || ratio(left, right) < params.min_edge_ratio {
         return None;
     }
+    // Cheap rejection before the eigen decomposition: the plane through the centroid normal to
+    // the diagonals' cross product is close to the fit for any quad that can pass, so a point
+    // beyond three times the tolerance from it means a corner or an edge.
+    let diag = (corners[2] - corners[0]).cross(&(corners[3] - corners[1]));
+    if let Some(n) = diag.try_normalize(1e-12) {
+        let centroid = acc.centroid();
+        for rr in r..r + qr {
+            for cc in c..c + qc {
+                let p = grid.at(rr, cc)?.p;
+                if n.dot(&(p - centroid)).abs() > 3.0 * tol {
+                    return None;
+                }
+            }
+        }
+    }
     let fit = acc.fit(sigma)?;
     for rr in r..r + qr {
         for cc in c..c + qc {

@@ -6,7 +6,7 @@
 //! trustworthy the step falls back to the odometry and the report says why (CSM issue #17).
 
 use super::correlative::{CorrelativeParams, correlative_search};
-use super::icp::{IcpParams, IcpResult, PosePrior, icp_with_prior};
+use super::icp::{IcpParams, IcpResult, PosePrior, icp, icp_with_prior};
 use super::map::{MapParams, VoxelMap};
 use super::reference::{Line, NormalParams, ScanReference, Target, estimate_lines};
 use crate::geometry::Pose2;
@@ -89,7 +89,7 @@ pub struct MatchReport {
 }
 
 /// Everything the matcher needs. Units in brackets; defaults in `Default`.
-#[derive(Clone, Copy, Debug, PartialEq, Default)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub struct MatcherParams {
     pub mode: Mode,
     pub icp: IcpParams,
@@ -99,9 +99,29 @@ pub struct MatcherParams {
     pub map: MapParams,
     pub checks: CheckParams,
     pub ranges: RangeParams,
+    /// Pairwise: also match the previous scan against this one and take the midpoint of the
+    /// two motions. Default true.
+    pub symmetric: bool,
     /// Weigh the odometry as a prior in every ICP solve; `None` (the default) trusts the scans
     /// alone and uses the odometry only as the first guess.
     pub odometry_prior: Option<OdometryPrior>,
+}
+
+impl Default for MatcherParams {
+    fn default() -> Self {
+        Self {
+            mode: Mode::default(),
+            icp: IcpParams::default(),
+            normals: NormalParams::default(),
+            coarse: Coarse::default(),
+            correlative: CorrelativeParams::default(),
+            map: MapParams::default(),
+            checks: CheckParams::default(),
+            ranges: RangeParams::default(),
+            symmetric: true,
+            odometry_prior: None,
+        }
+    }
 }
 
 /// The odometry's noise per step, for the odometry prior: sigma = per-unit part x the step +
@@ -360,6 +380,7 @@ impl Matcher {
             )
             .map(|c| c.0)
         });
+        let result = result.map(|r| self.symmetrize(points, &keyframe.reference, r));
         let keyframe_estimate = keyframe.estimate;
         self.finish(
             points,
@@ -369,6 +390,42 @@ impl Matcher {
             |r| keyframe_estimate.compose(&r.pose),
             odometry_estimate,
         )
+    }
+
+    /// Matches the other way too (the reference's points against this scan's lines) and takes
+    /// the midpoint of the two motions when they agree: each direction fits lines to a
+    /// different scan's noise, so their errors partly cancel.
+    fn symmetrize(
+        &self,
+        points: &[Point2<f64>],
+        reference: &ScanReference,
+        r: IcpResult,
+    ) -> IcpResult {
+        if !self.params.symmetric {
+            return r;
+        }
+        let current = ScanReference::new(points.to_vec(), &Point2::origin(), &self.params.normals);
+        let Some(back) = icp(
+            reference.points(),
+            &current,
+            r.pose.inverse(),
+            &self.params.icp,
+        ) else {
+            return r;
+        };
+        if self.check(back).is_err() {
+            return r;
+        }
+        let d = r.pose.between(&back.pose.inverse());
+        if d.translation().norm() > 0.02 || d.theta.abs() > 1f64.to_radians() {
+            return r;
+        }
+        IcpResult {
+            pose: r
+                .pose
+                .compose(&Pose2::new(0.5 * d.x, 0.5 * d.y, 0.5 * d.theta)),
+            ..r
+        }
     }
 
     fn metascan(
