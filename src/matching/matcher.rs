@@ -49,6 +49,9 @@ pub enum FallbackReason {
     HighResidual,
     /// The geometry does not pin the motion (a corridor: all normals nearly parallel).
     Degenerate,
+    /// The match moved the pose farther from the odometry guess than the search ever looks:
+    /// a match to the wrong place.
+    LargeCorrection,
 }
 
 impl FallbackReason {
@@ -59,6 +62,7 @@ impl FallbackReason {
             FallbackReason::TooFewCorrespondences => "too_few_correspondences",
             FallbackReason::HighResidual => "high_residual",
             FallbackReason::Degenerate => "degenerate",
+            FallbackReason::LargeCorrection => "large_correction",
         }
     }
 }
@@ -198,6 +202,14 @@ pub struct CheckParams {
     /// With `Coarse::Auto`, the coarse search runs when fewer than this fraction of the
     /// source points are inliers (residual within the kernel scale) [-]. Default 0.8.
     pub coarse_trigger_fraction: f64,
+    /// Largest accepted distance between the match and the odometry guess [m]. Default 0.6
+    /// (the coarse search's 0.4 m window and ICP's reach beyond it).
+    pub max_correction_xy: f64,
+    /// Largest accepted heading change from the odometry guess [rad]. Default 30 deg.
+    pub max_correction_theta: f64,
+    /// Metascan: the largest move the map may make to the pairwise stage's answer [m].
+    /// Default 0.1.
+    pub max_map_correction_xy: f64,
 }
 
 impl Default for CheckParams {
@@ -207,6 +219,9 @@ impl Default for CheckParams {
             max_residual: 0.08,
             min_constraint_ratio: 0.02,
             coarse_trigger_fraction: 0.8,
+            max_correction_xy: 0.6,
+            max_correction_theta: 30f64.to_radians(),
+            max_map_correction_xy: 0.1,
         }
     }
 }
@@ -451,6 +466,7 @@ impl Matcher {
         // poor guess. Then refine against the whole map, which ties the run to earlier visits.
         let mut start = guess;
         let mut coarse = false;
+        let mut local_ok: Option<IcpResult> = None;
         if let Some(kf) = self.keyframe.as_ref() {
             let local_guess = kf.estimate.between(&guess);
             let (local, used_coarse) = self.align(points, &kf.reference, local_guess, |g| {
@@ -466,6 +482,7 @@ impl Matcher {
             coarse = used_coarse;
             if let Ok(r) = local {
                 start = kf.estimate.compose(&r.pose);
+                local_ok = Some(IcpResult { pose: start, ..r });
             }
         }
         // The start is already within millimetres; in a map whose walls are a few voxels
@@ -486,12 +503,49 @@ impl Matcher {
             .map(|o| o.around(guess, &step));
         let result = icp_with_prior(points, &self.map, start, prior, &refine)
             .ok_or(FallbackReason::TooFewCorrespondences)
-            .and_then(|r| self.check(r));
+            .and_then(|r| self.check(r))
+            .and_then(|r| self.gate(r, &guess));
+        // The map may only fine-tune the pairwise stage's answer: a big jump means the map
+        // near here is too thin or ambiguous (e.g. built from one far scan), so keep the
+        // pairwise answer instead.
+        let result = match (result, local_ok) {
+            (Ok(r), Some(local)) => {
+                let d = local.pose.between(&r.pose);
+                if d.translation().norm() > self.params.checks.max_map_correction_xy {
+                    Ok(local)
+                } else {
+                    Ok(r)
+                }
+            }
+            (Err(_), Some(local)) => Ok(local),
+            (result, None) => result,
+        };
         self.finish(points, odometry, result, coarse, |r| r.pose, guess)
     }
 
     /// ICP from `guess`, with the coarse search first or as a second try, per `Coarse`.
     fn align(
+        &self,
+        points: &[Point2<f64>],
+        target: &dyn Target,
+        guess: Pose2,
+        coarse_search: impl Fn(Pose2) -> Option<Pose2>,
+    ) -> (Result<IcpResult, FallbackReason>, bool) {
+        let (result, coarse) = self.align_unchecked(points, target, guess, coarse_search);
+        (result.and_then(|r| self.gate(r, &guess)), coarse)
+    }
+
+    /// Rejects a match that moved too far from the odometry guess.
+    fn gate(&self, r: IcpResult, guess: &Pose2) -> Result<IcpResult, FallbackReason> {
+        let c = &self.params.checks;
+        let d = guess.between(&r.pose);
+        if d.translation().norm() > c.max_correction_xy || d.theta.abs() > c.max_correction_theta {
+            return Err(FallbackReason::LargeCorrection);
+        }
+        Ok(r)
+    }
+
+    fn align_unchecked(
         &self,
         points: &[Point2<f64>],
         target: &dyn Target,
@@ -600,8 +654,23 @@ impl Matcher {
     ) -> MatchReport {
         // Pairwise: the next scan is matched against this one (placed by odometry), so one bad
         // step does not poison the next. Metascan: a scan that did not match stays out of the map.
-        if self.params.mode == Mode::Pairwise && !points.is_empty() {
-            self.remember(points, estimate, odometry);
+        if !points.is_empty() {
+            match self.params.mode {
+                Mode::Pairwise => self.remember(points, estimate, odometry),
+                // The map stays clean, but the next scan's first (pairwise) stage starts from
+                // this one, the nearest scan in space and time.
+                Mode::Metascan => {
+                    self.keyframe = Some(Keyframe {
+                        reference: ScanReference::new(
+                            points.to_vec(),
+                            &Point2::origin(),
+                            &self.params.normals,
+                        ),
+                        estimate,
+                        odometry,
+                    });
+                }
+            }
         }
         MatchReport {
             estimate,
