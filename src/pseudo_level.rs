@@ -14,7 +14,7 @@ use crate::geometry::{Pose, rot_y};
 use crate::level::patches::UNLABELLED;
 use crate::level::{LevelEstimate, SurfaceKind};
 use crate::scan::Scan;
-use nalgebra::{Matrix3, Point3, Vector3};
+use nalgebra::{Matrix3, Point3, Vector2, Vector3};
 
 /// Parameters of the pseudo-level scan.
 #[derive(Clone, Debug, PartialEq)]
@@ -44,16 +44,7 @@ impl Default for PseudoLevelParams {
 /// from the base scan: `sequence`, planar `odometry`/`true_pose`/`estimate`, `timestamp` and
 /// unknown fields. A failed pose gives a scan with every ray invalid.
 pub fn pseudo_level_scan(scans: &[Scan], est: &LevelEstimate, params: &PseudoLevelParams) -> Scan {
-    let base_index = est
-        .base_scan
-        .or_else(|| {
-            (0..scans.len()).min_by(|&a, &b| {
-                let ea = scans[a].elevation.unwrap_or(0.0).abs();
-                let eb = scans[b].elevation.unwrap_or(0.0).abs();
-                ea.total_cmp(&eb)
-            })
-        })
-        .unwrap_or(0);
+    let base_index = base_scan_index(scans, est);
     let Some(base) = scans.get(base_index) else {
         return Scan::default();
     };
@@ -104,6 +95,24 @@ pub fn pseudo_level_scan(scans: &[Scan], est: &LevelEstimate, params: &PseudoLev
     out
 }
 
+/// The index of the base scan in `scans`: the one the estimate chose (most points on walls,
+/// sect. 6), or, for a pose that failed before choosing (too few scans, inconsistent scans),
+/// the scan nearest level elevation.
+pub fn base_scan_index(scans: &[Scan], est: &LevelEstimate) -> usize {
+    est.base_scan
+        .or_else(|| {
+            (0..scans.len()).min_by(|&a, &b| {
+                let ea = scans[a].elevation.unwrap_or(0.0).abs();
+                let eb = scans[b].elevation.unwrap_or(0.0).abs();
+                ea.total_cmp(&eb)
+            })
+        })
+        .unwrap_or(0)
+}
+
+/// Slack on how far a filled gap point may stray from its wall neighbours [m].
+const GAP_SLACK: f64 = 0.05;
+
 fn planar(p: Pose) -> Pose {
     Pose::planar(p.x, p.y, p.rz)
 }
@@ -146,6 +155,7 @@ fn kept_rays(
     let ceiling_z = height_of(SurfaceKind::Ceiling);
     let mut is_wall = vec![false; n];
     let mut blocked = vec![false; n];
+    let mut flat_points: Vec<Option<Vector2<f64>>> = vec![None; n];
     for (c, slot) in is_wall.iter_mut().enumerate() {
         let i = row * grid.cols + c;
         let Some(g) = &grid.points[i] else {
@@ -153,6 +163,7 @@ fn kept_rays(
             continue;
         };
         let lp = level(&g.p);
+        flat_points[c] = Some(lp.xy());
         let dz_noise = 3.0 * sigma * (level_from_robot * g.dir).z.abs();
         let near =
             |h: Option<f64>| h.is_some_and(|h| (lp.z - h).abs() < params.floor_margin + dz_noise);
@@ -183,8 +194,17 @@ fn kept_rays(
             });
         }
     }
-    // Fill short gaps between wall points, only with rays that had a return and are not known
-    // floor or ceiling points.
+    // Fill short gaps between wall points, only with rays that had a return, are not known
+    // floor or ceiling points, and lie near the two wall points either side: a ray through a
+    // doorway that meets the floor metres beyond is exactly the phantom to keep out.
+    let near_gap = |k: usize, l: usize, c: usize| -> bool {
+        let (Some(p), Some(a), Some(b)) = (flat_points[k], flat_points[l], flat_points[c]) else {
+            return false;
+        };
+        let ab = b - a;
+        let t = ((p - a).dot(&ab) / ab.norm_squared().max(1e-12)).clamp(0.0, 1.0);
+        (p - (a + ab * t)).norm() <= 0.5 * ab.norm() + 3.0 * sigma + GAP_SLACK
+    };
     let mut keep = is_wall.clone();
     let mut last: Option<usize> = None;
     for (c, &wall) in is_wall.iter().enumerate() {
@@ -195,7 +215,7 @@ fn kept_rays(
             let gap = c - l - 1;
             if gap > 0 && gap <= params.max_gap {
                 for k in l + 1..c {
-                    keep[k] |= !blocked[k];
+                    keep[k] |= !blocked[k] && near_gap(k, l, c);
                 }
             }
         }

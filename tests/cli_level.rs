@@ -157,6 +157,9 @@ fn level_reads_standard_input_and_fails_a_two_scan_pose_with_a_reason() {
     assert_eq!(r["level"]["status"], "failed");
     assert_eq!(r["level"]["reason"], "too_few_scans");
     assert!(r["level"]["theta_x"].is_null() && r["level"]["up"].is_null());
+    // Only the angles, sigmas and up are null for a failed pose (contract); the base scan is
+    // still named by its elevation.
+    assert!(r["level"]["base_elevation"].is_number(), "{}", r["level"]);
     assert!(
         r["valid"]
             .as_array()

@@ -77,3 +77,38 @@ fn corridor_is_parallel_walls_on_walls_alone_and_leveled_with_the_floor() {
         .to_degrees();
     assert!(err < 0.5, "error {err} deg");
 }
+
+/// A room whose front wall has a 0.2 m gap (a doorway), with nothing behind it but floor.
+fn room_with_doorway() -> Room {
+    Room {
+        segments: vec![
+            ([8.0, 3.1], [8.0, 6.0]),
+            ([8.0, 6.0], [0.0, 6.0]),
+            ([0.0, 6.0], [0.0, 0.0]),
+            ([0.0, 0.0], [8.0, 0.0]),
+            ([8.0, 0.0], [8.0, 2.9]),
+        ],
+        height: 2.5,
+        ceiling: false,
+    }
+}
+
+#[test]
+fn gap_filling_keeps_no_floor_hit_seen_through_a_doorway() {
+    use levelscan::pseudo_level::{PseudoLevelParams, pseudo_level_scan};
+    let pose = Pose::new(4.0, 3.0, 0.5, 0.0, deg(-4.0), deg(6.0));
+    let scans = scans_at(&room_with_doorway(), &pose, &elevations(3, 5.0), 0.0, 5, 0);
+    let e = level_pose(&scans, &LevelParams::default());
+    assert!(e.is_ok(), "{:?}", e.failure);
+    let out = pseudo_level_scan(&scans, &e, &PseudoLevelParams::default());
+    // Every kept point is on a wall: the farthest wall from (4, 3) is under 5 m away.
+    for i in 0..out.nrays() {
+        if let Some(r) = out.range(i) {
+            assert!(
+                r < 5.5,
+                "ray {i} kept at {r} m: a floor hit beyond the doorway"
+            );
+        }
+    }
+    assert!(out.valid_count() > 150, "only {} kept", out.valid_count());
+}

@@ -5,7 +5,7 @@ use super::{open_input, open_output};
 use anyhow::Context;
 use levelscan::formats::{InputError, ParallelScanReader, write_scan};
 use levelscan::level::{Estimator, LevelEstimate, LevelParams, SurfaceKind, level_pose};
-use levelscan::pseudo_level::{PseudoLevelParams, pseudo_level_scan};
+use levelscan::pseudo_level::{PseudoLevelParams, base_scan_index, pseudo_level_scan};
 use levelscan::scan::Scan;
 use nalgebra::Point3;
 use rayon::prelude::*;
@@ -167,9 +167,8 @@ pub fn level_record(
     polygons: bool,
 ) -> Scan {
     let mut scan = pseudo_level_scan(scans, est, pseudo);
-    let base_elevation = est
-        .base_scan
-        .and_then(|i| scans.get(i))
+    let base_elevation = scans
+        .get(base_scan_index(scans, est))
         .and_then(|s| s.elevation);
     let level = json!({
         "status": if est.is_ok() { "ok" } else { "failed" },
