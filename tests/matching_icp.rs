@@ -212,3 +212,46 @@ fn metascan_around_a_loop_with_poor_odometry_stays_accurate() {
         }
     }
 }
+
+#[test]
+fn the_correction_gate_applies_only_to_a_guess_from_odometry() {
+    // With no odometry the guess is the identity, which says nothing about the step: a match
+    // farther than the gate from it is still the answer. With odometry that claims no motion,
+    // the same match is rejected as a large correction.
+    let walls = office();
+    let a = Pose2::new(1.5, 2.0, 0.0);
+    let b = Pose2::new(1.75, 2.05, 0.05);
+    let mut params = MatcherParams::default();
+    params.checks.max_correction_xy = 0.1;
+    for mode in [Mode::Pairwise, Mode::Metascan] {
+        let params = MatcherParams { mode, ..params };
+        let blind = vec![
+            (scan_at(&a, &walls, 181, 0.0, 1), None),
+            (scan_at(&b, &walls, 181, 0.0, 2), None),
+        ];
+        let reports = match_run(&blind, &params);
+        assert_eq!(reports[1].status, MatchStatus::Ok, "{mode:?}");
+        let step = reports[0].estimate.between(&reports[1].estimate);
+        assert!(
+            close(&step, &a.between(&b), 1e-4, 1e-4),
+            "{mode:?}: {step:?}"
+        );
+        let still = vec![
+            (scan_at(&a, &walls, 181, 0.0, 1), Some(a)),
+            (scan_at(&b, &walls, 181, 0.0, 2), Some(a)),
+        ];
+        let reports = match_run(&still, &params);
+        // Metascan's map stage may name another reason once the local stage was refused.
+        match mode {
+            Mode::Pairwise => assert_eq!(
+                reports[1].status,
+                MatchStatus::Fallback(FallbackReason::LargeCorrection)
+            ),
+            Mode::Metascan => assert!(
+                matches!(reports[1].status, MatchStatus::Fallback(_)),
+                "{:?}",
+                reports[1].status
+            ),
+        }
+    }
+}

@@ -535,8 +535,12 @@ impl Matcher {
         (result.and_then(|r| self.gate(r, &guess)), coarse)
     }
 
-    /// Rejects a match that moved too far from the odometry guess.
+    /// Rejects a match that moved too far from the odometry guess. Without odometry the guess
+    /// is the identity, which says nothing about the step, so nothing is rejected.
     fn gate(&self, r: IcpResult, guess: &Pose2) -> Result<IcpResult, FallbackReason> {
+        if !self.has_odometry {
+            return Ok(r);
+        }
         let c = &self.params.checks;
         let d = guess.between(&r.pose);
         if d.translation().norm() > c.max_correction_xy || d.theta.abs() > c.max_correction_theta {
