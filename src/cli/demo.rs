@@ -9,11 +9,12 @@ use super::level::level_record;
 use super::progress_bar;
 use anyhow::Context;
 use levelscan::eval::accuracy::{AccuracyParams, CellStats, run_accuracy};
-use levelscan::eval::metrics::{Ate, Rpe, ate, rpe};
+use levelscan::eval::matching::{RunKind, RunResult, match_scans, nearest_level_scan};
+use levelscan::eval::metrics::{Ate, Rpe};
 use levelscan::formats::{parse_plan, write_scan};
 use levelscan::geometry::{Attitude, Pose, Pose2};
 use levelscan::level::{LevelParams, level_pose};
-use levelscan::matching::matcher::{MatchStatus, MatcherParams, Mode, match_run, scan_points};
+use levelscan::matching::matcher::{MatcherParams, Mode};
 use levelscan::plan::Plan;
 use levelscan::pseudo_level::PseudoLevelParams;
 use levelscan::scan::Scan;
@@ -26,10 +27,9 @@ use levelscan::viz::histogram;
 use levelscan::viz::html::{Source, ViewParams, build_scene, viewer_page};
 use levelscan::viz::plots::{
     AccuracyCell, MapPanel, grouped_bars_png, grouped_bars_svg, map_panels_png, map_panels_svg,
-    table_one_chart,
+    run_map_panel, table_one_chart,
 };
 use levelscan::viz::report::{Block, Figure, Panel, Report, Section, Table, render};
-use nalgebra::Point2;
 use rayon::prelude::*;
 use serde::Serialize;
 use serde_json::json;
@@ -77,6 +77,23 @@ struct MatchRow {
     scans: usize,
 }
 
+impl From<&RunResult> for MatchRow {
+    fn from(r: &RunResult) -> Self {
+        MatchRow {
+            run: r.kind.label().to_string(),
+            mode: match r.mode {
+                Mode::Pairwise => "pairwise",
+                Mode::Metascan => "metascan",
+            }
+            .to_string(),
+            ate: r.ate,
+            rpe: r.rpe,
+            fallbacks: r.fallbacks,
+            scans: r.scans,
+        }
+    }
+}
+
 /// How leveling went on the demo's own run.
 #[derive(Clone, Debug, Serialize)]
 struct PoseLevel {
@@ -121,13 +138,6 @@ struct DemoData {
 }
 
 /// A matched run with what its maps need.
-struct MatchedRun {
-    row: MatchRow,
-    /// Estimates aligned onto the truth (ATE's alignment), one per scan.
-    aligned: Vec<Pose2>,
-    points: Vec<Vec<Point2<f64>>>,
-}
-
 pub fn run(args: Args) -> anyhow::Result<()> {
     anyhow::ensure!(
         args.scans >= 3,
@@ -188,20 +198,21 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .map(|scans| nearest_level_scan(scans))
         .collect();
     let leveled_scans: Vec<Scan> = leveled.iter().map(|(s, _)| s.clone()).collect();
-    let inputs: [(&str, &[Scan]); 3] = [
-        ("level floor", &flat),
-        ("raw", &raw),
-        ("leveled", &leveled_scans),
+    let inputs: [(RunKind, &[Scan]); 3] = [
+        (RunKind::LevelFloor, &flat),
+        (RunKind::Raw, &raw),
+        (RunKind::Leveled, &leveled_scans),
     ];
-    let jobs: Vec<(&str, &[Scan], Mode)> = inputs
+    let jobs: Vec<(RunKind, &[Scan], Mode)> = inputs
         .iter()
-        .flat_map(|&(name, scans)| {
-            [Mode::Pairwise, Mode::Metascan].map(move |mode| (name, scans, mode))
+        .flat_map(|&(kind, scans)| {
+            [Mode::Pairwise, Mode::Metascan].map(move |mode| (kind, scans, mode))
         })
         .collect();
-    let runs: Vec<MatchedRun> = jobs
+    let matcher = MatcherParams::default();
+    let runs: Vec<RunResult> = jobs
         .par_iter()
-        .map(|&(name, scans, mode)| match_scans(name, scans, mode, &truth))
+        .map(|&(kind, scans, mode)| match_scans(kind, scans, mode, &truth, &matcher))
         .collect();
     stages.inc(1);
     lap("match", &mut timings);
@@ -238,7 +249,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             ),
         },
         level,
-        matching: runs.iter().map(|r| r.row.clone()).collect(),
+        matching: runs.iter().map(MatchRow::from).collect(),
         accuracy,
         timings_s: BTreeMap::new(),
     };
@@ -333,59 +344,6 @@ fn adaptive_attempt(scan: &Scan) -> u64 {
         .unwrap_or(0)
 }
 
-/// The raw run uses, at each pose, the scan taken nearest elevation 0, unleveled (issue 4).
-fn nearest_level_scan(scans: &[Scan]) -> Scan {
-    scans
-        .iter()
-        .min_by(|a, b| {
-            let ea = a.elevation.unwrap_or(0.0).abs();
-            let eb = b.elevation.unwrap_or(0.0).abs();
-            ea.total_cmp(&eb)
-        })
-        .cloned()
-        .unwrap_or_default()
-}
-
-fn match_scans(name: &str, scans: &[Scan], mode: Mode, truth: &[Pose2]) -> MatchedRun {
-    let params = MatcherParams {
-        mode,
-        ..MatcherParams::default()
-    };
-    let inputs: Vec<(Vec<Point2<f64>>, Option<Pose2>)> = scans
-        .iter()
-        .map(|s| {
-            (
-                scan_points(s, &params.ranges),
-                s.odometry.map(|p| p.to_pose2()),
-            )
-        })
-        .collect();
-    let reports = match_run(&inputs, &params);
-    let estimates: Vec<Pose2> = reports.iter().map(|r| r.estimate).collect();
-    let fallbacks = reports
-        .iter()
-        .filter(|r| matches!(r.status, MatchStatus::Fallback(_)))
-        .count();
-    let ate_result = ate(&estimates, truth);
-    let alignment = ate_result.map(|a| a.alignment).unwrap_or_default();
-    MatchedRun {
-        row: MatchRow {
-            run: name.to_string(),
-            mode: match mode {
-                Mode::Pairwise => "pairwise",
-                Mode::Metascan => "metascan",
-            }
-            .to_string(),
-            ate: ate_result,
-            rpe: rpe(&estimates, truth),
-            fallbacks,
-            scans: scans.len(),
-        },
-        aligned: estimates.iter().map(|e| alignment.compose(e)).collect(),
-        points: inputs.into_iter().map(|(p, _)| p).collect(),
-    }
-}
-
 fn level_summary(tilted: &[Vec<Scan>], leveled: &[(Scan, Option<Attitude>)]) -> LevelSummary {
     let per_pose: Vec<PoseLevel> = tilted
         .iter()
@@ -444,37 +402,6 @@ struct Figures {
     histogram: Figure,
 }
 
-fn map_panel(plan: &Plan, run: &MatchedRun, truth: &[Pose2]) -> MapPanel {
-    let walls = plan
-        .segments()
-        .iter()
-        .map(|s| [s.a.x, s.a.y, s.b.x, s.b.y])
-        .collect();
-    let points = run
-        .aligned
-        .iter()
-        .zip(&run.points)
-        .flat_map(|(pose, pts)| {
-            pts.iter().map(|p| {
-                let w = pose.transform_point(p);
-                [w.x, w.y]
-            })
-        })
-        .collect();
-    let ate = run
-        .row
-        .ate
-        .map(|a| format!("ATE {:.3} m", a.rmse))
-        .unwrap_or_default();
-    MapPanel {
-        title: format!("{} scans, {}: {ate}", run.row.run, run.row.mode),
-        walls,
-        points,
-        truth: truth.iter().map(|p| [p.x, p.y]).collect(),
-        estimate: run.aligned.iter().map(|p| [p.x, p.y]).collect(),
-    }
-}
-
 /// Writes one map as PNG and SVG in `dir`, and returns the PNG for embedding (smaller than
 /// the SVG's thousands of points).
 fn map_figure(dir: &Path, stem: &str, panels: &[MapPanel], size: (u32, u32)) -> Figure {
@@ -492,29 +419,35 @@ fn map_figure(dir: &Path, stem: &str, panels: &[MapPanel], size: (u32, u32)) -> 
     }
 }
 
-fn make_figures(dir: &Path, plan: &Plan, runs: &[MatchedRun], accuracy: &[CellStats]) -> Figures {
+fn make_figures(dir: &Path, plan: &Plan, runs: &[RunResult], accuracy: &[CellStats]) -> Figures {
     let truth: Vec<Pose2> = plan.poses.iter().map(Pose::to_pose2).collect();
-    let find = |run: &str, mode: &str| {
+    let find = |kind: RunKind, mode: Mode| {
         runs.iter()
-            .find(|r| r.row.run == run && r.row.mode == mode)
-            .map(|r| map_panel(plan, r, &truth))
+            .find(|r| r.kind == kind && r.mode == mode)
+            .map(|r| run_map_panel(plan, r, &truth))
             .unwrap_or_default()
     };
     let one = |stem: &str, panel: MapPanel| map_figure(dir, stem, &[panel], (620, 520));
     let metascan = [
-        one("map_raw_metascan", find("raw", "metascan")),
-        one("map_leveled_metascan", find("leveled", "metascan")),
+        one("map_raw_metascan", find(RunKind::Raw, Mode::Metascan)),
+        one(
+            "map_leveled_metascan",
+            find(RunKind::Leveled, Mode::Metascan),
+        ),
     ];
     let pairwise = [
-        one("map_raw_pairwise", find("raw", "pairwise")),
-        one("map_leveled_pairwise", find("leveled", "pairwise")),
+        one("map_raw_pairwise", find(RunKind::Raw, Mode::Pairwise)),
+        one(
+            "map_leveled_pairwise",
+            find(RunKind::Leveled, Mode::Pairwise),
+        ),
     ];
     let level_floor = map_figure(
         dir,
         "map_level_floor",
         &[
-            find("level floor", "pairwise"),
-            find("level floor", "metascan"),
+            find(RunKind::LevelFloor, Mode::Pairwise),
+            find(RunKind::LevelFloor, Mode::Metascan),
         ],
         (1240, 520),
     );
@@ -523,7 +456,10 @@ fn make_figures(dir: &Path, plan: &Plan, runs: &[MatchedRun], accuracy: &[CellSt
     let _ = map_figure(
         dir,
         "maps_raw_vs_leveled",
-        &[find("raw", "metascan"), find("leveled", "metascan")],
+        &[
+            find(RunKind::Raw, Mode::Metascan),
+            find(RunKind::Leveled, Mode::Metascan),
+        ],
         (1240, 520),
     );
     let cells: Vec<AccuracyCell> = accuracy
@@ -617,14 +553,10 @@ fn pose_scene(
 }
 
 /// The leveled scans as matched by metascan, top down (the paper's Fig. 5b).
-fn matched_scene(
-    plan: &Plan,
-    runs: &[MatchedRun],
-    leveled: &[Scan],
-) -> levelscan::viz::html::Scene {
+fn matched_scene(plan: &Plan, runs: &[RunResult], leveled: &[Scan]) -> levelscan::viz::html::Scene {
     let run = runs
         .iter()
-        .find(|r| r.row.run == "leveled" && r.row.mode == "metascan");
+        .find(|r| r.kind == RunKind::Leveled && r.mode == Mode::Metascan);
     let scans: Vec<Scan> = match run {
         Some(run) => leveled
             .iter()

@@ -4,14 +4,12 @@
 use super::matching::MatchOptions;
 use super::open_input;
 use anyhow::Context;
-use levelscan::eval::matching::{ExperimentParams, RunResult, matching_experiment};
+use levelscan::eval::matching::{ExperimentParams, matching_experiment};
 use levelscan::eval::real::{RealLog, RealResult, evaluate_real};
 use levelscan::formats::{CarmenParams, read_any, read_plan};
-use levelscan::geometry::Pose2;
 use levelscan::matching::{Mode, scan_points};
-use levelscan::plan::Plan;
 use levelscan::simulate::{OdometryParams, ScannerParams, elevations_centred};
-use levelscan::viz::plots::{MapPanel, map_panels_png, map_panels_svg};
+use levelscan::viz::plots::{MapPanel, map_panels_png, map_panels_svg, run_map_panel};
 use std::fmt::Write as _;
 use std::path::PathBuf;
 
@@ -121,7 +119,7 @@ pub fn run_matching(args: MatchingArgs) -> anyhow::Result<()> {
                 let panels: Vec<MapPanel> = runs
                     .iter()
                     .filter(|r| r.mode == mode)
-                    .map(|r| map_panel(&plan, r, &truth))
+                    .map(|r| run_map_panel(&plan, r, &truth))
                     .collect();
                 let name = format!("{stem}_{}", mode_label(mode));
                 let size = (600 * panels.len() as u32, 520);
@@ -149,37 +147,6 @@ fn mode_label(mode: Mode) -> &'static str {
     match mode {
         Mode::Pairwise => "pairwise",
         Mode::Metascan => "metascan",
-    }
-}
-
-/// A top-down map of one run: the plan's walls, every scan placed at its (aligned) estimate,
-/// and the true and estimated paths.
-pub fn map_panel(plan: &Plan, run: &RunResult, truth: &[Pose2]) -> MapPanel {
-    MapPanel {
-        title: format!(
-            "{}, {}: ATE {}",
-            run.kind.label(),
-            mode_label(run.mode),
-            run.ate.map_or("-".into(), |a| format!("{:.3} m", a.rmse))
-        ),
-        walls: plan
-            .segments()
-            .iter()
-            .map(|s| [s.a.x, s.a.y, s.b.x, s.b.y])
-            .collect(),
-        points: run
-            .aligned
-            .iter()
-            .zip(&run.points)
-            .flat_map(|(pose, pts)| {
-                pts.iter().map(|p| {
-                    let w = pose.transform_point(p);
-                    [w.x, w.y]
-                })
-            })
-            .collect(),
-        truth: truth.iter().map(|p| [p.x, p.y]).collect(),
-        estimate: run.aligned.iter().map(|p| [p.x, p.y]).collect(),
     }
 }
 

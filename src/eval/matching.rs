@@ -162,7 +162,8 @@ pub fn nearest_level_scan(scans: &[Scan]) -> Scan {
         .unwrap_or_default()
 }
 
-fn match_scans(
+/// Matches one run's scans with `mode` and scores it against the truth (ATE, RPE, fallbacks).
+pub fn match_scans(
     kind: RunKind,
     scans: &[Scan],
     mode: Mode,

@@ -3,6 +3,9 @@
 //! text (for self-contained reports) or PNG files.
 
 use crate::eval::accuracy::paper_mean;
+use crate::eval::matching::RunResult;
+use crate::geometry::Pose2;
+use crate::plan::Plan;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 use std::path::Path;
@@ -346,6 +349,40 @@ pub fn map_panels_svg(panels: &[MapPanel], size: (u32, u32)) -> Result<String, P
         draw_side_by_side(&area, panels)?;
     }
     Ok(svg)
+}
+
+/// A top-down map of one matched run (paper Figs. 8-10): the plan's walls, every scan placed at
+/// its estimate after the ATE alignment, and the true and estimated paths.
+pub fn run_map_panel(plan: &Plan, run: &RunResult, truth: &[Pose2]) -> MapPanel {
+    let mode = match run.mode {
+        crate::matching::Mode::Pairwise => "pairwise",
+        crate::matching::Mode::Metascan => "metascan",
+    };
+    let ate = run
+        .ate
+        .map(|a| format!("ATE {:.3} m", a.rmse))
+        .unwrap_or_default();
+    MapPanel {
+        title: format!("{} scans, {mode}: {ate}", run.kind.label()),
+        walls: plan
+            .segments()
+            .iter()
+            .map(|s| [s.a.x, s.a.y, s.b.x, s.b.y])
+            .collect(),
+        points: run
+            .aligned
+            .iter()
+            .zip(&run.points)
+            .flat_map(|(pose, pts)| {
+                pts.iter().map(|p| {
+                    let w = pose.transform_point(p);
+                    [w.x, w.y]
+                })
+            })
+            .collect(),
+        truth: truth.iter().map(|p| [p.x, p.y]).collect(),
+        estimate: run.aligned.iter().map(|p| [p.x, p.y]).collect(),
+    }
 }
 
 #[cfg(test)]
