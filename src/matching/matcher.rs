@@ -316,20 +316,19 @@ impl Matcher {
         }
     }
 
+    /// Makes `points` (at `estimate`) the scan the next one is first matched against.
+    fn set_keyframe(&mut self, points: &[Point2<f64>], estimate: Pose2, odometry: Option<Pose2>) {
+        self.keyframe = Some(Keyframe {
+            reference: ScanReference::new(points.to_vec(), &Point2::origin(), &self.params.normals),
+            estimate,
+            odometry,
+        });
+    }
+
     /// Makes `points` (at `estimate`) the next pairwise reference, or adds them to the map.
     fn remember(&mut self, points: &[Point2<f64>], estimate: Pose2, odometry: Option<Pose2>) {
         match self.params.mode {
-            Mode::Pairwise => {
-                self.keyframe = Some(Keyframe {
-                    reference: ScanReference::new(
-                        points.to_vec(),
-                        &Point2::origin(),
-                        &self.params.normals,
-                    ),
-                    estimate,
-                    odometry,
-                });
-            }
+            Mode::Pairwise => self.set_keyframe(points, estimate, odometry),
             Mode::Metascan => {
                 let lines = estimate_lines(points, &Point2::origin(), &self.params.normals);
                 let world: Vec<Point2<f64>> =
@@ -656,25 +655,11 @@ impl Matcher {
         reason: FallbackReason,
         residual: Option<f64>,
     ) -> MatchReport {
-        // Pairwise: the next scan is matched against this one (placed by odometry), so one bad
-        // step does not poison the next. Metascan: a scan that did not match stays out of the map.
+        // The next scan is first matched against this one (placed by odometry), so one bad step
+        // does not poison the next. Metascan keeps it out of the map, which stays clean, but its
+        // first (pairwise) stage starts from this scan, the nearest in space and time.
         if !points.is_empty() {
-            match self.params.mode {
-                Mode::Pairwise => self.remember(points, estimate, odometry),
-                // The map stays clean, but the next scan's first (pairwise) stage starts from
-                // this one, the nearest scan in space and time.
-                Mode::Metascan => {
-                    self.keyframe = Some(Keyframe {
-                        reference: ScanReference::new(
-                            points.to_vec(),
-                            &Point2::origin(),
-                            &self.params.normals,
-                        ),
-                        estimate,
-                        odometry,
-                    });
-                }
-            }
+            self.set_keyframe(points, estimate, odometry);
         }
         MatchReport {
             estimate,
