@@ -55,16 +55,13 @@ fn box_with_clutter(n: usize) -> World {
     World::from_segments(segments, 3.0, false)
 }
 
-/// Random rays from inside the box, within 20 degrees of level, so most meet walls.
-fn rays() -> Vec<(Point3<f64>, Vector3<f64>)> {
-    let mut rng = ChaCha8Rng::seed_from_u64(2);
+/// `RAYS` rays from random points of the square `[lo, hi]^2` at scanner height, in random
+/// directions within 20 degrees of level.
+fn random_rays(seed: u64, lo: f64, hi: f64) -> Vec<(Point3<f64>, Vector3<f64>)> {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
     (0..RAYS)
         .map(|_| {
-            let o = Point3::new(
-                rng.random_range(1.0..SIDE - 1.0),
-                rng.random_range(1.0..SIDE - 1.0),
-                0.45,
-            );
+            let o = Point3::new(rng.random_range(lo..hi), rng.random_range(lo..hi), 0.45);
             let az = rng.random_range(0.0..std::f64::consts::TAU);
             let el = rng.random_range(-0.35f64..0.35);
             (
@@ -80,7 +77,7 @@ fn rays() -> Vec<(Point3<f64>, Vector3<f64>)> {
 #[divan::bench(args = [100, 10_000])]
 fn cast_rays(bencher: Bencher, segments: usize) {
     let world = box_with_clutter(segments);
-    let rays = rays();
+    let rays = random_rays(2, 1.0, SIDE - 1.0);
     bencher
         .counter(divan::counter::ItemsCount::new(RAYS))
         .bench(|| {
@@ -96,7 +93,7 @@ fn cast_rays(bencher: Bencher, segments: usize) {
 #[divan::bench(args = [100, 10_000])]
 fn cast_rays_brute_force(bencher: Bencher, segments: usize) {
     let world = box_with_clutter(segments);
-    let rays = rays();
+    let rays = random_rays(2, 1.0, SIDE - 1.0);
     bencher
         .counter(divan::counter::ItemsCount::new(RAYS))
         .bench(|| {
@@ -161,33 +158,14 @@ fn tiled_rooms(tiles: usize) -> World {
     World::from_segments(segments, 3.0, false)
 }
 
-/// Rays from random points of the middle room, within 20 degrees of level.
-fn rays_in_room(tiles: usize) -> Vec<(Point3<f64>, Vector3<f64>)> {
-    let mut rng = ChaCha8Rng::seed_from_u64(5);
-    let base = (tiles / 2) as f64 * ROOM;
-    (0..RAYS)
-        .map(|_| {
-            let o = Point3::new(
-                base + rng.random_range(0.2..ROOM - 0.2),
-                base + rng.random_range(0.2..ROOM - 0.2),
-                0.45,
-            );
-            let az = rng.random_range(0.0..std::f64::consts::TAU);
-            let el = rng.random_range(-0.35f64..0.35);
-            (
-                o,
-                Vector3::new(el.cos() * az.cos(), el.cos() * az.sin(), el.sin()),
-            )
-        })
-        .collect()
-}
-
 /// The same room alone (100 segments) and among 99 copies (10,000 segments): what the size of
 /// the plan alone costs each ray.
 #[divan::bench(args = [1, 10])]
 fn cast_rays_tiled_rooms(bencher: Bencher, tiles: usize) {
     let world = tiled_rooms(tiles);
-    let rays = rays_in_room(tiles);
+    // Rays from the middle room, which is the same in every plan size.
+    let base = (tiles / 2) as f64 * ROOM;
+    let rays = random_rays(5, base + 0.2, base + ROOM - 0.2);
     bencher
         .counter(divan::counter::ItemsCount::new(RAYS))
         .bench(|| {

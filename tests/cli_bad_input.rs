@@ -2,13 +2,12 @@
 //! with a non-zero exit and ONE line on standard error, `FILE:LINE: what is wrong` (the JSON
 //! path instead of the line for `.wall` files), and never panics.
 
+mod cli_support;
+use cli_support::*;
+
 use std::io::Write;
 use std::path::PathBuf;
-use std::process::{Command, Output, Stdio};
-
-fn bin() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_levelscan"))
-}
+use std::process::Output;
 
 /// A temporary file that is removed when dropped.
 struct TempFile(PathBuf);
@@ -106,21 +105,8 @@ fn every_bad_scan_line_fails_with_file_and_line() {
 
 #[test]
 fn bad_line_on_stdin_is_named_stdin() {
-    let mut child = bin()
-        .arg("info")
-        .stdin(Stdio::piped())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
     let input = format!("{GOOD}\n{}\n", BAD_SCAN_LINES[2].1);
-    child
-        .stdin
-        .take()
-        .unwrap()
-        .write_all(input.as_bytes())
-        .unwrap();
-    let out = child.wait_with_output().unwrap();
+    let out = run_with_stdin(&["info"], input.as_bytes());
     let err = one_line_failure(&out, "stdin");
     assert_eq!(err, "<stdin>:2: readings has 2 entries but nrays is 3");
 }

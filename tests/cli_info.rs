@@ -1,28 +1,15 @@
 //! End-to-end runs of `levelscan info` on each input it reads: simulator output, CSM logs,
 //! CARMEN logs (plain and gzipped), empty input.
 
+mod cli_support;
+use cli_support::*;
+
 use serde_json::{Value, json};
 use std::io::Write;
 use std::path::{Path, PathBuf};
-use std::process::{Command, Stdio};
-
-fn bin() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_levelscan"))
-}
 
 fn info_of(input: &[u8]) -> Value {
-    let mut child = bin()
-        .arg("info")
-        .stdin(Stdio::piped())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    let mut stdin = child.stdin.take().unwrap();
-    let input = input.to_vec();
-    let writer = std::thread::spawn(move || stdin.write_all(&input));
-    let out = child.wait_with_output().unwrap();
-    writer.join().unwrap().unwrap();
+    let out = run_with_stdin(&["info"], input);
     assert!(
         out.status.success(),
         "{}",

@@ -1,5 +1,8 @@
 //! End-to-end runs of `levelscan level` on simulated scans.
 
+mod cli_support;
+use cli_support::*;
+
 use levelscan::formats::write_scan;
 use levelscan::geometry::Pose;
 use levelscan::plan::Plan;
@@ -54,11 +57,7 @@ fn scan_file(name: &str, poses: &[Pose]) -> PathBuf {
 }
 
 fn level(args: &[&str]) -> std::process::Output {
-    Command::new(env!("CARGO_BIN_EXE_levelscan"))
-        .arg("level")
-        .args(args)
-        .output()
-        .unwrap()
+    bin().arg("level").args(args).output().unwrap()
 }
 
 fn poses() -> Vec<Pose> {
@@ -138,20 +137,7 @@ fn level_reads_standard_input_and_fails_a_two_scan_pose_with_a_reason() {
     // Keep only the first two scans: too few elevations.
     let text = std::fs::read_to_string(&path).unwrap();
     let two: String = text.lines().take(2).map(|l| format!("{l}\n")).collect();
-    let mut child = Command::new(env!("CARGO_BIN_EXE_levelscan"))
-        .arg("level")
-        .stdin(std::process::Stdio::piped())
-        .stdout(std::process::Stdio::piped())
-        .spawn()
-        .unwrap();
-    use std::io::Write;
-    child
-        .stdin
-        .take()
-        .unwrap()
-        .write_all(two.as_bytes())
-        .unwrap();
-    let out = child.wait_with_output().unwrap();
+    let out = run_with_stdin(&["level"], two.as_bytes());
     assert!(out.status.success());
     let r: Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(r["level"]["status"], "failed");

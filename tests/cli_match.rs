@@ -1,13 +1,12 @@
 //! End-to-end runs of `levelscan match` (the binary).
 
+mod cli_support;
+use cli_support::*;
+
 use serde_json::Value;
 use std::io::Write;
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output, Stdio};
-
-fn bin() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_levelscan"))
-}
+use std::process::Output;
 
 fn plan(name: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join(format!("examples/plans/{name}.wall"))
@@ -32,19 +31,6 @@ impl Drop for TempFile {
     fn drop(&mut self) {
         let _ = std::fs::remove_file(&self.0);
     }
-}
-
-fn records(out: &Output) -> Vec<Value> {
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    String::from_utf8(out.stdout.clone())
-        .unwrap()
-        .lines()
-        .map(|l| serde_json::from_str(l).unwrap())
-        .collect()
 }
 
 fn pose3(v: &Value) -> [f64; 3] {
@@ -81,21 +67,10 @@ fn simulated_level_scans(poses: usize) -> Vec<u8> {
 }
 
 fn run_match(args: &[&str], stdin: &[u8]) -> Output {
-    let mut child = bin()
-        .arg("match")
-        .args(args)
-        .stdin(Stdio::piped())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    // Feed standard input from a thread: `match` streams, so it writes while we still write.
-    let mut pipe = child.stdin.take().unwrap();
-    let data = stdin.to_vec();
-    let feeder = std::thread::spawn(move || pipe.write_all(&data));
-    let out = child.wait_with_output().unwrap();
-    feeder.join().unwrap().unwrap();
-    out
+    let args: Vec<&str> = std::iter::once("match")
+        .chain(args.iter().copied())
+        .collect();
+    run_with_stdin(&args, stdin)
 }
 
 #[test]

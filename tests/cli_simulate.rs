@@ -1,17 +1,16 @@
 //! End-to-end runs of `levelscan simulate` (the binary), on the example plans.
 
+mod cli_support;
+use cli_support::*;
+
 use levelscan::formats::read_plan;
 use levelscan::simulate::{World, is_free};
 use serde_json::Value;
 use std::io::Write;
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output, Stdio};
+use std::process::{Output, Stdio};
 
 const PLANS: [&str; 5] = ["office", "angled", "ceiling", "corridor", "two_rooms"];
-
-fn bin() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_levelscan"))
-}
 
 fn plan(name: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join(format!("examples/plans/{name}.wall"))
@@ -19,19 +18,6 @@ fn plan(name: &str) -> PathBuf {
 
 fn simulate(args: &[&str]) -> Output {
     bin().arg("simulate").args(args).output().unwrap()
-}
-
-fn records(out: &Output) -> Vec<Value> {
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    String::from_utf8(out.stdout.clone())
-        .unwrap()
-        .lines()
-        .map(|l| serde_json::from_str(l).unwrap())
-        .collect()
 }
 
 /// A temporary file that is removed when dropped.

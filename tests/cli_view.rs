@@ -1,11 +1,11 @@
 //! End-to-end runs of `levelscan view`: what it sniffs, what the page embeds, and its errors.
 
-use serde_json::{Value, json};
-use std::io::Write;
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output, Stdio};
+mod cli_support;
+use cli_support::*;
 
-const BIN: &str = env!("CARGO_BIN_EXE_levelscan");
+use serde_json::{Value, json};
+use std::path::{Path, PathBuf};
+use std::process::Output;
 
 fn temp_dir(tag: &str) -> PathBuf {
     let dir = std::env::temp_dir().join(format!("levelscan-cli-view-{tag}-{}", std::process::id()));
@@ -15,17 +15,7 @@ fn temp_dir(tag: &str) -> PathBuf {
 }
 
 fn run(args: &[&str], stdin: Option<&str>) -> Output {
-    let mut child = Command::new(BIN)
-        .args(args)
-        .stdin(Stdio::piped())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    let mut input = child.stdin.take().unwrap();
-    input.write_all(stdin.unwrap_or("").as_bytes()).unwrap();
-    drop(input);
-    child.wait_with_output().unwrap()
+    run_with_stdin(args, stdin.unwrap_or("").as_bytes())
 }
 
 fn stderr(o: &Output) -> String {

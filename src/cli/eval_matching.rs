@@ -8,7 +8,7 @@ use levelscan::eval::matching::{ExperimentParams, matching_experiment};
 use levelscan::eval::real::{RealLog, RealResult, evaluate_real};
 use levelscan::formats::{CarmenParams, read_any, read_plan};
 use levelscan::matching::{Mode, scan_points};
-use levelscan::simulate::{OdometryParams, ScannerParams, elevations_centred};
+use levelscan::simulate::{ScannerParams, elevations_centred};
 use levelscan::viz::plots::{MapPanel, map_panels_png, map_panels_svg, run_map_panel};
 use std::fmt::Write as _;
 use std::path::PathBuf;
@@ -33,18 +33,8 @@ pub struct MatchingArgs {
     /// Elevation step between the tilted run's scans [deg].
     #[arg(long, default_value_t = 5.0)]
     pub step: f64,
-    /// Odometry noise: translation sigma per step, fraction of the step's length (x and y each).
-    #[arg(long, default_value_t = OdometryParams::default().trans_per_m)]
-    pub odo_trans: f64,
-    /// Odometry noise: translation sigma added to every step [m].
-    #[arg(long, default_value_t = OdometryParams::default().trans_const)]
-    pub odo_trans_min: f64,
-    /// Odometry noise: heading sigma per step, fraction of the step's rotation.
-    #[arg(long, default_value_t = OdometryParams::default().rot_per_rad)]
-    pub odo_rot: f64,
-    /// Odometry noise: heading sigma added to every step [deg].
-    #[arg(long, default_value_t = OdometryParams::default().rot_const.to_degrees())]
-    pub odo_rot_min: f64,
+    #[command(flatten)]
+    pub odometry: super::OdometryNoiseArgs,
     #[command(flatten)]
     pub options: MatchOptions,
 }
@@ -58,16 +48,7 @@ pub fn run_matching(args: MatchingArgs) -> anyhow::Result<()> {
         args.noise.is_finite() && args.noise >= 0.0,
         "--noise must be >= 0"
     );
-    let odometry = OdometryParams {
-        trans_per_m: args.odo_trans,
-        trans_const: args.odo_trans_min,
-        rot_per_rad: args.odo_rot,
-        rot_const: args.odo_rot_min.to_radians(),
-    };
-    anyhow::ensure!(
-        odometry.is_valid(),
-        "odometry noise must be finite and >= 0"
-    );
+    let odometry = args.odometry.params()?;
     let params = ExperimentParams {
         seed: args.seed,
         odometry,
@@ -159,18 +140,8 @@ pub struct RealArgs {
     /// Seed of the odometry perturbation.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
-    /// Odometry noise: translation sigma per step, fraction of the step's length (x and y each).
-    #[arg(long, default_value_t = OdometryParams::default().trans_per_m)]
-    pub odo_trans: f64,
-    /// Odometry noise: translation sigma added to every step [m].
-    #[arg(long, default_value_t = OdometryParams::default().trans_const)]
-    pub odo_trans_min: f64,
-    /// Odometry noise: heading sigma per step, fraction of the step's rotation.
-    #[arg(long, default_value_t = OdometryParams::default().rot_per_rad)]
-    pub odo_rot: f64,
-    /// Odometry noise: heading sigma added to every step [deg].
-    #[arg(long, default_value_t = OdometryParams::default().rot_const.to_degrees())]
-    pub odo_rot_min: f64,
+    #[command(flatten)]
+    pub odometry: super::OdometryNoiseArgs,
     /// Also write `real.md` and `real.json` into this directory.
     #[arg(long)]
     pub out: Option<PathBuf>,
@@ -205,13 +176,7 @@ fn load_real_log(
 
 pub fn run_real(args: RealArgs) -> anyhow::Result<()> {
     let params = args.options.params()?;
-    let noise = OdometryParams {
-        trans_per_m: args.odo_trans,
-        trans_const: args.odo_trans_min,
-        rot_per_rad: args.odo_rot,
-        rot_const: args.odo_rot_min.to_radians(),
-    };
-    anyhow::ensure!(noise.is_valid(), "odometry noise must be finite and >= 0");
+    let noise = args.odometry.params()?;
     let mut results: Vec<RealResult> = Vec::new();
     for path in &args.logs {
         let log = load_real_log(path, &params.ranges)?;

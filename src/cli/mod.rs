@@ -13,6 +13,7 @@ mod view;
 use anyhow::Context;
 use clap::{Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
+use levelscan::simulate::OdometryParams;
 use std::fs::File;
 use std::io::{self, BufRead, BufReader, BufWriter, Read, Write};
 use std::path::{Path, PathBuf};
@@ -53,6 +54,41 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Info(a) => info::run(a),
         Command::Eval(c) => eval::run(c),
         Command::View(a) => view::run(a),
+    }
+}
+
+/// The odometry noise model's flags (simulate, eval matching, eval real): per step, Gaussian
+/// noise proportional to the step plus a constant (`simulate::OdometryParams`).
+#[derive(clap::Args, Debug, Clone)]
+pub struct OdometryNoiseArgs {
+    /// Odometry noise: translation sigma per step, fraction of the step's length (x and y each).
+    #[arg(long, default_value_t = OdometryParams::default().trans_per_m)]
+    pub odo_trans: f64,
+    /// Odometry noise: translation sigma added to every step [m].
+    #[arg(long, default_value_t = OdometryParams::default().trans_const)]
+    pub odo_trans_min: f64,
+    /// Odometry noise: heading sigma per step, fraction of the step's rotation.
+    #[arg(long, default_value_t = OdometryParams::default().rot_per_rad)]
+    pub odo_rot: f64,
+    /// Odometry noise: heading sigma added to every step [deg].
+    #[arg(long, default_value_t = OdometryParams::default().rot_const.to_degrees())]
+    pub odo_rot_min: f64,
+}
+
+impl OdometryNoiseArgs {
+    /// The model, checked: every sigma finite and >= 0.
+    pub fn params(&self) -> anyhow::Result<OdometryParams> {
+        let p = OdometryParams {
+            trans_per_m: self.odo_trans,
+            trans_const: self.odo_trans_min,
+            rot_per_rad: self.odo_rot,
+            rot_const: self.odo_rot_min.to_radians(),
+        };
+        anyhow::ensure!(
+            p.is_valid(),
+            "--odo-trans, --odo-trans-min, --odo-rot and --odo-rot-min must be finite and >= 0"
+        );
+        Ok(p)
     }
 }
 

@@ -7,8 +7,8 @@ use levelscan::formats::{InputError, parse_plan, write_scan};
 use levelscan::geometry::Pose;
 use levelscan::plan::Plan;
 use levelscan::simulate::{
-    AdaptiveParams, OdometryParams, RandomPoseParams, ScannerParams, Stream, World,
-    elevations_centred, odometry, random_poses, simulate_pose_adaptive, simulate_poses, stream_rng,
+    AdaptiveParams, RandomPoseParams, ScannerParams, Stream, World, elevations_centred, odometry,
+    random_poses, simulate_pose_adaptive, simulate_poses, stream_rng,
 };
 use rayon::prelude::*;
 use std::io::{Read, Write};
@@ -76,18 +76,8 @@ pub struct Args {
     )]
     pub hinge_offset: Option<Vec<f64>>,
 
-    /// Odometry: translation noise per step, fraction of the step's length (x and y each).
-    #[arg(long, default_value_t = 0.02)]
-    pub odo_trans: f64,
-    /// Odometry: translation noise added to every step [m].
-    #[arg(long, default_value_t = 0.005)]
-    pub odo_trans_min: f64,
-    /// Odometry: heading noise per step, fraction of the step's rotation.
-    #[arg(long, default_value_t = 0.02)]
-    pub odo_rot: f64,
-    /// Odometry: heading noise added to every step [deg].
-    #[arg(long, default_value_t = 0.5)]
-    pub odo_rot_min: f64,
+    #[command(flatten)]
+    pub odometry: super::OdometryNoiseArgs,
 
     /// The adaptive robot, cleverRobot (paper sect. 7.2.2): level each pose's scans as the
     /// robot would and, when they face the floor or the ceiling, retake them tilted the other
@@ -110,15 +100,7 @@ pub struct Args {
 
 pub fn run(args: Args) -> anyhow::Result<()> {
     let scanner = scanner_params(&args)?;
-    let odo = OdometryParams {
-        trans_per_m: args.odo_trans,
-        trans_const: args.odo_trans_min,
-        rot_per_rad: args.odo_rot,
-        rot_const: args.odo_rot_min.to_radians(),
-    };
-    if !odo.is_valid() {
-        bail!("--odo-trans, --odo-trans-min, --odo-rot and --odo-rot-min must be >= 0");
-    }
+    let odo = args.odometry.params()?;
     let elevations: Vec<f64> = match &args.elevations {
         Some(list) => list.iter().map(|e| e.to_radians()).collect(),
         None => elevations_centred(args.scans, args.step.to_radians()),

@@ -384,16 +384,7 @@ impl Matcher {
                 None,
             );
         }
-        let (result, coarse) = self.align(points, &keyframe.reference, guess, |g| {
-            correlative_search(
-                points,
-                keyframe.reference.points(),
-                &Point2::origin(),
-                g,
-                &self.params.correlative,
-            )
-            .map(|c| c.0)
-        });
+        let (result, coarse) = self.align(points, &keyframe.reference, guess);
         let result = result.map(|r| self.symmetrize(points, &keyframe.reference, r));
         let keyframe_estimate = keyframe.estimate;
         self.finish(
@@ -468,16 +459,7 @@ impl Matcher {
         let mut local_ok: Option<IcpResult> = None;
         if let Some(kf) = self.keyframe.as_ref() {
             let local_guess = kf.estimate.between(&guess);
-            let (local, used_coarse) = self.align(points, &kf.reference, local_guess, |g| {
-                correlative_search(
-                    points,
-                    kf.reference.points(),
-                    &Point2::origin(),
-                    g,
-                    &self.params.correlative,
-                )
-                .map(|c| c.0)
-            });
+            let (local, used_coarse) = self.align(points, &kf.reference, local_guess);
             coarse = used_coarse;
             if let Ok(r) = local {
                 start = kf.estimate.compose(&r.pose);
@@ -522,15 +504,25 @@ impl Matcher {
         self.finish(points, odometry, result, coarse, |r| r.pose, guess)
     }
 
-    /// ICP from `guess`, with the coarse search first or as a second try, per `Coarse`.
+    /// ICP against one scan from `guess`, with the coarse search (over that scan's points)
+    /// first or as a second try, per `Coarse`.
     fn align(
         &self,
         points: &[Point2<f64>],
-        target: &dyn Target,
+        reference: &ScanReference,
         guess: Pose2,
-        coarse_search: impl Fn(Pose2) -> Option<Pose2>,
     ) -> (Result<IcpResult, FallbackReason>, bool) {
-        let (result, coarse) = self.align_unchecked(points, target, guess, coarse_search);
+        let coarse_search = |g| {
+            correlative_search(
+                points,
+                reference.points(),
+                &Point2::origin(),
+                g,
+                &self.params.correlative,
+            )
+            .map(|c| c.0)
+        };
+        let (result, coarse) = self.align_unchecked(points, reference, guess, coarse_search);
         (result.and_then(|r| self.gate(r, &guess)), coarse)
     }
 

@@ -609,6 +609,18 @@ mod tests {
     use serde_json::json;
     use std::f64::consts::FRAC_PI_2;
 
+    /// The scene of one scan from one source, with default parameters.
+    fn scene_of(s: Scan) -> Scene {
+        build_scene(
+            None,
+            &[Source {
+                name: "a".into(),
+                scans: vec![s],
+            }],
+            &ViewParams::default(),
+        )
+    }
+
     fn scan_with(readings: &[Option<f64>], bearings: &[f64]) -> Scan {
         let mut s = Scan {
             theta: bearings.to_vec(),
@@ -632,14 +644,7 @@ mod tests {
         s.elevation = Some(0.0);
         s.true_pose = Some(Pose::new(1.0, 2.0, 0.5, FRAC_PI_2, 0.0, 0.0));
         s.odometry = Some(Pose::planar(9.0, 9.0, 0.0));
-        let scene = build_scene(
-            None,
-            &[Source {
-                name: "a".into(),
-                scans: vec![s],
-            }],
-            &ViewParams::default(),
-        );
+        let scene = scene_of(s);
         let layer = scene.layer("scans").unwrap();
         assert_eq!(
             coords(&layer.lines[0]),
@@ -659,14 +664,7 @@ mod tests {
         let mut s = scan_with(&[Some(2.0), Some(2.0)], &[0.0, 0.0]);
         s.elevation = Some(e);
         s.true_pose = Some(Pose::new(0.0, 0.0, 1.0, 0.0, 0.0, 0.0));
-        let scene = build_scene(
-            None,
-            &[Source {
-                name: "a".into(),
-                scans: vec![s],
-            }],
-            &ViewParams::default(),
-        );
+        let scene = scene_of(s);
         let p = coords(&scene.layer("scans").unwrap().lines[0])[0];
         assert_eq!(p, [mm(2.0 * e.cos()), 0, 0]);
     }
@@ -678,14 +676,7 @@ mod tests {
             &[0.0, 0.1, 0.2, 0.3, 0.4, 0.5],
         );
         s.elevation = Some(0.0);
-        let scene = build_scene(
-            None,
-            &[Source {
-                name: "a".into(),
-                scans: vec![s],
-            }],
-            &ViewParams::default(),
-        );
+        let scene = scene_of(s);
         let layer = scene.layer("scans").unwrap();
         assert_eq!(layer.lines.len(), 2);
         assert_eq!(layer.point_count(), 5);
@@ -701,14 +692,7 @@ mod tests {
             &[0.0, 0.01, 0.02, 0.03],
         );
         s.elevation = Some(0.0);
-        let scene = build_scene(
-            None,
-            &[Source {
-                name: "a".into(),
-                scans: vec![s],
-            }],
-            &ViewParams::default(),
-        );
+        let scene = scene_of(s);
         let layer = scene.layer("scans").unwrap();
         assert_eq!(layer.lines.len(), 2);
         assert_eq!(layer.point_count(), 4);
