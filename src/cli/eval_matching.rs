@@ -208,13 +208,13 @@ pub fn run_real(args: RealArgs) -> anyhow::Result<()> {
 /// The results as a markdown table.
 fn real_table(results: &[RealResult]) -> String {
     let mut s = String::from(
-        "| log | scans | RPE median [mm] | RPE p95 [mm] | bad pairs | odometry median [mm] | odometry bad pairs | fallbacks | coarse |\n\
-         |---|---:|---:|---:|---:|---:|---:|---:|---:|\n",
+        "| log | scans | RPE median [mm] | RPE p95 [mm] | bad pairs | odometry median [mm] | odometry bad pairs | closure median [mm] | fallbacks | coarse |\n\
+         |---|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n",
     );
     for r in results {
         let _ = writeln!(
             s,
-            "| {} | {} | {:.2} | {:.2} | {} | {:.2} | {} | {} | {} |",
+            "| {} | {} | {:.2} | {:.2} | {} | {:.2} | {} | {} | {} | {} |",
             r.name,
             r.scans,
             r.matched.median_translation * 1e3,
@@ -222,6 +222,8 @@ fn real_table(results: &[RealResult]) -> String {
             r.matched.bad_pairs,
             r.odometry.median_translation * 1e3,
             r.odometry.bad_pairs,
+            r.closure
+                .map_or("-".into(), |c| format!("{:.2}", c.median_translation * 1e3)),
             r.fallbacks,
             r.coarse
         );
