@@ -79,6 +79,18 @@ pub struct LevelParams {
     pub min_edge_ratio: f64,
     /// Region growing admits points within this many sigmas of a patch's plane. Default 3.
     pub grow_k: f64,
+    /// Those sigmas are each point's own range noise along the plane's normal,
+    /// `sigma |d . n|`, rather than `sigma`. Default true: a floor seen at a grazing angle
+    /// lies within centimetres of its plane even at 10 cm noise, and an isotropic tolerance
+    /// let floor patches run up the walls' feet.
+    pub ray_tolerance: bool,
+    /// Smallest share of sigma used for that tolerance, `|d . n|` floor [1]. Default 0.1.
+    pub min_ray_share: f64,
+    /// Fit walls with each point weighted by its noise along the normal, `1 / (d . n)^2`.
+    /// Default true: oblique points are the precise ones.
+    pub ray_weights: bool,
+    /// Floor on `|d . n|` in those weights [1]. Default 0.2.
+    pub ray_weight_floor: f64,
     /// Region-growing seeds span about this many range-noise sigmas sideways [1]. Default 6.
     pub seed_span_sigmas: f64,
     /// Widest seed [columns]. Default 25.
@@ -147,7 +159,8 @@ pub struct LevelParams {
     pub max_level_misfit: f64,
     /// Factor on a level plane's normal variance [1]. The noise model does not see what
     /// cleaning leaves of a wall's foot in a floor patch; simulations at 1-10 cm noise show its
-    /// sigmas about this much too small. Default 4 (twice the standard deviation).
+    /// sigmas about this much too small. Default 2 (measured with `ray_tolerance`, which keeps
+    /// the wall's foot out of floor patches: 4 before it).
     pub level_inflation: f64,
 }
 
@@ -163,6 +176,10 @@ impl Default for LevelParams {
             wall_min_angle_deg: 45.0,
             min_edge_ratio: 0.3,
             grow_k: 3.0,
+            ray_tolerance: true,
+            min_ray_share: 0.1,
+            ray_weights: true,
+            ray_weight_floor: 0.2,
             seed_span_sigmas: 6.0,
             split_misfit: 1.1,
             two_row_seeds: false,
@@ -183,7 +200,7 @@ impl Default for LevelParams {
             level_surfaces: true,
             min_level_points: 30,
             max_level_misfit: 3.0,
-            level_inflation: 4.0,
+            level_inflation: 2.0,
         }
     }
 }
