@@ -85,10 +85,17 @@ pub fn pseudo_level_scan(scans: &[Scan], est: &LevelEstimate, params: &PseudoLev
         valid: Vec::with_capacity(n),
         ..Scan::default()
     };
+    // `Scan::point_in_robot`'s arithmetic, with its rotation and offset built once per scan
+    // and one sincos per ray shared with the direction.
+    let robot_from_scanner = rot_y(elevation);
+    let offset = base.hinge_offset_vector();
     for (i, &kept) in keep.iter().enumerate() {
         let (sp, cp) = base.theta[i].sin_cos();
-        let dir = level_from_scanner * Vector3::new(cp, sp, 0.0);
-        let point = base.point_in_robot(i).map(|p| level_from_robot * p.coords);
+        let ray = Vector3::new(cp, sp, 0.0);
+        let dir = level_from_scanner * ray;
+        let point = base
+            .range(i)
+            .map(|r| level_from_robot * (robot_from_scanner * (offset + r * ray)));
         let bearing = match &point {
             Some(p) if p.x != 0.0 || p.y != 0.0 => p.y.atan2(p.x),
             _ => dir.y.atan2(dir.x),

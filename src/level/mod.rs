@@ -613,7 +613,12 @@ fn clean_level_fit(
     params: &LevelParams,
 ) -> Option<PlaneFit> {
     let cols = grid.cols;
-    let member = |i: usize| p.members.binary_search(&i).is_ok();
+    // A mask rather than a binary search: `step` asks several times per member.
+    let mut in_patch = vec![false; grid.points.len()];
+    for &i in &p.members {
+        in_patch[i] = true;
+    }
+    let member = |i: usize| in_patch[i];
     // Signed scan-to-scan range steps in units of `r de`, keyed by the lower point.
     let step = |i: usize| -> Option<f64> {
         let j = i + cols;

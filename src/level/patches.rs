@@ -24,13 +24,9 @@ pub struct Patch {
 /// at the grid's median range, so its normal is good to a few degrees and growth follows the
 /// true surface instead of wandering across a corner.
 pub fn seed_cols(grid: &PoseGrid, params: &LevelParams, sigma: f64) -> usize {
-    let mut ranges: Vec<f64> = grid.points.iter().flatten().map(|g| g.range).collect();
-    if ranges.is_empty() || grid.cols < 2 {
+    if grid.cols < 2 || grid.points.iter().all(Option::is_none) {
         return params.quad_cols;
     }
-    let mid = ranges.len() / 2;
-    let (_, r, _) = ranges.select_nth_unstable_by(mid, f64::total_cmp);
-    let r = *r;
     // Angular step from the directions of the first row's consecutive valid rays.
     let step = (0..grid.cols - 1)
         .find_map(|c| {
@@ -38,8 +34,24 @@ pub fn seed_cols(grid: &PoseGrid, params: &LevelParams, sigma: f64) -> usize {
             Some(a.dir.angle(&b.dir))
         })
         .unwrap_or(1f64.to_radians());
-    let want = (params.seed_span_sigmas * sigma / (r * step).max(1e-9)).ceil() as usize + 1;
-    want.clamp(params.quad_cols, params.max_seed_cols.max(params.quad_cols))
+    let want =
+        |r: f64| (params.seed_span_sigmas * sigma / (r * step).max(1e-9)).ceil() as usize + 1;
+    let clamp = |w: usize| w.clamp(params.quad_cols, params.max_seed_cols.max(params.quad_cols));
+    // `want` falls as the range grows: when even the nearest point asks for no more than the
+    // quad width (low noise), so does the median, and the median need not be found.
+    let nearest = grid
+        .points
+        .iter()
+        .flatten()
+        .map(|g| g.range)
+        .fold(f64::INFINITY, f64::min);
+    if want(nearest) <= params.quad_cols {
+        return clamp(want(nearest));
+    }
+    let mut ranges: Vec<f64> = grid.points.iter().flatten().map(|g| g.range).collect();
+    let mid = ranges.len() / 2;
+    let (_, r, _) = ranges.select_nth_unstable_by(mid, f64::total_cmp);
+    clamp(want(*r))
 }
 
 /// No patch.
@@ -232,11 +244,7 @@ fn make_patch(
     Some(Patch {
         kind: classify(&fit.normal, &fit.centroid, params),
         fit,
-        members: {
-            let mut m = members.to_vec();
-            m.sort_unstable();
-            m
-        },
+        members: in_order(grid, members, true),
         row_range: (lo, hi),
     })
 }
@@ -322,6 +330,34 @@ fn robust_fit(
     Some(fit)
 }
 
+/// Members in row-major order (`by_row`) or column-major order, ties by grid index, as a
+/// sort by `(row or column, index)` would give: ascending grid index is row-major, and a
+/// stable counting sort of that by column is column-major (members are distinct).
+fn in_order(grid: &PoseGrid, members: &[usize], by_row: bool) -> Vec<usize> {
+    let mut ascending = members.to_vec();
+    if !ascending.is_sorted() {
+        ascending.sort_unstable();
+    }
+    if by_row {
+        return ascending;
+    }
+    let cols = grid.cols.max(1);
+    let mut start = vec![0usize; cols + 1];
+    for &i in &ascending {
+        start[i % cols + 1] += 1;
+    }
+    for c in 0..cols {
+        start[c + 1] += start[c];
+    }
+    let mut out = vec![0usize; ascending.len()];
+    for &i in &ascending {
+        let slot = &mut start[i % cols];
+        out[*slot] = i;
+        *slot += 1;
+    }
+    out
+}
+
 fn accumulate(grid: &PoseGrid, members: &[usize]) -> PlaneAccumulator {
     let mut acc = PlaneAccumulator::default();
     for g in members.iter().filter_map(|&i| grid.points[i].as_ref()) {
@@ -351,16 +387,24 @@ pub fn split_members(
         return whole;
     };
     let rss1 = fit_all.residual_ss;
-    // Best split so far: (RSS of the two planes, which ordering, boundary index).
-    let mut best: Option<(f64, usize, usize)> = None;
-    let mut orders: [Vec<usize>; 2] = [members.to_vec(), members.to_vec()];
-    for (which, sorted) in orders.iter_mut().enumerate() {
+    // Candidate cuts (where the key changes, both parts spanning two rows), as (lower bound on
+    // the two planes' RSS, which ordering, boundary index). They are fitted in order of their
+    // bounds, and a cut whose bound exceeds the best RSS found cannot win, so most of them
+    // need no eigen decomposition. The winner is the same as fitting every cut in turn: the
+    // least RSS, ties to the first ordering and boundary.
+    let mut candidates: Vec<(f64, usize, usize)> = Vec::new();
+    let orders: [Vec<usize>; 2] = [
+        in_order(grid, members, false),
+        in_order(grid, members, true),
+    ];
+    let mut prefixes: [Vec<PlaneAccumulator>; 2] = [Vec::new(), Vec::new()];
+    for (which, sorted) in orders.iter().enumerate() {
         let by_row = which == 1;
         let key = |i: usize| if by_row { i / cols } else { i % cols };
-        sorted.sort_by_key(|&i| (key(i), i));
         let n = sorted.len();
         // Prefix plane sums, and the rows spanned by every prefix and suffix.
-        let mut prefix = Vec::with_capacity(n + 1);
+        let prefix = &mut prefixes[which];
+        prefix.reserve(n + 1);
         let mut acc = PlaneAccumulator::default();
         prefix.push(acc);
         let (mut pre_lo, mut pre_hi) = (vec![usize::MAX; n + 1], vec![0usize; n + 1]);
@@ -389,13 +433,28 @@ pub fn split_members(
             }
             let l = prefix[b];
             let r = total.minus(&l);
-            let (Some(fl), Some(fr)) = (l.fit(sigma), r.fit(sigma)) else {
-                continue;
-            };
-            let rss2 = fl.residual_ss + fr.residual_ss;
-            if best.is_none_or(|(br, _, _)| rss2 < br) {
-                best = Some((rss2, which, b));
-            }
+            let bound = l.residual_lower_bound() + r.residual_lower_bound();
+            candidates.push((bound, which, b));
+        }
+    }
+    candidates.sort_by(|x, y| x.0.total_cmp(&y.0));
+    // Best split so far: (RSS of the two planes, which ordering, boundary index).
+    let mut best: Option<(f64, usize, usize)> = None;
+    for &(bound, which, b) in &candidates {
+        if best.is_some_and(|(br, _, _)| bound > br) {
+            break;
+        }
+        let prefix = &prefixes[which];
+        let l = prefix[b];
+        let r = prefix[prefix.len() - 1].minus(&l);
+        let (Some(fl), Some(fr)) = (l.fit(sigma), r.fit(sigma)) else {
+            continue;
+        };
+        let rss2 = fl.residual_ss + fr.residual_ss;
+        let better =
+            best.is_none_or(|(br, bw, bb)| rss2 < br || (rss2 == br && (which, b) < (bw, bb)));
+        if better {
+            best = Some((rss2, which, b));
         }
     }
     let Some((_, which, cut)) = best else {
