@@ -124,6 +124,13 @@ pub struct LevelParams {
     pub flat_margin: f64,
     /// Smallest patch kept [points]. Default 20.
     pub min_patch_points: usize,
+    /// A patch too small to split is dropped when its residual variance exceeds the noise's by
+    /// more than this many standard deviations of a true plane's ratio [1]. Default 4; 0 keeps
+    /// every patch.
+    pub max_misfit_sigmas: f64,
+    /// A patch needs at least this share of its points in columns where it holds two rows or
+    /// more [1]. Default 0.75; 0 accepts any patch over two rows.
+    pub min_stacked_share: f64,
     /// Fewer wall quads than this fails the pose (too_few_polygons / facing_floor /
     /// facing_ceiling). Default 3.
     pub min_polygons: usize,
@@ -192,6 +199,8 @@ impl Default for LevelParams {
             split_depth: 3,
             max_seed_cols: 25,
             min_patch_points: 20,
+            max_misfit_sigmas: 4.0,
+            min_stacked_share: 0.75,
             min_polygons: 3,
             parallel_ratio: 0.01,
             max_sigma_deg: 1.5,

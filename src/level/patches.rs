@@ -236,13 +236,52 @@ fn make_patch(
     if members.len() < params.min_patch_points || hi <= lo {
         return None;
     }
+    if !stacked(members, grid, params) {
+        return None;
+    }
     let fit = robust_fit(grid, members, params, sigma)?;
+    if too_bent_to_split(&fit, members.len(), params, sigma) {
+        return None;
+    }
     Some(Patch {
         kind: classify(&fit.normal, &fit.centroid, params),
         fit,
         members: in_order(grid, members, true),
         row_range: (lo, hi),
     })
+}
+
+/// Whether the members are stacked: at least `min_stacked_share` of them lie in columns where
+/// the patch holds two rows or more. On a wall the scans meet the same stretch one above the
+/// other; a floor line with a few wall points at one end of it (the floor at a wall's foot,
+/// at nearly the wall's range) is mostly single-row columns, and those few points decide its
+/// tilt: a steep "wall" off by degrees.
+fn stacked(members: &[usize], grid: &PoseGrid, params: &LevelParams) -> bool {
+    let mut rows_in_col = vec![0u8; grid.cols];
+    for &i in members {
+        let c = &mut rows_in_col[i % grid.cols];
+        *c = c.saturating_add(1);
+    }
+    let stacked = members
+        .iter()
+        .filter(|&&i| rows_in_col[i % grid.cols] >= 2)
+        .count();
+    stacked as f64 >= params.min_stacked_share * members.len() as f64
+}
+
+/// A patch too small for [`split_members`] whose points fit their plane far worse than the
+/// noise explains is no plane: typically two scan lines on a wall and one on the floor at its
+/// foot, at nearly the same range, which a quad's tolerance let through. Its normal is tilted
+/// by degrees, and where no other wall pins the same direction it would decide the attitude.
+/// The test: residual variance over the noise's above `1 + k sqrt(2 / dof)` (k =
+/// `max_misfit_sigmas`), k standard deviations of a true plane's ratio.
+fn too_bent_to_split(fit: &PlaneFit, members: usize, params: &LevelParams, sigma: f64) -> bool {
+    if params.max_misfit_sigmas <= 0.0 || members >= 2 * params.min_patch_points {
+        return false;
+    }
+    let dof = (fit.weight - 3.0).max(1.0);
+    fit.misfit_ratio(sigma.max(params.min_sigma))
+        > 1.0 + params.max_misfit_sigmas * (2.0 / dof).sqrt()
 }
 
 /// Drops members farther than `tol` from the members' plane, then makes the patch.
