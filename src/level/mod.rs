@@ -15,6 +15,7 @@ pub mod grid;
 pub mod noise;
 pub mod patches;
 pub mod polygons;
+pub mod refine;
 pub mod up;
 
 use crate::geometry::Attitude;
@@ -149,6 +150,45 @@ pub struct LevelParams {
     /// cleaning leaves of a wall's foot in a floor patch; simulations at 1-10 cm noise show its
     /// sigmas about this much too small. Default 4 (twice the standard deviation).
     pub level_inflation: f64,
+    /// Passes of re-segmentation in the provisional level frame ([`refine`], robust
+    /// estimator): points re-assigned to the floor and ceiling by height and to walls as
+    /// vertical planes, then up re-estimated from the refitted planes. 0 turns it off.
+    /// Default 0.
+    pub refine_passes: usize,
+    /// Re-segmentation admits a point within this many sigmas of a model [1]. Default 3.
+    pub refine_k: f64,
+    /// A re-segmented wall is used only when its points lie in at least this many scans.
+    /// Default 2 (the floor's points are kept out of walls, so two scan lines on a wall are
+    /// a wall).
+    pub refine_min_rows: usize,
+    /// Walls whose level-frame normals are within this angle [deg] and whose lines coincide
+    /// within the tolerance are one wall. Default 10.
+    pub refine_merge_deg: f64,
+    /// Factor on a re-segmented floor's or ceiling's normal variance [1]. Default 4.
+    pub refine_level_inflation: f64,
+    /// Smallest up uncertainty assumed while assigning points [deg]. Default 0.2.
+    pub refine_min_sigma_deg: f64,
+    /// A re-segmented floor or ceiling must be within this angle of up [deg]. Default 10.
+    pub refine_level_max_deg: f64,
+    /// A point joins a re-segmented floor or ceiling only when its range steps from scan to
+    /// scan like a level surface's by this many sigmas of the step's noise [1]. Default 1.
+    pub refine_step_k: f64,
+    /// ... and the floor or ceiling is used only when its points fit one plane within this
+    /// multiple of the residual the noise explains [1]. Default 1.5.
+    pub refine_level_misfit: f64,
+    /// Also look for walls the region growing missed, as lines in each leveled scan.
+    /// Default true.
+    pub refine_discover: bool,
+    /// Find the floor and ceiling afresh in each pass's level frame rather than start from
+    /// the region-grown ones. Default true.
+    pub refine_fresh_levels: bool,
+}
+
+impl LevelParams {
+    /// Cosine of `refine_level_max_deg`.
+    pub fn refine_level_cos(&self) -> f64 {
+        self.refine_level_max_deg.to_radians().cos()
+    }
 }
 
 impl Default for LevelParams {
@@ -184,6 +224,17 @@ impl Default for LevelParams {
             min_level_points: 30,
             max_level_misfit: 3.0,
             level_inflation: 4.0,
+            refine_passes: 0,
+            refine_k: 3.0,
+            refine_min_rows: 2,
+            refine_merge_deg: 10.0,
+            refine_level_inflation: 4.0,
+            refine_min_sigma_deg: 0.2,
+            refine_level_max_deg: 10.0,
+            refine_step_k: 1.0,
+            refine_level_misfit: 1.5,
+            refine_discover: true,
+            refine_fresh_levels: true,
         }
     }
 }
@@ -318,6 +369,8 @@ pub fn range_sigma_for(scans: &[Scan], params: &LevelParams) -> f64 {
 /// Levels one pose: its scans (any order, at least three distinct elevations) in, attitude,
 /// uncertainty, wall geometry and failure reason out (paper sect. 5).
 pub fn level_pose(scans: &[Scan], params: &LevelParams) -> LevelEstimate {
+    let dev = dev_params(params);
+    let params = &dev;
     let sigma = range_sigma_for(scans, params);
     let grid = match PoseGrid::from_scans(scans) {
         Ok(g) => g,
@@ -367,6 +420,11 @@ pub fn level_pose(scans: &[Scan], params: &LevelParams) -> LevelEstimate {
             }
         }
     }
+    if params.estimator == Estimator::Robust && params.refine_passes > 0 {
+        if let Some(refined) = refined_solution(&est, &result, params) {
+            result = Ok(refined);
+        }
+    }
     let Some(grid) = &est.grid else {
         return est;
     };
@@ -402,6 +460,48 @@ pub fn level_pose(scans: &[Scan], params: &LevelParams) -> LevelEstimate {
         Err(reason) => est.failure = Some(reason),
     }
     est
+}
+
+/// Re-segmentation in the provisional level frame ([`refine`]), started from the solution
+/// found (`first`), or when the gate refused it, from the ungated robust solution. Returns the
+/// start and the refined model, not yet gated; `None` when there is nothing to start from or
+/// the refined model does not fix up.
+pub fn refine_estimate(
+    est: &LevelEstimate,
+    first: &Result<UpSolution, FailReason>,
+    params: &LevelParams,
+) -> Option<(UpSolution, refine::Refined)> {
+    let grid = est.grid.as_ref()?;
+    let sigma = est.range_sigma;
+    let levels = level_fits(est, params);
+    let sigma_eff = sigma.max(params.min_sigma);
+    let start = match first {
+        Ok(sol) => *sol,
+        Err(_) => up::up_robust(
+            &robust_obs(est, &levels, params, sigma, false),
+            sigma_eff,
+            params.iterations,
+        )?,
+    };
+    let walls: Vec<&Patch> = est
+        .patches
+        .iter()
+        .filter(|p| p.kind == SurfaceKind::Wall)
+        .collect();
+    let refined = refine::refine(grid, &start, &walls, &levels, params, sigma)?;
+    Some((start, refined))
+}
+
+/// The refined solution when it passes the gate.
+fn refined_solution(
+    est: &LevelEstimate,
+    first: &Result<UpSolution, FailReason>,
+    params: &LevelParams,
+) -> Option<UpSolution> {
+    let (_, refined) = refine_estimate(est, first, params)?;
+    let with_level = refined.models.iter().any(|m| m.kind != SurfaceKind::Wall);
+    acceptable(&refined.solution, params, with_level).ok()?;
+    Some(refined.solution)
 }
 
 /// Points at the height of the floor or ceiling patches once leveled with `att` (within
@@ -524,26 +624,7 @@ fn solve_up(
             // Patches over three or more scans first. A plane through just two scan lines can
             // be a wall line and a floor line that happen to be coplanar, so two-row patches
             // only help when the others cannot fix up, and then only clearly vertical ones.
-            let full_rows = params.quad_rows.min(grid_rows(est)).saturating_sub(1);
-            let strict = (params.two_row_min_angle_deg.to_radians()).cos();
-            let obs_with = |two_rows: bool| -> Vec<PlaneObs> {
-                est.patches
-                    .iter()
-                    .filter(|p| p.kind == SurfaceKind::Wall)
-                    .filter(|p| {
-                        p.row_range.1 - p.row_range.0 >= full_rows
-                            || (two_rows
-                                && p.fit.normal.z.abs() < strict
-                                && est.grid.as_ref().is_some_and(|g| steep(g, p)))
-                    })
-                    .map(|p| PlaneObs::wall(&p.fit, misfit(&p.fit)))
-                    .chain(
-                        levels
-                            .iter()
-                            .map(|f| PlaneObs::level(f, misfit(f) * params.level_inflation)),
-                    )
-                    .collect()
-            };
+            let obs_with = |two_rows: bool| robust_obs(est, levels, params, sigma, two_rows);
             let first = obs_with(false);
             let attempt = up::up_robust(&first, sigma_eff, params.iterations)
                 .filter(|sol| acceptable(sol, params, !levels.is_empty()).is_ok());
@@ -569,6 +650,36 @@ fn solve_up(
     };
     acceptable(&sol, params, !levels.is_empty())?;
     Ok(sol)
+}
+
+/// The robust estimator's observations: wall patches over three or more scans (with
+/// `two_rows`, also steep two-row ones) and the level planes.
+fn robust_obs<'a>(
+    est: &'a LevelEstimate,
+    levels: &'a [PlaneFit],
+    params: &LevelParams,
+    sigma: f64,
+    two_rows: bool,
+) -> Vec<PlaneObs<'a>> {
+    let misfit = |f: &grid::PlaneFit| f.misfit_ratio(sigma.max(params.min_sigma)).max(1.0);
+    let full_rows = params.quad_rows.min(grid_rows(est)).saturating_sub(1);
+    let strict = (params.two_row_min_angle_deg.to_radians()).cos();
+    est.patches
+        .iter()
+        .filter(|p| p.kind == SurfaceKind::Wall)
+        .filter(|p| {
+            p.row_range.1 - p.row_range.0 >= full_rows
+                || (two_rows
+                    && p.fit.normal.z.abs() < strict
+                    && est.grid.as_ref().is_some_and(|g| steep(g, p)))
+        })
+        .map(|p| PlaneObs::wall(&p.fit, misfit(&p.fit)))
+        .chain(
+            levels
+                .iter()
+                .map(|f| PlaneObs::level(f, misfit(f) * params.level_inflation)),
+        )
+        .collect()
 }
 
 /// Floor and ceiling planes usable as level (when `level_surfaces` is on): each floor or
@@ -707,4 +818,22 @@ fn acceptable(sol: &UpSolution, params: &LevelParams, with_level: bool) -> Resul
         return Err(FailReason::ParallelWalls);
     }
     Ok(())
+}
+
+pub fn dev_params(p: &LevelParams) -> LevelParams {
+    let mut p = p.clone();
+    let f = |k: &str| std::env::var(k).ok().and_then(|v| v.parse::<f64>().ok());
+    if let Some(v) = f("LS_PASSES") { p.refine_passes = v as usize; }
+    if let Some(v) = f("LS_K") { p.refine_k = v; }
+    if let Some(v) = f("LS_ROWS") { p.refine_min_rows = v as usize; }
+    if let Some(v) = f("LS_MERGE") { p.refine_merge_deg = v; }
+    if let Some(v) = f("LS_LINF") { p.refine_level_inflation = v; }
+    if let Some(v) = f("LS_MINSIG") { p.refine_min_sigma_deg = v; }
+    if let Some(v) = f("LS_LMAX") { p.refine_level_max_deg = v; }
+    if let Some(v) = f("LS_STEPK") { p.refine_step_k = v; }
+    if let Some(v) = f("LS_LMISFIT") { p.refine_level_misfit = v; }
+    if let Some(v) = f("LS_DISC") { p.refine_discover = v > 0.5; }
+    if let Some(v) = f("LS_FRESH") { p.refine_fresh_levels = v > 0.5; }
+    if let Some(v) = f("LS_MAXSIG") { p.max_sigma_deg = v; }
+    p
 }
