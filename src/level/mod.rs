@@ -182,6 +182,12 @@ pub struct LevelParams {
     /// Find the floor and ceiling afresh in each pass's level frame rather than start from
     /// the region-grown ones. Default true.
     pub refine_fresh_levels: bool,
+    /// Pseudo degrees of freedom of the noise model's own variance scale in the refined
+    /// solution's chi-square inflation [1] ([`up::solution_at_prior`]). Default 0.
+    pub refine_prior_dof: f64,
+    /// When the refined model fails the gate, the pose fails even if the first solution
+    /// passed. Default false.
+    pub refine_overrules: bool,
 }
 
 impl LevelParams {
@@ -235,6 +241,8 @@ impl Default for LevelParams {
             refine_level_misfit: 1.5,
             refine_discover: true,
             refine_fresh_levels: true,
+            refine_prior_dof: 0.0,
+            refine_overrules: false,
         }
     }
 }
@@ -399,7 +407,8 @@ pub fn level_pose(scans: &[Scan], params: &LevelParams) -> LevelEstimate {
         wall_mask: Vec::new(),
         grid: Some(grid),
     };
-    let mut result = solve(&est, params, sigma);
+    let mut levels = level_fits(&est, params);
+    let mut result = solve(&est, &levels, params, sigma);
     // Second pass: with up known, points at the floor's or ceiling's height are not wall
     // points. Walls grown a first time can have swallowed the floor at their foot (within the
     // noise of the wall's plane, and all on one side of it); growing again without those
@@ -413,16 +422,24 @@ pub fn level_pose(scans: &[Scan], params: &LevelParams) -> LevelEstimate {
                     std::mem::replace(&mut est.patches, patches),
                     std::mem::replace(&mut est.labels, labels),
                 );
-                match solve(&est, params, sigma) {
-                    Ok(sol2) => result = Ok(sol2),
+                let levels2 = level_fits(&est, params);
+                match solve(&est, &levels2, params, sigma) {
+                    Ok(sol2) => {
+                        result = Ok(sol2);
+                        levels = levels2;
+                    }
                     Err(_) => (est.patches, est.labels) = first,
                 }
             }
         }
     }
     if params.estimator == Estimator::Robust && params.refine_passes > 0 {
-        if let Some(refined) = refined_solution(&est, &result, params) {
-            result = Ok(refined);
+        match refined_solution(&est, &levels, &result, params) {
+            Some(Ok(refined)) => result = Ok(refined),
+            // The refined model sees more of the evidence: when it cannot pin up down, the
+            // first solution's confidence was not earned either.
+            Some(Err(reason)) if params.refine_overrules => result = Err(reason),
+            _ => {}
         }
     }
     let Some(grid) = &est.grid else {
@@ -468,12 +485,12 @@ pub fn level_pose(scans: &[Scan], params: &LevelParams) -> LevelEstimate {
 /// the refined model does not fix up.
 pub fn refine_estimate(
     est: &LevelEstimate,
+    levels: &[PlaneFit],
     first: &Result<UpSolution, FailReason>,
     params: &LevelParams,
 ) -> Option<(UpSolution, refine::Refined)> {
     let grid = est.grid.as_ref()?;
     let sigma = est.range_sigma;
-    let levels = level_fits(est, params);
     let sigma_eff = sigma.max(params.min_sigma);
     let start = match first {
         Ok(sol) => *sol,
@@ -492,16 +509,16 @@ pub fn refine_estimate(
     Some((start, refined))
 }
 
-/// The refined solution when it passes the gate.
+/// The refined solution, gated: `None` when refinement found no model.
 fn refined_solution(
     est: &LevelEstimate,
+    levels: &[PlaneFit],
     first: &Result<UpSolution, FailReason>,
     params: &LevelParams,
-) -> Option<UpSolution> {
-    let (_, refined) = refine_estimate(est, first, params)?;
+) -> Option<Result<UpSolution, FailReason>> {
+    let (_, refined) = refine_estimate(est, levels, first, params)?;
     let with_level = refined.models.iter().any(|m| m.kind != SurfaceKind::Wall);
-    acceptable(&refined.solution, params, with_level).ok()?;
-    Some(refined.solution)
+    Some(acceptable(&refined.solution, params, with_level).map(|_| refined.solution))
 }
 
 /// Points at the height of the floor or ceiling patches once leveled with `att` (within
@@ -573,7 +590,12 @@ fn flat_points(
 /// few, or all parallel) while floor or ceiling quads outnumber wall quads, the reason is
 /// facing_floor / facing_ceiling: the scanner looks at the wrong surface, and a robot can
 /// retake its scans tilted the other way (sect. 5.5, 7.2.2).
-fn solve(est: &LevelEstimate, params: &LevelParams, sigma: f64) -> Result<UpSolution, FailReason> {
+fn solve(
+    est: &LevelEstimate,
+    levels: &[PlaneFit],
+    params: &LevelParams,
+    sigma: f64,
+) -> Result<UpSolution, FailReason> {
     let count = |k: SurfaceKind| est.quads.iter().filter(|q| q.kind == k).count();
     let (walls, floors, ceilings) = (
         count(SurfaceKind::Wall),
@@ -589,11 +611,10 @@ fn solve(est: &LevelEstimate, params: &LevelParams, sigma: f64) -> Result<UpSolu
             otherwise
         }
     };
-    let levels = level_fits(est, params);
     if walls < params.min_polygons && levels.is_empty() {
         return Err(facing(FailReason::TooFewPolygons));
     }
-    solve_up(est, &levels, params, sigma).map_err(facing)
+    solve_up(est, levels, params, sigma).map_err(facing)
 }
 
 fn solve_up(
@@ -693,7 +714,7 @@ fn robust_obs<'a>(
 /// neighbouring scan, in the patch's prevailing direction, are kept. A patch mostly in one scan
 /// line is dropped: it fits that scan's own plane, whose normal is near the robot's z axis
 /// whatever the surface.
-fn level_fits(est: &LevelEstimate, params: &LevelParams) -> Vec<PlaneFit> {
+pub fn level_fits(est: &LevelEstimate, params: &LevelParams) -> Vec<PlaneFit> {
     let (Some(grid), true) = (
         est.grid.as_ref(),
         params.level_surfaces && params.estimator == Estimator::Robust,
@@ -823,7 +844,7 @@ fn acceptable(sol: &UpSolution, params: &LevelParams, with_level: bool) -> Resul
 pub fn dev_params(p: &LevelParams) -> LevelParams {
     let mut p = p.clone();
     let f = |k: &str| std::env::var(k).ok().and_then(|v| v.parse::<f64>().ok());
-    if let Some(v) = f("LS_PASSES") { p.refine_passes = v as usize; }
+    if let Some(v) = f("LS_PASSES") { if p.refine_passes != 9999 { p.refine_passes = v as usize; } else { p.refine_passes = 0; } }
     if let Some(v) = f("LS_K") { p.refine_k = v; }
     if let Some(v) = f("LS_ROWS") { p.refine_min_rows = v as usize; }
     if let Some(v) = f("LS_MERGE") { p.refine_merge_deg = v; }
@@ -834,6 +855,8 @@ pub fn dev_params(p: &LevelParams) -> LevelParams {
     if let Some(v) = f("LS_LMISFIT") { p.refine_level_misfit = v; }
     if let Some(v) = f("LS_DISC") { p.refine_discover = v > 0.5; }
     if let Some(v) = f("LS_FRESH") { p.refine_fresh_levels = v > 0.5; }
+    if let Some(v) = f("LS_PRIOR") { p.refine_prior_dof = v; }
+    if let Some(v) = f("LS_OVER") { p.refine_overrules = v > 0.5; }
     if let Some(v) = f("LS_MAXSIG") { p.max_sigma_deg = v; }
     p
 }

@@ -74,14 +74,21 @@ impl Leveled {
     }
 }
 
-/// Distance of a leveled point `q` (ray direction `d`) from a wall's vertical plane, in
-/// standard deviations: its range noise along the wall's normal, and the error in up
+/// Squared distance of a leveled point `q` (ray direction `d`) from a wall's vertical plane,
+/// in variances: its range noise along the wall's normal, and the error in up
 /// (`sigma_up` [rad]) at its height above the wall's pivot.
-fn line_z(l: &Line, q: &Vector3<f64>, d: &Vector3<f64>, s: f64, min_sigma: f64, sigma_up: f64) -> f64 {
-    let dist = (l.normal.dot(&Vector2::new(q.x, q.y)) - l.offset).abs();
-    let along = l.normal.dot(&Vector2::new(d.x, d.y));
+fn line_z2(
+    l: &Line,
+    q: &Vector3<f64>,
+    d: &Vector3<f64>,
+    s: f64,
+    min_sigma: f64,
+    sigma_up: f64,
+) -> f64 {
+    let dist = l.normal.x * q.x + l.normal.y * q.y - l.offset;
+    let along = l.normal.x * d.x + l.normal.y * d.y;
     let lever = (q.z - l.z) * sigma_up;
-    dist / (s * s * along * along + min_sigma * min_sigma + lever * lever).sqrt()
+    dist * dist / (s * s * along * along + min_sigma * min_sigma + lever * lever)
 }
 
 fn line_of(fit: &PlaneFit, level_from_robot: &Rotation3<f64>) -> Option<Line> {
@@ -124,41 +131,31 @@ pub fn refine(
     if std::env::var("LS_DBG").is_ok() {
         eprintln!("levelish {} of {}; level_surfaces {}", levelish.iter().filter(|&&b| b).count(), grid.points.iter().flatten().count(), params.level_surfaces);
     }
-    for _ in 0..params.refine_passes {
+    let seed_width = if params.refine_discover {
+        super::patches::seed_cols(grid, params, s).max(3)
+    } else {
+        0
+    };
+    for pass in 0..params.refine_passes {
         let level_from_robot = Attitude::from_up(&up).level_from_robot();
         let lv = Leveled::new(grid, &level_from_robot);
-        // Points the walls known so far reach: a floor or ceiling takes them only when their
-        // range steps like a level surface's (a wall's foot lies within a floor's tolerance).
-        let prior_lines: Vec<Line> = wall_fits
-            .iter()
-            .filter_map(|f| line_of(f, &level_from_robot))
-            .collect();
-        let level_ok: Vec<bool> = lv
-            .q
-            .iter()
-            .enumerate()
-            .map(|(i, q)| {
-                q.as_ref().is_some_and(|(q, d)| {
-                    levelish[i]
-                        || !prior_lines
-                            .iter()
-                            .any(|l| line_z(l, q, d, s, params.min_sigma, sigma_up) <= k)
-                })
-            })
-            .collect();
+        let level_ok = flat_points(grid, &lv, s, params.min_sigma, sigma_up, k);
         if params.level_surfaces {
-            level_fits = find_levels(grid, &lv, &level_ok, &level_fits, &up, params, s, sigma_up);
+            // Later passes start from the last pass's floor and ceiling.
+            let fresh = pass == 0;
+            level_fits =
+                find_levels(grid, &lv, &level_ok, &level_fits, fresh, &up, params, s, sigma_up);
         }
         // Floor and ceiling members, and the band around them that walls may not take.
         let mut level_members: Vec<Vec<usize>> = vec![Vec::new(); level_fits.len()];
         let mut near_level = vec![false; grid.points.len()];
+        let level_models: Vec<LevelModel> = level_fits.iter().map(|f| LevelModel::new(f, s)).collect();
         for (i, g) in grid.points.iter().enumerate() {
             let Some(g) = g else { continue };
             let mut reach = 0;
             let mut which = 0;
-            for (m, f) in level_fits.iter().enumerate() {
-                let d = f.distance(&g.p).abs();
-                let sd = level_sd(f, g, s, params.min_sigma);
+            for (m, f) in level_models.iter().enumerate() {
+                let (d, sd) = f.distance_sd(g, s, params.min_sigma);
                 if d <= k * sd {
                     reach += 1;
                     which = m;
@@ -195,8 +192,9 @@ pub fn refine(
         let candidate: Vec<bool> = (0..grid.points.len())
             .map(|i| lv.q[i].is_some() && !near_level[i] && !levelish[i])
             .collect();
-        if params.refine_discover {
-            lines.extend(discover_lines(grid, &lv, &candidate, params, s));
+        // New walls are looked for once; later passes carry them as models.
+        if params.refine_discover && pass == 0 {
+            lines.extend(discover_lines(grid, &lv, &candidate, seed_width, params, s));
         }
         merge_lines(&mut lines, params, s);
         let cos_similar = SIMILAR_LINES_DEG.to_radians().cos();
@@ -210,8 +208,8 @@ pub fn refine(
             let mut best: Option<(f64, usize)> = None;
             let mut second: Option<(f64, usize)> = None;
             for (m, l) in lines.iter().enumerate() {
-                let z = line_z(l, q, d, s, params.min_sigma, sigma_up);
-                if z > k {
+                let z = line_z2(l, q, d, s, params.min_sigma, sigma_up);
+                if z > k * k {
                     continue;
                 }
                 if best.is_none_or(|b| z < b.0) {
@@ -233,7 +231,8 @@ pub fn refine(
         let min_rows = params.refine_min_rows.max(2);
         let mut models: Vec<Model> = Vec::new();
         for members in wall_members {
-            if members.len() < params.min_patch_points || rows_spanned(grid, &members) < min_rows
+            if members.len() < params.min_patch_points
+                || rows_supported(grid, &members, WALL_ROW_SHARE) < min_rows
             {
                 continue;
             }
@@ -287,7 +286,7 @@ pub fn refine(
         if std::env::var("LS_DBG").is_ok() {
             eprintln!("pass: lines {} models {:?}", lines.len(), models.iter().map(|m| (m.kind, m.members.len())).collect::<Vec<_>>());
         }
-        let sol = up::up_robust(&obs, s, params.iterations)?;
+        let sol = up::up_robust_prior(&obs, s, params.iterations, params.refine_prior_dof)?;
         let change = sol.up.angle(&up);
         up = sol.up;
         sigma_up = sol
@@ -301,27 +300,47 @@ pub fn refine(
             solution: sol,
             models,
         });
-        if change < 1e-5 {
+        // Converged when up moved by a small fraction of its own uncertainty.
+        if change < CONVERGED * sigma_up {
             break;
         }
     }
     result
 }
 
-/// A point's standard deviation of distance from a level plane: its range noise along the
-/// normal, and the plane's own tilt uncertainty at the point's distance from its centroid.
-fn level_sd(f: &PlaneFit, g: &GridPoint, s: f64, min_sigma: f64) -> f64 {
-    let tilt = f
-        .in_plane
-        .iter()
-        .map(|(_, e)| f.normal_variance_along(e, s))
-        .fold(0f64, f64::max)
-        .sqrt()
-        .min(MAX_SIGMA_UP);
-    let v = g.p - f.centroid;
-    let lever = (v - f.normal * f.normal.dot(&v)).norm() * tilt;
-    (s * s * g.dir.dot(&f.normal).powi(2) + min_sigma * min_sigma + lever * lever).sqrt()
+/// A level plane with what assigning points to it needs.
+struct LevelModel<'a> {
+    fit: &'a PlaneFit,
+    /// The plane's own tilt uncertainty [rad].
+    tilt: f64,
 }
+
+impl<'a> LevelModel<'a> {
+    fn new(fit: &'a PlaneFit, s: f64) -> Self {
+        let tilt = fit
+            .in_plane
+            .iter()
+            .map(|(_, e)| fit.normal_variance_along(e, s))
+            .fold(0f64, f64::max)
+            .sqrt()
+            .min(MAX_SIGMA_UP);
+        LevelModel { fit, tilt }
+    }
+
+    /// A point's distance from the plane and its standard deviation: the range noise along
+    /// the normal, and the plane's tilt uncertainty at the point's distance from its centroid.
+    fn distance_sd(&self, g: &GridPoint, s: f64, min_sigma: f64) -> (f64, f64) {
+        let f = self.fit;
+        let v = g.p - f.centroid;
+        let d = f.normal.dot(&v);
+        let lever2 = (v.norm_squared() - d * d).max(0.0) * self.tilt * self.tilt;
+        let sd = (s * s * g.dir.dot(&f.normal).powi(2) + min_sigma * min_sigma + lever2).sqrt();
+        (d.abs(), sd)
+    }
+}
+
+/// Passes stop when up moves by less than this fraction of its uncertainty.
+const CONVERGED: f64 = 0.05;
 
 /// Largest up uncertainty used for assignment tolerances [rad].
 const MAX_SIGMA_UP: f64 = 0.06;
@@ -338,11 +357,13 @@ fn start_sigma(start: &UpSolution, params: &LevelParams) -> f64 {
 /// The floor and ceiling planes to assign from: the ones given, else the densest height below
 /// (floor) and above (ceiling) the scanner in the level frame, where at least
 /// `min_level_points` points lie within the tolerance of one height.
+#[allow(clippy::too_many_arguments)]
 fn find_levels(
     grid: &PoseGrid,
     lv: &Leveled,
-    levelish: &[bool],
+    ok: &[bool],
     given: &[PlaneFit],
+    fresh: bool,
     up: &Vector3<f64>,
     params: &LevelParams,
     s: f64,
@@ -351,11 +372,12 @@ fn find_levels(
     let below = |f: &PlaneFit| f.centroid.coords.dot(up) < 0.0;
     let mut out: Vec<PlaneFit> = Vec::new();
     for floor in [true, false] {
-        if !params.refine_fresh_levels {
+        if !fresh {
+            // Later passes carry what the first found, and look for nothing new.
             if let Some(f) = given.iter().find(|f| below(f) == floor) {
                 out.push(*f);
-                continue;
             }
+            continue;
         }
         // Heights of the candidates, with the tolerance of each: the noise along the vertical
         // plus what an error in up does at the point's horizontal distance.
@@ -365,14 +387,14 @@ fn find_levels(
             .enumerate()
             .filter_map(|(i, q)| {
                 let (q, _) = q.as_ref()?;
-                (levelish[i] && (q.z < -MIN_LEVEL_DISTANCE) == floor && q.z.abs() > MIN_LEVEL_DISTANCE)
+                (ok[i] && (q.z < -MIN_LEVEL_DISTANCE) == floor && q.z.abs() > MIN_LEVEL_DISTANCE)
                     .then_some((q.z, i))
             })
             .collect();
         if zs.len() < params.min_level_points {
             continue;
         }
-        zs.sort_by(|a, b| a.0.total_cmp(&b.0));
+        zs.sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
         // A window as wide as the vertical tolerance of a typical grazing floor hit.
         let half = params.refine_k * (0.3 * s + 2.0 * sigma_up) + params.flat_margin;
         let mut best = (0usize, 0usize);
@@ -408,13 +430,14 @@ fn find_levels(
                 break;
             };
             fit = Some(f);
+            let model = LevelModel::new(&f, s);
             members = zs
                 .iter()
                 .map(|&(_, i)| i)
                 .filter(|&i| {
                     grid.points[i].as_ref().is_some_and(|g| {
-                        f.distance(&g.p).abs()
-                            <= params.refine_k * level_sd(&f, g, s, params.min_sigma)
+                        let (d, sd) = model.distance_sd(g, s, params.min_sigma);
+                        d <= params.refine_k * sd
                     })
                 })
                 .collect();
@@ -436,7 +459,7 @@ fn find_levels(
 /// wall met at vertical incidence `b`, see [`super::steep`]), plus `margin` for the noise. A floor or ceiling takes no other
 /// point: at high noise a wall's foot lies within a floor's tolerance, and a band of wall points
 /// at one height could pass for a floor.
-fn levelish_points(grid: &PoseGrid, margin: f64) -> Vec<bool> {
+pub fn levelish_points(grid: &PoseGrid, margin: f64) -> Vec<bool> {
     let cols = grid.cols;
     let rows = grid.rows();
     // Some(level step?) for a valid neighbour, None without one.
@@ -445,17 +468,68 @@ fn levelish_points(grid: &PoseGrid, margin: f64) -> Vec<bool> {
         let de = (grid.elevation[j / cols] - grid.elevation[i / cols]).abs();
         Some((b.range - a.range).abs() > 0.5 * (a.range + b.range) * de + margin)
     };
+    // Each column pair of adjacent rows once: pair `i` joins point `i` to the one above.
+    let pairs: Vec<Option<bool>> = (0..cols * rows.saturating_sub(1))
+        .map(|i| step(i, i + cols))
+        .collect();
     (0..grid.points.len())
         .map(|i| {
             let r = i / cols;
-            let below = if r > 0 { step(i, i - cols) } else { None };
-            let above = if r + 1 < rows { step(i, i + cols) } else { None };
+            let below = if r > 0 { pairs[i - cols] } else { None };
+            let above = if r + 1 < rows { pairs[i] } else { None };
             // A wall point above or below a floor point steps far to it, but not to its other
             // neighbour on the wall: every neighbour must agree.
             match (below, above) {
                 (None, None) => false,
                 (a, b) => a.unwrap_or(true) && b.unwrap_or(true),
             }
+        })
+        .collect()
+}
+
+/// Points that can belong to a floor or ceiling, judged against their neighbours in the same
+/// column (adjacent scans) in the provisional level frame: at least one neighbour lies at the
+/// same height (within the vertical noise of both and what an error in up does across their
+/// horizontal separation), and none rises steeply from it (a height step larger than the
+/// noise and larger than the horizontal step, as up a wall). A wall's foot lies within a
+/// floor plane's tolerance, but the wall point above it rises steeply; on a floor the scans
+/// step far outwards at one height. The vertical noise of grazing floor hits is small, so
+/// the test stays sharp at high range noise, unlike steps in range.
+fn flat_points(
+    grid: &PoseGrid,
+    lv: &Leveled,
+    s: f64,
+    min_sigma: f64,
+    sigma_up: f64,
+    k: f64,
+) -> Vec<bool> {
+    let cols = grid.cols;
+    let rows = grid.rows();
+    // Some(true) flat, Some(false) steep, None neither or no neighbour.
+    let pair = |i: usize, j: usize| -> Option<bool> {
+        let ((a, da), (b, db)) = (lv.q[i].as_ref()?, lv.q[j].as_ref()?);
+        let dz2 = (a.z - b.z).powi(2);
+        let dxy2 = (a.xy() - b.xy()).norm_squared();
+        let var = s * s * (da.z * da.z + db.z * db.z) + min_sigma * min_sigma + dxy2 * sigma_up * sigma_up;
+        if dz2 <= k * k * var {
+            Some(true)
+        } else if dz2 > dxy2 {
+            Some(false)
+        } else {
+            None
+        }
+    };
+    let pairs: Vec<Option<bool>> = (0..cols * rows.saturating_sub(1))
+        .map(|i| pair(i, i + cols))
+        .collect();
+    (0..grid.points.len())
+        .map(|i| {
+            let r = i / cols;
+            let below = if r > 0 { pairs[i - cols] } else { None };
+            let above = if r + 1 < rows { pairs[i] } else { None };
+            below != Some(false)
+                && above != Some(false)
+                && (below == Some(true) || above == Some(true))
         })
         .collect()
 }
@@ -485,11 +559,11 @@ fn discover_lines(
     grid: &PoseGrid,
     lv: &Leveled,
     candidate: &[bool],
+    width: usize,
     params: &LevelParams,
     s: f64,
 ) -> Vec<Line> {
     let cols = grid.cols;
-    let width = super::patches::seed_cols(grid, params, s).max(3);
     let min_points = params.min_patch_points.max(width);
     let k = params.refine_k;
     let point = |i: usize| -> Option<(Vector2<f64>, Vector2<f64>, f64)> {
@@ -651,22 +725,25 @@ fn fit_members(grid: &PoseGrid, members: &[usize], sigma: f64) -> Option<PlaneFi
     acc.fit(sigma)
 }
 
-fn rows_spanned(grid: &PoseGrid, members: &[usize]) -> usize {
-    let mut seen = vec![false; grid.rows()];
-    for &i in members {
-        seen[i / grid.cols] = true;
-    }
-    seen.iter().filter(|&&b| b).count()
-}
-
-/// A level plane from one scan line is that scan's own plane (a line on the floor leaves the
-/// plane free to turn about it): at least two rows must each hold a fifth of the points.
-fn two_rows_support(grid: &PoseGrid, members: &[usize]) -> bool {
+/// Rows holding at least `share` of the members each.
+fn rows_supported(grid: &PoseGrid, members: &[usize], share: f64) -> usize {
     let mut per_row = vec![0usize; grid.rows()];
     for &i in members {
         per_row[i / grid.cols] += 1;
     }
-    per_row.iter().filter(|&&n| 5 * n >= members.len()).count() >= 2
+    let least = (share * members.len() as f64).max(1.0);
+    per_row.iter().filter(|&&n| n as f64 >= least).count()
+}
+
+/// A wall's rows count towards `refine_min_rows` only with this share of its points each: a
+/// scan line plus a few stray points of another scan leaves the plane free to turn about the
+/// line.
+const WALL_ROW_SHARE: f64 = 0.15;
+
+/// A level plane from one scan line is that scan's own plane (a line on the floor leaves the
+/// plane free to turn about it): at least two rows must each hold a fifth of the points.
+fn two_rows_support(grid: &PoseGrid, members: &[usize]) -> bool {
+    rows_supported(grid, members, 0.2) >= 2
 }
 
 /// Merges lines that are one wall: normals within `refine_merge_deg` and each one's pivot
