@@ -60,6 +60,7 @@ fn simulated_run(n: usize) -> Run {
         0,
         &[0.0],
         &ScannerParams::default(),
+        None,
         7,
     )
     .into_iter()

@@ -25,6 +25,7 @@ fn run() -> (levelscan::plan::Plan, Vec<Source>) {
         0,
         &elevations_centred(5, 5f64.to_radians()),
         &ScannerParams::default(),
+        None,
         1,
     );
     let source = Source {

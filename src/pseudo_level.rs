@@ -7,7 +7,13 @@
 //! column of an adjacent scan lies nearly straight above or below it after leveling (walls are
 //! vertical; on the floor the same two rays land far apart horizontally at nearly the same
 //! height). That per-point test recovers corners and small features that no quad covers.
-//! Points at the floor's or ceiling's height (from floor/ceiling patches) are never kept.
+//! Points at the floor's or ceiling's height (from floor/ceiling patches) are never kept. And a
+//! point clearly above the floor (and below the ceiling, or below the scanner when no ceiling
+//! was seen) is kept even when no other scan saw its wall: a far wall that only the highest
+//! scan reaches before the others meet the floor is still a wall. The floor's height comes from
+//! its patches, else from the lowest height at which many leveled points gather (a floor seen
+//! by fewer scans than a patch needs is still a crowd of points at one height, and nothing
+//! lies below it).
 //! Then gaps of at most `max_gap` rays between kept points are filled, for rays with a return.
 
 use crate::geometry::{Pose, rot_y};
@@ -28,6 +34,12 @@ pub struct PseudoLevelParams {
     /// Points within this height of the floor or ceiling (plus three sigmas of the range noise
     /// along the vertical) are never kept [m]. Default 0.05.
     pub floor_margin: f64,
+    /// Keep points that lie clear of the floor (and the ceiling) by their height alone, when
+    /// the floor's height is known: by `floor_margin`, plus three sigmas of the range noise
+    /// along the vertical, plus two sigmas of the attitude at the point's distance (two, not
+    /// three: the floor's height, measured from the same leveled points, shares much of that
+    /// error). Default true.
+    pub height_test: bool,
 }
 
 impl Default for PseudoLevelParams {
@@ -36,6 +48,7 @@ impl Default for PseudoLevelParams {
             max_gap: 3,
             vertical_ratio: 1.5,
             floor_margin: 0.05,
+            height_test: true,
         }
     }
 }
@@ -72,10 +85,17 @@ pub fn pseudo_level_scan(scans: &[Scan], est: &LevelEstimate, params: &PseudoLev
         valid: Vec::with_capacity(n),
         ..Scan::default()
     };
+    // `Scan::point_in_robot`'s arithmetic, with its rotation and offset built once per scan
+    // and one sincos per ray shared with the direction.
+    let robot_from_scanner = rot_y(elevation);
+    let offset = base.hinge_offset_vector();
     for (i, &kept) in keep.iter().enumerate() {
         let (sp, cp) = base.theta[i].sin_cos();
-        let dir = level_from_scanner * Vector3::new(cp, sp, 0.0);
-        let point = base.point_in_robot(i).map(|p| level_from_robot * p.coords);
+        let ray = Vector3::new(cp, sp, 0.0);
+        let dir = level_from_scanner * ray;
+        let point = base
+            .range(i)
+            .map(|r| level_from_robot * (robot_from_scanner * (offset + r * ray)));
         let bearing = match &point {
             Some(p) if p.x != 0.0 || p.y != 0.0 => p.y.atan2(p.x),
             _ => dir.y.atan2(dir.x),
@@ -108,6 +128,24 @@ pub fn base_scan_index(scans: &[Scan], est: &LevelEstimate) -> usize {
             })
         })
         .unwrap_or(0)
+}
+
+/// Fewest points that make a crowd at the floor's height.
+const MIN_GROUND_POINTS: usize = 20;
+
+/// The lowest height with at least `min_count` of `heights` within `window` above it: the
+/// median of that crowd. `None` when no window holds that many.
+fn lowest_crowded_height(mut heights: Vec<f64>, window: f64, min_count: usize) -> Option<f64> {
+    if min_count == 0 || heights.len() < min_count {
+        return None;
+    }
+    heights.sort_by(f64::total_cmp);
+    (0..=heights.len() - min_count)
+        .find(|&i| heights[i + min_count - 1] - heights[i] <= window)
+        .map(|i| {
+            let end = heights.partition_point(|&z| z <= heights[i] + window);
+            heights[(i + end) / 2]
+        })
 }
 
 /// Slack on how far a filled gap point may stray from its wall neighbours [m].
@@ -153,6 +191,17 @@ fn kept_rays(
     };
     let floor_z = height_of(SurfaceKind::Floor);
     let ceiling_z = height_of(SurfaceKind::Ceiling);
+    let attitude_sigma = est.sigmas.map_or(0.0, |s| s[0].max(s[1]));
+    let ground_z = floor_z.or_else(|| {
+        let heights: Vec<f64> = grid
+            .points
+            .iter()
+            .flatten()
+            .map(|g| level(&g.p).z)
+            .collect();
+        let min_count = (heights.len() / 20).max(MIN_GROUND_POINTS);
+        lowest_crowded_height(heights, params.floor_margin, min_count)
+    });
     let mut is_wall = vec![false; n];
     let mut blocked = vec![false; n];
     let mut flat_points: Vec<Option<Vector2<f64>>> = vec![None; n];
@@ -176,6 +225,15 @@ fn kept_rays(
         if est.wall_mask.get(i).copied().unwrap_or(false) {
             *slot = true;
             continue;
+        }
+        if params.height_test {
+            let margin = params.floor_margin + dz_noise + 2.0 * attitude_sigma * lp.x.hypot(lp.y);
+            let above_floor = ground_z.is_some_and(|f| lp.z > f + margin);
+            let below_top = ceiling_z.map_or(lp.z < 0.0, |h| lp.z < h - margin);
+            if above_floor && below_top {
+                *slot = true;
+                continue;
+            }
         }
         if params.vertical_ratio > 0.0 {
             let neighbours = [
@@ -222,4 +280,26 @@ fn kept_rays(
         last = Some(c);
     }
     keep
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn lowest_crowd_is_the_floor_under_walls_and_stray_points() {
+        let floor = (0..30).map(|k| -0.45 + 0.001 * (k % 7) as f64);
+        let walls = (0..60).map(|k| -0.3 + 0.02 * k as f64);
+        let strays = [-1.2, -0.9, -0.7];
+        let heights: Vec<f64> = floor.chain(walls).chain(strays).collect();
+        let z = lowest_crowded_height(heights, 0.05, 20).unwrap();
+        assert!((z + 0.447).abs() < 0.004, "{z}");
+    }
+
+    #[test]
+    fn no_crowd_no_floor() {
+        let spread: Vec<f64> = (0..50).map(|k| 0.1 * k as f64).collect();
+        assert_eq!(lowest_crowded_height(spread, 0.05, 20), None);
+        assert_eq!(lowest_crowded_height(vec![0.0; 5], 0.05, 20), None);
+    }
 }

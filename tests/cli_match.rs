@@ -371,10 +371,12 @@ fn eval_real_scores_a_log_against_its_poses() {
         .split('|')
         .map(str::trim)
         .collect();
-    // | log | scans | median | p95 | bad | odometry median | ...
+    // | log | scans | median | p95 | bad | odometry median | odometry bad | closure | ...
     assert_eq!(row[2], "25");
     let matched: f64 = row[3].parse().unwrap();
     let odometry: f64 = row[6].parse().unwrap();
+    let closure: f64 = row[8].parse().unwrap();
     assert!(matched < odometry, "{table}");
     assert!(matched < 1.0, "{table}");
+    assert!(closure < 1.0, "{table}");
 }

@@ -112,3 +112,42 @@ fn gap_filling_keeps_no_floor_hit_seen_through_a_doorway() {
     }
     assert!(out.valid_count() > 150, "only {} kept", out.valid_count());
 }
+
+#[test]
+fn a_far_wall_only_the_top_scan_reaches_is_kept() {
+    use levelscan::pseudo_level::{PseudoLevelParams, pseudo_level_scan};
+    use levelscan::scan::Hit;
+    // Pitched 5 degrees towards the floor: the top scan is level and meets the wall 10 m ahead;
+    // the lower two meet the floor 5 and 2.6 m ahead. The side walls and a pillar 2 m ahead
+    // level the pose.
+    let mut room = Room::box_room(12.0, 6.0);
+    room.segments.extend([
+        ([4.0, 4.0], [4.0, 4.6]),
+        ([4.0, 4.6], [4.6, 4.6]),
+        ([4.6, 4.6], [4.6, 4.0]),
+        ([4.6, 4.0], [4.0, 4.0]),
+    ]);
+    let pose = Pose::new(2.0, 3.0, 0.45, 0.0, deg(5.0), deg(0.0));
+    let scans = scans_at(&room, &pose, &elevations(3, 5.0), 0.01, 4, 0);
+    let e = level_pose(&scans, &LevelParams::default());
+    assert!(e.is_ok(), "{:?}", e.failure);
+    let base = e.base_scan.unwrap();
+    let out = pseudo_level_scan(&scans, &e, &PseudoLevelParams::default());
+    let hits = scans[base].hit.as_ref().unwrap();
+    let mut front = 0;
+    for (i, hit) in hits.iter().enumerate() {
+        let Some(r) = out.range(i) else { continue };
+        assert_eq!(*hit, Hit::Wall, "ray {i} kept but not a wall");
+        if pose.x + r * out.theta[i].cos() > 11.5 {
+            front += 1;
+        }
+    }
+    // The front wall spans about 33 degrees of the top scan (|y| <= 3 at 10 m).
+    assert!(front >= 25, "{front} front-wall points kept");
+    let without = PseudoLevelParams {
+        height_test: false,
+        ..PseudoLevelParams::default()
+    };
+    let old = pseudo_level_scan(&scans, &e, &without);
+    assert!(old.valid_count() + 25 <= out.valid_count());
+}

@@ -245,3 +245,41 @@ fn attitude_from_up_matches_truth_sign_conventions() {
     let back = Attitude::from_up(&a.up_in_robot());
     assert!((back.theta_x - a.theta_x).abs() < 1e-12);
 }
+
+/// A 7 m x 5 m room with a ceiling and a 0.4 m box 2.3 m ahead of a robot pitched towards the
+/// floor: the lowest scan meets the floor at the box's foot, at nearly the box's range, and the
+/// box is the only thing that pins the pitch (the side walls are parallel).
+fn room_with_a_box_at_the_floor_line() -> (Room, Pose) {
+    let mut room = Room::polygon(&[[0.0, 0.0], [7.0, 0.0], [7.0, 5.0], [0.0, 5.0]], 2.4, true);
+    let b = [[3.3, 2.3], [3.7, 2.3], [3.7, 2.7], [3.3, 2.7]];
+    room.segments.extend((0..4).map(|i| (b[i], b[(i + 1) % 4])));
+    let pose = Pose::new(1.0, 1.0, 0.45, deg(-2.717), deg(6.732), 0.0);
+    (room, pose)
+}
+
+#[test]
+fn a_wall_line_with_a_floor_line_at_its_foot_never_levels_a_pose_wrongly() {
+    let (room, pose) = room_with_a_box_at_the_floor_line();
+    let unguarded = LevelParams {
+        max_misfit_sigmas: 0.0,
+        min_stacked_share: 0.0,
+        ..LevelParams::default()
+    };
+    let (mut wrong_unguarded, mut wrong) = (0, 0);
+    for seed in 0..20 {
+        let scans = scans_at(&room, &pose, &elevations(3, 5.0), 0.01, seed, 0);
+        let off = |p: &LevelParams| {
+            level_pose(&scans, p)
+                .attitude
+                .is_some_and(|a| a.max_abs_error(&pose.attitude()).to_degrees() > 2.0)
+        };
+        wrong_unguarded += usize::from(off(&unguarded));
+        wrong += usize::from(off(&LevelParams::default()));
+    }
+    // The case is real: without the guards some of these poses are leveled degrees off.
+    assert!(
+        wrong_unguarded > 0,
+        "the scene no longer fools the extraction"
+    );
+    assert_eq!(wrong, 0);
+}

@@ -9,7 +9,9 @@ use super::level::level_record;
 use super::progress_bar;
 use anyhow::Context;
 use levelscan::eval::accuracy::{AccuracyParams, CellStats, run_accuracy};
-use levelscan::eval::matching::{RunKind, RunResult, match_scans, nearest_level_scan};
+use levelscan::eval::matching::{
+    RunKind, RunResult, adaptive_attempt, match_scans, nearest_level_scan,
+};
 use levelscan::eval::metrics::{Ate, Rpe};
 use levelscan::formats::{parse_plan, write_scan};
 use levelscan::geometry::{Attitude, Pose, Pose2};
@@ -18,10 +20,9 @@ use levelscan::matching::matcher::{MatcherParams, Mode};
 use levelscan::plan::Plan;
 use levelscan::pseudo_level::PseudoLevelParams;
 use levelscan::scan::Scan;
-use levelscan::simulate::adaptive::{AdaptiveParams, simulate_pose_adaptive};
+use levelscan::simulate::adaptive::AdaptiveParams;
 use levelscan::simulate::{
-    OdometryParams, ScannerParams, Stream, World, elevations_centred, odometry, simulate_poses,
-    stream_rng,
+    OdometryParams, ScannerParams, World, elevations_centred, odometry, simulate_poses,
 };
 use levelscan::viz::histogram;
 use levelscan::viz::html::{Source, ViewParams, build_scene, viewer_page};
@@ -243,8 +244,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             accuracy_poses: args.accuracy_poses,
             robot: format!(
                 "cleverRobot (simulate --adaptive): it levels its own scans at each pose and \
-                 retakes them tilted the other way when it faced the floor or the ceiling; it \
-                 retook scans at {retook} of {} poses",
+                 retakes them at other elevations when it faced the floor or the ceiling or \
+                 could not level them; it retook scans at {retook} of {} poses",
                 tilted.len()
             ),
         },
@@ -292,29 +293,18 @@ fn simulate_run(plan: &Plan, args: &Args) -> (Vec<Vec<Scan>>, Vec<Scan>, Vec<Pos
         ..ScannerParams::default()
     };
     let elevations = elevations_centred(args.scans, args.step.to_radians());
-    // cleverRobot (sect. 7.2.2): each pose levels its own scans and retakes them tilted the
-    // other way when it faced the floor or the ceiling. One random stream per pose.
-    let adaptive = AdaptiveParams::default();
-    let tilted: Vec<Vec<Scan>> = poses
-        .par_iter()
-        .enumerate()
-        .map(|(k, pose)| {
-            let mut rng = stream_rng(args.seed, Stream::Scans, k as u64);
-            let mut scans = simulate_pose_adaptive(
-                &world,
-                k as u64,
-                pose,
-                &elevations,
-                &scanner,
-                &adaptive,
-                &mut rng,
-            );
-            for s in &mut scans {
-                s.odometry = Some(odo[k]);
-            }
-            scans
-        })
-        .collect();
+    // cleverRobot (sect. 7.2.2): each pose levels its own scans and retakes them when it could
+    // not level them or faced the floor or the ceiling.
+    let tilted = simulate_poses(
+        &world,
+        poses,
+        Some(&odo),
+        0,
+        &elevations,
+        &scanner,
+        Some(&AdaptiveParams::default()),
+        args.seed,
+    );
     let flat_poses: Vec<Pose> = poses
         .iter()
         .map(|p| Pose::new(p.x, p.y, p.z, p.rz, 0.0, 0.0))
@@ -326,6 +316,7 @@ fn simulate_run(plan: &Plan, args: &Args) -> (Vec<Vec<Scan>>, Vec<Scan>, Vec<Pos
         0,
         &[0.0],
         &scanner,
+        None,
         args.seed,
     )
     .into_iter()
@@ -333,15 +324,6 @@ fn simulate_run(plan: &Plan, args: &Args) -> (Vec<Vec<Scan>>, Vec<Scan>, Vec<Pos
     .collect();
     let truth = poses.iter().map(Pose::to_pose2).collect();
     (tilted, flat, truth)
-}
-
-/// Which attempt of cleverRobot took a scan (0: the first set of elevations).
-fn adaptive_attempt(scan: &Scan) -> u64 {
-    scan.extra
-        .get("adaptive")
-        .and_then(|a| a.get("attempt"))
-        .and_then(|a| a.as_u64())
-        .unwrap_or(0)
 }
 
 fn level_summary(tilted: &[Vec<Scan>], leveled: &[(Scan, Option<Attitude>)]) -> LevelSummary {

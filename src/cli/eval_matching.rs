@@ -8,7 +8,7 @@ use levelscan::eval::matching::{ExperimentParams, matching_experiment};
 use levelscan::eval::real::{RealLog, RealResult, evaluate_real};
 use levelscan::formats::{CarmenParams, read_any, read_plan};
 use levelscan::matching::{Mode, scan_points};
-use levelscan::simulate::{ScannerParams, elevations_centred};
+use levelscan::simulate::{AdaptiveParams, ScannerParams, elevations_centred};
 use levelscan::viz::plots::{MapPanel, map_panels_png, map_panels_svg, run_map_panel};
 use std::fmt::Write as _;
 use std::path::PathBuf;
@@ -33,6 +33,10 @@ pub struct MatchingArgs {
     /// Elevation step between the tilted run's scans [deg].
     #[arg(long, default_value_t = 5.0)]
     pub step: f64,
+    /// Take one set of scans per pose; by default cleverRobot takes the tilted run, retaking a
+    /// pose's scans at other elevations when it cannot level them (as the paper's experiment).
+    #[arg(long)]
+    pub no_retakes: bool,
     #[command(flatten)]
     pub odometry: super::OdometryNoiseArgs,
     #[command(flatten)]
@@ -57,6 +61,7 @@ pub fn run_matching(args: MatchingArgs) -> anyhow::Result<()> {
             ..ScannerParams::default()
         },
         elevations: elevations_centred(args.scans, args.step.to_radians()),
+        adaptive: (!args.no_retakes).then(AdaptiveParams::default),
         matcher: args.options.params()?,
         ..ExperimentParams::default()
     };
@@ -208,13 +213,13 @@ pub fn run_real(args: RealArgs) -> anyhow::Result<()> {
 /// The results as a markdown table.
 fn real_table(results: &[RealResult]) -> String {
     let mut s = String::from(
-        "| log | scans | RPE median [mm] | RPE p95 [mm] | bad pairs | odometry median [mm] | odometry bad pairs | fallbacks | coarse |\n\
-         |---|---:|---:|---:|---:|---:|---:|---:|---:|\n",
+        "| log | scans | RPE median [mm] | RPE p95 [mm] | bad pairs | odometry median [mm] | odometry bad pairs | closure median [mm] | fallbacks | coarse |\n\
+         |---|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n",
     );
     for r in results {
         let _ = writeln!(
             s,
-            "| {} | {} | {:.2} | {:.2} | {} | {:.2} | {} | {} | {} |",
+            "| {} | {} | {:.2} | {:.2} | {} | {:.2} | {} | {} | {} | {} |",
             r.name,
             r.scans,
             r.matched.median_translation * 1e3,
@@ -222,6 +227,8 @@ fn real_table(results: &[RealResult]) -> String {
             r.matched.bad_pairs,
             r.odometry.median_translation * 1e3,
             r.odometry.bad_pairs,
+            r.closure
+                .map_or("-".into(), |c| format!("{:.2}", c.median_translation * 1e3)),
             r.fallbacks,
             r.coarse
         );

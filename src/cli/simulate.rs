@@ -7,10 +7,9 @@ use levelscan::formats::{InputError, parse_plan, write_scan};
 use levelscan::geometry::Pose;
 use levelscan::plan::Plan;
 use levelscan::simulate::{
-    AdaptiveParams, RandomPoseParams, ScannerParams, Stream, World, elevations_centred, odometry,
-    random_poses, simulate_pose_adaptive, simulate_poses, stream_rng,
+    AdaptiveParams, RandomPoseParams, ScannerParams, World, elevations_centred, odometry,
+    random_poses, simulate_poses,
 };
-use rayon::prelude::*;
 use std::io::{Read, Write};
 use std::path::PathBuf;
 
@@ -80,9 +79,10 @@ pub struct Args {
     pub odometry: super::OdometryNoiseArgs,
 
     /// The adaptive robot, cleverRobot (paper sect. 7.2.2): level each pose's scans as the
-    /// robot would and, when they face the floor or the ceiling, retake them tilted the other
-    /// way. Retaken scans keep the pose's `sequence`; every scan records
-    /// `"adaptive": {"attempt": k, "shift": rad}`.
+    /// robot would and, when the estimate is poor, retake them at other elevations: tilted the
+    /// other way when they face the floor or the ceiling, away from the floor (or the ceiling)
+    /// when the walls seen cannot pin the attitude down. Retaken scans keep the pose's
+    /// `sequence`; every scan records `"adaptive": {"attempt": k, "shift": rad}`.
     #[arg(long)]
     pub adaptive: bool,
     /// Adaptive robot: retakes allowed per pose.
@@ -159,47 +159,24 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     };
     let odometry = odometry(&poses, &odo, args.seed);
 
+    let adaptive = args.adaptive.then(|| AdaptiveParams {
+        max_retakes: args.max_retakes,
+        ..AdaptiveParams::default()
+    });
     let mut out = open_output(args.output.as_ref())?;
     let bar = progress_bar(poses.len() as u64, "simulate");
     for (c, chunk) in poses.chunks(CHUNK).enumerate() {
         let first = c * CHUNK;
-        let scans = if args.adaptive {
-            let params = AdaptiveParams {
-                max_retakes: args.max_retakes,
-                ..AdaptiveParams::default()
-            };
-            chunk
-                .par_iter()
-                .enumerate()
-                .map(|(k, pose)| {
-                    let sequence = (first + k) as u64;
-                    let mut rng = stream_rng(args.seed, Stream::Scans, sequence);
-                    let mut scans = simulate_pose_adaptive(
-                        &world,
-                        sequence,
-                        pose,
-                        &elevations,
-                        &scanner,
-                        &params,
-                        &mut rng,
-                    );
-                    for s in &mut scans {
-                        s.odometry = Some(odometry[first + k]);
-                    }
-                    scans
-                })
-                .collect()
-        } else {
-            simulate_poses(
-                &world,
-                chunk,
-                Some(&odometry[first..first + chunk.len()]),
-                first as u64,
-                &elevations,
-                &scanner,
-                args.seed,
-            )
-        };
+        let scans = simulate_poses(
+            &world,
+            chunk,
+            Some(&odometry[first..first + chunk.len()]),
+            first as u64,
+            &elevations,
+            &scanner,
+            adaptive.as_ref(),
+            args.seed,
+        );
         for scan in scans.iter().flatten() {
             write_scan(&mut out, scan)?;
         }

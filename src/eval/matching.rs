@@ -4,7 +4,9 @@
 //! - `level floor`: the same poses with roll and pitch zeroed, one scan at elevation 0 (Fig. 8);
 //! - `raw`: the tilted poses, each pose's scan nearest elevation 0 used as it is (Fig. 9);
 //! - `leveled`: the tilted poses' scans leveled (sect. 5) into pseudo-level scans (sect. 6)
-//!   (Fig. 10).
+//!   (Fig. 10). As in the paper, cleverRobot takes them (sect. 7.2.2: it retakes a pose's scans
+//!   at other elevations when its leveling is poor); the raw run uses each pose's first set, as
+//!   a robot that does not level would have taken it.
 //!
 //! Scored by ATE and RPE against the true planar poses. Pure: plan in, results out.
 
@@ -15,7 +17,9 @@ use crate::matching::{MatchStatus, MatcherParams, Mode, match_run, scan_points};
 use crate::plan::Plan;
 use crate::pseudo_level::{PseudoLevelParams, pseudo_level_scan};
 use crate::scan::Scan;
-use crate::simulate::{OdometryParams, ScannerParams, World, odometry, simulate_poses};
+use crate::simulate::{
+    AdaptiveParams, OdometryParams, ScannerParams, World, odometry, simulate_poses,
+};
 use nalgebra::Point2;
 use rayon::prelude::*;
 use serde::Serialize;
@@ -31,6 +35,10 @@ pub struct ExperimentParams {
     pub elevations: Vec<f64>,
     /// Odometry drift. Default `OdometryParams::default()`.
     pub odometry: OdometryParams,
+    /// The robot that takes the tilted scans: cleverRobot with these settings (its `level` is
+    /// replaced by the experiment's), or `None` for one set of scans per pose. Default
+    /// cleverRobot, as in the paper's experiment.
+    pub adaptive: Option<AdaptiveParams>,
     pub level: LevelParams,
     pub pseudo: PseudoLevelParams,
     /// Matcher settings; the mode is set per run.
@@ -44,6 +52,7 @@ impl Default for ExperimentParams {
             scanner: ScannerParams::default(),
             elevations: [-5.0f64, 0.0, 5.0].iter().map(|d| d.to_radians()).collect(),
             odometry: OdometryParams::default(),
+            adaptive: Some(AdaptiveParams::default()),
             level: LevelParams::default(),
             pseudo: PseudoLevelParams::default(),
             matcher: MatcherParams::default(),
@@ -101,6 +110,10 @@ pub fn matching_experiment(plan: &Plan, params: &ExperimentParams) -> (Vec<Pose2
     let world = World::from_plan(plan);
     let poses = &plan.poses;
     let odo = odometry(poses, &params.odometry, params.seed);
+    let adaptive = params.adaptive.as_ref().map(|a| AdaptiveParams {
+        level: params.level.clone(),
+        ..a.clone()
+    });
     let tilted = simulate_poses(
         &world,
         poses,
@@ -108,6 +121,7 @@ pub fn matching_experiment(plan: &Plan, params: &ExperimentParams) -> (Vec<Pose2
         0,
         &params.elevations,
         &params.scanner,
+        adaptive.as_ref(),
         params.seed,
     );
     let flat_poses: Vec<Pose> = poses
@@ -121,6 +135,7 @@ pub fn matching_experiment(plan: &Plan, params: &ExperimentParams) -> (Vec<Pose2
         0,
         &[0.0],
         &params.scanner,
+        None,
         params.seed,
     )
     .into_iter()
@@ -148,11 +163,13 @@ pub fn matching_experiment(plan: &Plan, params: &ExperimentParams) -> (Vec<Pose2
     (truth, runs)
 }
 
-/// The scan of a pose taken nearest elevation 0, unleveled (issue 4's raw run). A tilted
-/// scan is used as if it were level: its points go into the plane as they are.
+/// The scan of a pose taken nearest elevation 0, unleveled (issue 4's raw run), from the
+/// pose's first set of scans (cleverRobot's retakes are for leveling). A tilted scan is used
+/// as if it were level: its points go into the plane as they are.
 pub fn nearest_level_scan(scans: &[Scan]) -> Scan {
     scans
         .iter()
+        .filter(|s| adaptive_attempt(s) == 0)
         .min_by(|a, b| {
             let ea = a.elevation.unwrap_or(0.0).abs();
             let eb = b.elevation.unwrap_or(0.0).abs();
@@ -160,6 +177,16 @@ pub fn nearest_level_scan(scans: &[Scan]) -> Scan {
         })
         .cloned()
         .unwrap_or_default()
+}
+
+/// Which attempt of cleverRobot took a scan (0: the first set of elevations, or a scan not
+/// taken by cleverRobot).
+pub fn adaptive_attempt(scan: &Scan) -> u64 {
+    scan.extra
+        .get("adaptive")
+        .and_then(|a| a.get("attempt"))
+        .and_then(|a| a.as_u64())
+        .unwrap_or(0)
 }
 
 /// Matches one run's scans with `mode` and scores it against the truth (ATE, RPE, fallbacks).

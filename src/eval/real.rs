@@ -4,10 +4,16 @@
 //! `simulate::odometry`'s model), so the matcher must do better than dead reckoning. Scored by
 //! RPE over consecutive pairs (Kümmerle et al. 2009), for the matcher and for the perturbed
 //! odometry itself.
+//!
+//! A reference made by SLAM is not ground truth: where it is noisier than the matcher, RPE
+//! measures the reference. The closure check needs no reference: every second scan is matched
+//! again directly (scan i against scan i-2), and those two-scan steps are compared with the
+//! composition of the two one-scan steps they span. A matcher that is right agrees with itself;
+//! an RPE far above its closure error says the reference, not the matcher, sets the RPE.
 
 use super::metrics::{Rpe, rpe};
 use crate::geometry::{Pose, Pose2};
-use crate::matching::{MatchStatus, Matcher, MatcherParams};
+use crate::matching::{MatchReport, MatchStatus, Matcher, MatcherParams};
 use crate::simulate::{OdometryParams, odometry};
 use nalgebra::Point2;
 use serde::Serialize;
@@ -30,6 +36,10 @@ pub struct RealResult {
     pub matched: Rpe,
     /// RPE of the perturbed odometry against the reference.
     pub odometry: Rpe,
+    /// Self-consistency: RPE of the direct matches of every second scan against the
+    /// composition of the consecutive matches they span (no reference needed). `None` below
+    /// three scans.
+    pub closure: Option<Rpe>,
     /// Scans whose step fell back to odometry.
     pub fallbacks: usize,
     /// Scans where the coarse search ran.
@@ -53,25 +63,34 @@ pub fn evaluate_real(
         .iter()
         .map(|p| p.to_pose2())
         .collect();
-    let mut matcher = Matcher::new(*params);
-    let reports: Vec<_> = log
-        .points
-        .iter()
-        .zip(&odo)
-        .map(|(pts, o)| matcher.push(pts, Some(*o)))
-        .collect();
+    let reports = match_all(log.points.iter().zip(&odo), params);
     let estimate: Vec<Pose2> = reports.iter().map(|r| r.estimate).collect();
+    let every_second = log.points.iter().zip(&odo).step_by(2);
+    let direct: Vec<Pose2> = match_all(every_second, params)
+        .iter()
+        .map(|r| r.estimate)
+        .collect();
+    let composed: Vec<Pose2> = estimate.iter().step_by(2).copied().collect();
     Some(RealResult {
         name: log.name.clone(),
         scans: log.points.len(),
         matched: rpe(&estimate, &log.reference)?,
         odometry: rpe(&odo, &log.reference)?,
+        closure: rpe(&direct, &composed),
         fallbacks: reports
             .iter()
             .filter(|r| matches!(r.status, MatchStatus::Fallback(_)))
             .count(),
         coarse: reports.iter().filter(|r| r.coarse).count(),
     })
+}
+
+fn match_all<'a>(
+    scans: impl Iterator<Item = (&'a Vec<Point2<f64>>, &'a Pose2)>,
+    params: &MatcherParams,
+) -> Vec<MatchReport> {
+    let mut matcher = Matcher::new(*params);
+    scans.map(|(pts, o)| matcher.push(pts, Some(*o))).collect()
 }
 
 #[cfg(test)]
@@ -125,5 +144,8 @@ mod tests {
         assert_eq!(r.fallbacks, 0);
         assert!(r.matched.median_translation < 1e-4, "{r:?}");
         assert!(r.odometry.median_translation > 1e-3, "{r:?}");
+        let closure = r.closure.unwrap();
+        assert_eq!(closure.pairs, 14);
+        assert!(closure.median_translation < 1e-4, "{r:?}");
     }
 }

@@ -80,6 +80,18 @@ pub struct LevelParams {
     pub min_edge_ratio: f64,
     /// Region growing admits points within this many sigmas of a patch's plane. Default 3.
     pub grow_k: f64,
+    /// Those sigmas are each point's own range noise along the plane's normal,
+    /// `sigma |d . n|`, rather than `sigma`. Default true: a floor seen at a grazing angle
+    /// lies within centimetres of its plane even at 10 cm noise, and an isotropic tolerance
+    /// let floor patches run up the walls' feet.
+    pub ray_tolerance: bool,
+    /// Smallest share of sigma used for that tolerance, `|d . n|` floor [1]. Default 0.1.
+    pub min_ray_share: f64,
+    /// Fit walls with each point weighted by its noise along the normal, `1 / (d . n)^2`.
+    /// Default true: oblique points are the precise ones.
+    pub ray_weights: bool,
+    /// Floor on `|d . n|` in those weights [1]. Default 0.2.
+    pub ray_weight_floor: f64,
     /// Region-growing seeds span about this many range-noise sigmas sideways [1]. Default 6.
     pub seed_span_sigmas: f64,
     /// Widest seed [columns]. Default 25.
@@ -113,6 +125,13 @@ pub struct LevelParams {
     pub flat_margin: f64,
     /// Smallest patch kept [points]. Default 20.
     pub min_patch_points: usize,
+    /// A patch too small to split is dropped when its residual variance exceeds the noise's by
+    /// more than this many standard deviations of a true plane's ratio [1]. Default 4; 0 keeps
+    /// every patch.
+    pub max_misfit_sigmas: f64,
+    /// A patch needs at least this share of its points in columns where it holds two rows or
+    /// more [1]. Default 0.75; 0 accepts any patch over two rows.
+    pub min_stacked_share: f64,
     /// Fewer wall quads than this fails the pose (too_few_polygons / facing_floor /
     /// facing_ceiling). Default 3.
     pub min_polygons: usize,
@@ -148,7 +167,8 @@ pub struct LevelParams {
     pub max_level_misfit: f64,
     /// Factor on a level plane's normal variance [1]. The noise model does not see what
     /// cleaning leaves of a wall's foot in a floor patch; simulations at 1-10 cm noise show its
-    /// sigmas about this much too small. Default 4 (twice the standard deviation).
+    /// sigmas about this much too small. Default 2 (measured with `ray_tolerance`, which keeps
+    /// the wall's foot out of floor patches: 4 before it).
     pub level_inflation: f64,
     /// Passes of re-segmentation in the provisional level frame ([`refine`], robust
     /// estimator): points re-assigned to the floor and ceiling by height and to walls as
@@ -209,6 +229,10 @@ impl Default for LevelParams {
             wall_min_angle_deg: 45.0,
             min_edge_ratio: 0.3,
             grow_k: 3.0,
+            ray_tolerance: true,
+            min_ray_share: 0.1,
+            ray_weights: true,
+            ray_weight_floor: 0.2,
             seed_span_sigmas: 6.0,
             split_misfit: 1.1,
             two_row_seeds: false,
@@ -221,6 +245,8 @@ impl Default for LevelParams {
             split_depth: 3,
             max_seed_cols: 25,
             min_patch_points: 20,
+            max_misfit_sigmas: 4.0,
+            min_stacked_share: 0.75,
             min_polygons: 3,
             parallel_ratio: 0.01,
             max_sigma_deg: 1.5,
@@ -229,7 +255,7 @@ impl Default for LevelParams {
             level_surfaces: true,
             min_level_points: 30,
             max_level_misfit: 3.0,
-            level_inflation: 4.0,
+            level_inflation: 2.0,
             refine_passes: 0,
             refine_k: 3.0,
             refine_min_rows: 2,
@@ -736,7 +762,12 @@ fn clean_level_fit(
     params: &LevelParams,
 ) -> Option<PlaneFit> {
     let cols = grid.cols;
-    let member = |i: usize| p.members.binary_search(&i).is_ok();
+    // A mask rather than a binary search: `step` asks several times per member.
+    let mut in_patch = vec![false; grid.points.len()];
+    for &i in &p.members {
+        in_patch[i] = true;
+    }
+    let member = |i: usize| in_patch[i];
     // Signed scan-to-scan range steps in units of `r de`, keyed by the lower point.
     let step = |i: usize| -> Option<f64> {
         let j = i + cols;

@@ -3,7 +3,7 @@
 //! EM plane fitting after Thrun et al. 2004; region growing from good seeds reaches the same
 //! planes far more cheaply for a handful of scans).
 
-use super::grid::{PlaneAccumulator, PlaneFit, PoseGrid};
+use super::grid::{GridPoint, PlaneAccumulator, PlaneFit, PoseGrid};
 use super::polygons::{Polygon, classify, extract_quads_sized};
 use super::{LevelParams, SurfaceKind};
 use std::collections::VecDeque;
@@ -24,13 +24,9 @@ pub struct Patch {
 /// at the grid's median range, so its normal is good to a few degrees and growth follows the
 /// true surface instead of wandering across a corner.
 pub fn seed_cols(grid: &PoseGrid, params: &LevelParams, sigma: f64) -> usize {
-    let mut ranges: Vec<f64> = grid.points.iter().flatten().map(|g| g.range).collect();
-    if ranges.is_empty() || grid.cols < 2 {
+    if grid.cols < 2 || grid.points.iter().all(Option::is_none) {
         return params.quad_cols;
     }
-    let mid = ranges.len() / 2;
-    let (_, r, _) = ranges.select_nth_unstable_by(mid, f64::total_cmp);
-    let r = *r;
     // Angular step from the directions of the first row's consecutive valid rays.
     let step = (0..grid.cols - 1)
         .find_map(|c| {
@@ -38,8 +34,24 @@ pub fn seed_cols(grid: &PoseGrid, params: &LevelParams, sigma: f64) -> usize {
             Some(a.dir.angle(&b.dir))
         })
         .unwrap_or(1f64.to_radians());
-    let want = (params.seed_span_sigmas * sigma / (r * step).max(1e-9)).ceil() as usize + 1;
-    want.clamp(params.quad_cols, params.max_seed_cols.max(params.quad_cols))
+    let want =
+        |r: f64| (params.seed_span_sigmas * sigma / (r * step).max(1e-9)).ceil() as usize + 1;
+    let clamp = |w: usize| w.clamp(params.quad_cols, params.max_seed_cols.max(params.quad_cols));
+    // `want` falls as the range grows: when even the nearest point asks for no more than the
+    // quad width (low noise), so does the median, and the median need not be found.
+    let nearest = grid
+        .points
+        .iter()
+        .flatten()
+        .map(|g| g.range)
+        .fold(f64::INFINITY, f64::min);
+    if want(nearest) <= params.quad_cols {
+        return clamp(want(nearest));
+    }
+    let mut ranges: Vec<f64> = grid.points.iter().flatten().map(|g| g.range).collect();
+    let mid = ranges.len() / 2;
+    let (_, r, _) = ranges.select_nth_unstable_by(mid, f64::total_cmp);
+    clamp(want(*r))
 }
 
 /// No patch.
@@ -122,6 +134,8 @@ pub fn grow_patches(
         let Some(mut fit) = acc.fit(sigma) else {
             continue;
         };
+        let s_eff = sigma.max(params.min_sigma);
+        let tol_at = |fit: &PlaneFit, g: &GridPoint| ray_tolerance(fit, g, tol, s_eff, params);
         let mut refit_at = acc.n + acc.n / 3 + 1;
         while let Some(i) = queue.pop_front() {
             let (r, c) = (i / cols, i % cols);
@@ -143,7 +157,7 @@ pub fn grow_patches(
                     continue;
                 }
                 let Some(g) = &grid.points[j] else { continue };
-                if fit.distance(&g.p).abs() <= tol {
+                if fit.distance(&g.p).abs() <= tol_at(&fit, g) {
                     labels[j] = id;
                     members.push(j);
                     queue.push_back(j);
@@ -166,7 +180,7 @@ pub fn grow_patches(
             let Some(g) = grid.points[i].as_ref() else {
                 return false;
             };
-            if fit.distance(&g.p).abs() <= tol {
+            if fit.distance(&g.p).abs() <= tol_at(&fit, g) {
                 kept.add(g);
                 true
             } else {
@@ -222,17 +236,52 @@ fn make_patch(
     if members.len() < params.min_patch_points || hi <= lo {
         return None;
     }
+    if !stacked(members, grid, params) {
+        return None;
+    }
     let fit = robust_fit(grid, members, params, sigma)?;
+    if too_bent_to_split(&fit, members.len(), params, sigma) {
+        return None;
+    }
     Some(Patch {
         kind: classify(&fit.normal, &fit.centroid, params),
         fit,
-        members: {
-            let mut m = members.to_vec();
-            m.sort_unstable();
-            m
-        },
+        members: in_order(grid, members, true),
         row_range: (lo, hi),
     })
+}
+
+/// Whether the members are stacked: at least `min_stacked_share` of them lie in columns where
+/// the patch holds two rows or more. On a wall the scans meet the same stretch one above the
+/// other; a floor line with a few wall points at one end of it (the floor at a wall's foot,
+/// at nearly the wall's range) is mostly single-row columns, and those few points decide its
+/// tilt: a steep "wall" off by degrees.
+fn stacked(members: &[usize], grid: &PoseGrid, params: &LevelParams) -> bool {
+    let mut rows_in_col = vec![0u8; grid.cols];
+    for &i in members {
+        let c = &mut rows_in_col[i % grid.cols];
+        *c = c.saturating_add(1);
+    }
+    let stacked = members
+        .iter()
+        .filter(|&&i| rows_in_col[i % grid.cols] >= 2)
+        .count();
+    stacked as f64 >= params.min_stacked_share * members.len() as f64
+}
+
+/// A patch too small for [`split_members`] whose points fit their plane far worse than the
+/// noise explains is no plane: typically two scan lines on a wall and one on the floor at its
+/// foot, at nearly the same range, which a quad's tolerance let through. Its normal is tilted
+/// by degrees, and where no other wall pins the same direction it would decide the attitude.
+/// The test: residual variance over the noise's above `1 + k sqrt(2 / dof)` (k =
+/// `max_misfit_sigmas`), k standard deviations of a true plane's ratio.
+fn too_bent_to_split(fit: &PlaneFit, members: usize, params: &LevelParams, sigma: f64) -> bool {
+    if params.max_misfit_sigmas <= 0.0 || members >= 2 * params.min_patch_points {
+        return false;
+    }
+    let dof = (fit.weight - 3.0).max(1.0);
+    fit.misfit_ratio(sigma.max(params.min_sigma))
+        > 1.0 + params.max_misfit_sigmas * (2.0 / dof).sqrt()
 }
 
 /// Drops members farther than `tol` from the members' plane, then makes the patch.
@@ -265,22 +314,118 @@ fn robust_fit(
     params: &LevelParams,
     sigma: f64,
 ) -> Option<PlaneFit> {
+    let points: Vec<&GridPoint> = members
+        .iter()
+        .filter_map(|&i| grid.points[i].as_ref())
+        .collect();
     let mut fit = accumulate(grid, members).fit(sigma)?;
     let s = sigma.max(params.min_sigma);
-    // A plane its noise already explains has no outliers worth reweighting.
-    if fit.misfit_ratio(s) <= params.split_misfit {
-        return Some(fit);
+    let mut weights = vec![1.0; points.len()];
+    if params.ray_weights && classify(&fit.normal, &fit.centroid, params) == SurfaceKind::Wall {
+        fit = ray_weighted_fit(&points, params, sigma, fit, &mut weights)?;
+    } else if fit.misfit_ratio(s) > params.split_misfit {
+        // A plane its noise already explains has no outliers worth reweighting.
+        for _ in 0..params.plane_iterations {
+            let mut acc = PlaneAccumulator::default();
+            for (g, w) in points.iter().zip(weights.iter_mut()) {
+                *w = cauchy_weight(&fit, g, s, params);
+                acc.add_weighted(g, *w);
+            }
+            fit = acc.fit(sigma)?;
+        }
     }
-    for _ in 0..params.plane_iterations {
+    Some(fit)
+}
+
+/// Cauchy weight of a point's residual over its own noise along the normal.
+fn cauchy_weight(fit: &PlaneFit, g: &GridPoint, s: f64, params: &LevelParams) -> f64 {
+    let sd = s * g.dir.dot(&fit.normal).abs().max(0.3);
+    let z = fit.distance(&g.p) / (params.plane_cauchy * sd);
+    1.0 / (1.0 + z * z)
+}
+
+/// How far from a patch's plane a point may lie and still join it: `grow_k` sigmas of the
+/// point's own range noise along the plane's normal, `sigma |d . n|` (at least
+/// `min_ray_share` of sigma), when `ray_tolerance` is on; else `tol` for every point.
+///
+/// A floor seen at a grazing angle carries its range noise almost along itself, so its points
+/// lie within centimetres of its plane even at 10 cm noise, while the foot of a wall rises
+/// out of it at once; an isotropic `grow_k sigma` (30 cm at 10 cm noise) let floor patches run
+/// up the walls and tilted them by degrees.
+fn ray_tolerance(fit: &PlaneFit, g: &GridPoint, tol: f64, sigma: f64, params: &LevelParams) -> f64 {
+    if params.ray_tolerance {
+        params.grow_k * sigma * g.dir.dot(&fit.normal).abs().max(params.min_ray_share)
+    } else {
+        tol
+    }
+}
+
+/// A wall's plane refitted with each point weighted by the inverse variance of its range noise
+/// along the normal, `1 / (d . n)^2` (with `|d . n|` at least `ray_weight_floor`), normalised
+/// to a mean of one so that [`PlaneFit::normal_variance_along`] stays the weighted fit's
+/// variance; plus the Cauchy weights of [`robust_fit`] when the plane misfits. Points met at
+/// an oblique incidence are the precise ones along the normal; an unweighted fit lets the
+/// head-on points' noise dominate. Two passes, since the weights follow the normal.
+fn ray_weighted_fit(
+    points: &[&GridPoint],
+    params: &LevelParams,
+    sigma: f64,
+    mut fit: PlaneFit,
+    weights: &mut [f64],
+) -> Option<PlaneFit> {
+    let s = sigma.max(params.min_sigma);
+    let robust = fit.misfit_ratio(s) > params.split_misfit;
+    for _ in 0..2 {
+        for (g, w) in points.iter().zip(weights.iter_mut()) {
+            *w = 1.0
+                / g.dir
+                    .dot(&fit.normal)
+                    .abs()
+                    .max(params.ray_weight_floor)
+                    .powi(2);
+        }
+        let k = points.len() as f64 / weights.iter().sum::<f64>().max(1e-300);
         let mut acc = PlaneAccumulator::default();
-        for g in members.iter().filter_map(|&i| grid.points[i].as_ref()) {
-            let sd = s * g.dir.dot(&fit.normal).abs().max(0.3);
-            let z = fit.distance(&g.p) / (params.plane_cauchy * sd);
-            acc.add_weighted(g, 1.0 / (1.0 + z * z));
+        for (g, w) in points.iter().zip(weights.iter_mut()) {
+            let cauchy = if robust {
+                cauchy_weight(&fit, g, s, params)
+            } else {
+                1.0
+            };
+            *w *= cauchy * k;
+            acc.add_weighted(g, *w);
         }
         fit = acc.fit(sigma)?;
     }
     Some(fit)
+}
+
+/// Members in row-major order (`by_row`) or column-major order, ties by grid index, as a
+/// sort by `(row or column, index)` would give: ascending grid index is row-major, and a
+/// stable counting sort of that by column is column-major (members are distinct).
+fn in_order(grid: &PoseGrid, members: &[usize], by_row: bool) -> Vec<usize> {
+    let mut ascending = members.to_vec();
+    if !ascending.is_sorted() {
+        ascending.sort_unstable();
+    }
+    if by_row {
+        return ascending;
+    }
+    let cols = grid.cols.max(1);
+    let mut start = vec![0usize; cols + 1];
+    for &i in &ascending {
+        start[i % cols + 1] += 1;
+    }
+    for c in 0..cols {
+        start[c + 1] += start[c];
+    }
+    let mut out = vec![0usize; ascending.len()];
+    for &i in &ascending {
+        let slot = &mut start[i % cols];
+        out[*slot] = i;
+        *slot += 1;
+    }
+    out
 }
 
 fn accumulate(grid: &PoseGrid, members: &[usize]) -> PlaneAccumulator {
@@ -312,16 +457,24 @@ pub fn split_members(
         return whole;
     };
     let rss1 = fit_all.residual_ss;
-    // Best split so far: (RSS of the two planes, which ordering, boundary index).
-    let mut best: Option<(f64, usize, usize)> = None;
-    let mut orders: [Vec<usize>; 2] = [members.to_vec(), members.to_vec()];
-    for (which, sorted) in orders.iter_mut().enumerate() {
+    // Candidate cuts (where the key changes, both parts spanning two rows), as (lower bound on
+    // the two planes' RSS, which ordering, boundary index). They are fitted in order of their
+    // bounds, and a cut whose bound exceeds the best RSS found cannot win, so most of them
+    // need no eigen decomposition. The winner is the same as fitting every cut in turn: the
+    // least RSS, ties to the first ordering and boundary.
+    let mut candidates: Vec<(f64, usize, usize)> = Vec::new();
+    let orders: [Vec<usize>; 2] = [
+        in_order(grid, members, false),
+        in_order(grid, members, true),
+    ];
+    let mut prefixes: [Vec<PlaneAccumulator>; 2] = [Vec::new(), Vec::new()];
+    for (which, sorted) in orders.iter().enumerate() {
         let by_row = which == 1;
         let key = |i: usize| if by_row { i / cols } else { i % cols };
-        sorted.sort_by_key(|&i| (key(i), i));
         let n = sorted.len();
         // Prefix plane sums, and the rows spanned by every prefix and suffix.
-        let mut prefix = Vec::with_capacity(n + 1);
+        let prefix = &mut prefixes[which];
+        prefix.reserve(n + 1);
         let mut acc = PlaneAccumulator::default();
         prefix.push(acc);
         let (mut pre_lo, mut pre_hi) = (vec![usize::MAX; n + 1], vec![0usize; n + 1]);
@@ -350,13 +503,28 @@ pub fn split_members(
             }
             let l = prefix[b];
             let r = total.minus(&l);
-            let (Some(fl), Some(fr)) = (l.fit(sigma), r.fit(sigma)) else {
-                continue;
-            };
-            let rss2 = fl.residual_ss + fr.residual_ss;
-            if best.is_none_or(|(br, _, _)| rss2 < br) {
-                best = Some((rss2, which, b));
-            }
+            let bound = l.residual_lower_bound() + r.residual_lower_bound();
+            candidates.push((bound, which, b));
+        }
+    }
+    candidates.sort_by(|x, y| x.0.total_cmp(&y.0));
+    // Best split so far: (RSS of the two planes, which ordering, boundary index).
+    let mut best: Option<(f64, usize, usize)> = None;
+    for &(bound, which, b) in &candidates {
+        if best.is_some_and(|(br, _, _)| bound > br) {
+            break;
+        }
+        let prefix = &prefixes[which];
+        let l = prefix[b];
+        let r = prefix[prefix.len() - 1].minus(&l);
+        let (Some(fl), Some(fr)) = (l.fit(sigma), r.fit(sigma)) else {
+            continue;
+        };
+        let rss2 = fl.residual_ss + fr.residual_ss;
+        let better =
+            best.is_none_or(|(br, bw, bb)| rss2 < br || (rss2 == br && (which, b) < (bw, bb)));
+        if better {
+            best = Some((rss2, which, b));
         }
     }
     let Some((_, which, cut)) = best else {
@@ -385,4 +553,88 @@ pub fn split_members(
     let mut out = split_members(grid, &a, params, sigma, depth - 1);
     out.extend(split_members(grid, &b, params, sigma, depth - 1));
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::{Point3, Vector3};
+    use rand::SeedableRng;
+    use rand_distr::{Distribution, Normal};
+
+    /// A wall met obliquely: the plane through (3, 0, 0) with normal `n`, seen by 3 scans of
+    /// 61 rays from the origin, with Gaussian range noise `sigma`.
+    fn oblique_wall_grid(n: &Vector3<f64>, sigma: f64, seed: u64) -> PoseGrid {
+        let mut rng = rand::rngs::ChaCha8Rng::seed_from_u64(seed);
+        let noise = Normal::new(0.0, sigma).unwrap();
+        let (rows, cols) = (3, 61);
+        let elevation: Vec<f64> = (0..rows).map(|r| (r as f64 - 1.0) * 0.087).collect();
+        let mut points = Vec::new();
+        for &e in &elevation {
+            for c in 0..cols {
+                let bearing = (c as f64 - 30.0).to_radians() * 1.2;
+                let dir = Vector3::new(bearing.cos() * e.cos(), bearing.sin(), -e.sin());
+                // Range to the plane n . (p - (3, 0, 0)) = 0 along dir.
+                let range = 3.0 * n.x / n.dot(&dir) + noise.sample(&mut rng);
+                points.push(Some(GridPoint {
+                    p: Point3::from(dir * range),
+                    dir,
+                    range,
+                }));
+            }
+        }
+        PoseGrid {
+            scan_index: (0..rows).collect(),
+            elevation,
+            cols,
+            points,
+        }
+    }
+
+    /// The weighted wall fit is better than the plain one on an oblique wall, and the normal
+    /// variance it reports is not smaller than the scatter over repeated noise (its sigmas are
+    /// not overconfident).
+    #[test]
+    fn ray_weighted_wall_fit_is_tighter_and_not_overconfident() {
+        let n = Vector3::new(1.0, -1.2, 0.0).normalize();
+        let params = LevelParams::default();
+        let sigma = 0.1;
+        let up = Vector3::z();
+        let (mut sq_w, mut sq_plain, mut predicted) = (0.0, 0.0, 0.0);
+        let trials = 300;
+        for seed in 0..trials {
+            let grid = oblique_wall_grid(&n, sigma, seed);
+            let points: Vec<&GridPoint> = grid.points.iter().flatten().collect();
+            let members: Vec<usize> = (0..grid.points.len()).collect();
+            let plain = accumulate(&grid, &members).fit(sigma).unwrap();
+            let mut w = vec![1.0; points.len()];
+            let weighted = ray_weighted_fit(&points, &params, sigma, plain, &mut w).unwrap();
+            sq_plain += plain.normal.dot(&up).powi(2);
+            sq_w += weighted.normal.dot(&up).powi(2);
+            predicted += weighted.normal_variance_along(&up, sigma);
+        }
+        let t = trials as f64;
+        let (var_w, var_plain, predicted) = (sq_w / t, sq_plain / t, predicted / t);
+        assert!(
+            var_w < 0.5 * var_plain,
+            "weighted {var_w:.3e} vs plain {var_plain:.3e}"
+        );
+        assert!(
+            var_w < 1.1 * predicted,
+            "observed {var_w:.3e} over predicted {predicted:.3e}"
+        );
+    }
+
+    #[test]
+    fn ray_weighted_fit_is_exact_without_noise() {
+        let n = Vector3::new(1.0, -1.2, 0.3).normalize();
+        let grid = oblique_wall_grid(&n, 1e-300, 1);
+        let points: Vec<&GridPoint> = grid.points.iter().flatten().collect();
+        let members: Vec<usize> = (0..grid.points.len()).collect();
+        let plain = accumulate(&grid, &members).fit(0.0).unwrap();
+        let params = LevelParams::default();
+        let mut w = vec![1.0; points.len()];
+        let fit = ray_weighted_fit(&points, &params, 0.0, plain, &mut w).unwrap();
+        assert!(1.0 - fit.normal.dot(&n).abs() < 1e-12, "{:?}", fit.normal);
+    }
 }

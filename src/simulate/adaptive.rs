@@ -1,12 +1,16 @@
 //! The adaptive robot, the paper's "cleverRobot" (sect. 7.2.2): after taking its scans at a
 //! pose it levels them with what a robot knows (the scans themselves, never `true_pose` or
-//! `hit`), and when too few wall polygons were found because the scanner faces the floor or the
-//! ceiling (sect. 5.5), it takes more scans with the hinge tilted the other way, up to a limit.
+//! `hit`), and when the estimate is possibly poor (sect. 7.2.2) it takes more scans at other
+//! elevations, up to a limit: tilted the other way when too few wall polygons were found because
+//! the scanner faces the floor or the ceiling (sect. 5.5); away from the floor (or the ceiling,
+//! whichever it saw more of) when the walls seen could not pin the attitude down. Scans added
+//! above or below the first set widen the vertical span the wall polygons cover, and so
+//! sharpen their normals even on the same walls.
 
 use super::raycast::World;
 use super::scanner::{ScannerParams, simulate_pose};
 use crate::geometry::Pose;
-use crate::level::{FailReason, LevelParams, level_pose};
+use crate::level::{FailReason, LevelEstimate, LevelParams, SurfaceKind, level_pose};
 use crate::scan::Scan;
 use rand::Rng;
 use serde_json::json;
@@ -51,8 +55,8 @@ fn default_shift(elevations: &[f64]) -> f64 {
 /// Scans at one pose the way cleverRobot takes them. Every scan keeps the pose's `sequence`
 /// and gets `"adaptive": {"attempt": k, "shift": rad}` (attempt 0 is the first set, shift its
 /// offset from the requested elevations). Retakes stop as soon as the pose levels, or fails for
-/// a reason a retake cannot cure. A pose that levels (from the floor) while facing the floor
-/// is retaken too: its pseudo-level scan needs walls.
+/// a reason a retake cannot cure (too few or inconsistent scans). A pose that levels (from the
+/// floor) while facing the floor is retaken too: its pseudo-level scan needs walls.
 pub fn simulate_pose_adaptive<R: Rng + ?Sized>(
     world: &World,
     sequence: u64,
@@ -84,12 +88,7 @@ pub fn simulate_pose_adaptive<R: Rng + ?Sized>(
         }
         // Judge with what the robot has: its scans, stripped of the simulator's truth.
         let seen: Vec<Scan> = all.iter().map(robot_view).collect();
-        let est = level_pose(&seen, &params.level);
-        let facing = match est.failure {
-            Some(f @ (FailReason::FacingFloor | FailReason::FacingCeiling)) => Some(f),
-            _ => est.facing(),
-        };
-        offset = match facing {
+        offset = match retake_direction(&level_pose(&seen, &params.level)) {
             // Positive elevation tilts the beams down: facing the floor, look up.
             Some(FailReason::FacingFloor) => offset.min(0.0) - step,
             Some(FailReason::FacingCeiling) => offset.max(0.0) + step,
@@ -97,6 +96,26 @@ pub fn simulate_pose_adaptive<R: Rng + ?Sized>(
         };
     }
     all
+}
+
+/// Which way a retake should look, as the surface to look away from (`FacingFloor`: look up,
+/// `FacingCeiling`: look down); `None` when no retake is needed or none can help.
+fn retake_direction(est: &LevelEstimate) -> Option<FailReason> {
+    match est.failure {
+        None => est.facing(),
+        Some(FailReason::TooFewScans | FailReason::InconsistentScans) => None,
+        Some(f @ (FailReason::FacingFloor | FailReason::FacingCeiling)) => Some(f),
+        Some(FailReason::TooFewPolygons | FailReason::ParallelWalls) => {
+            let count = |k: SurfaceKind| est.quads.iter().filter(|q| q.kind == k).count();
+            Some(est.facing().unwrap_or(
+                if count(SurfaceKind::Ceiling) > count(SurfaceKind::Floor) {
+                    FailReason::FacingCeiling
+                } else {
+                    FailReason::FacingFloor
+                },
+            ))
+        }
+    }
 }
 
 /// A scan as the robot knows it: without the simulator's `true_pose` and `hit`.
@@ -166,6 +185,52 @@ mod tests {
             .max_abs_error(&pose.attitude())
             .to_degrees();
         assert!(err < 1.0, "{err}");
+    }
+
+    #[test]
+    fn a_robot_between_parallel_walls_retakes_until_it_sees_the_end_wall() {
+        // A corridor 20 m long, pitched 8 degrees down: its first scans see the two side walls
+        // (parallel) and meet the floor before the end wall 10 m ahead.
+        let p = |x: f64, y: f64| Point2::new(x, y);
+        let world = World::from_plan(&Plan {
+            wall_height: 3.0,
+            walls: vec![vec![
+                p(0.0, 0.0),
+                p(20.0, 0.0),
+                p(20.0, 3.0),
+                p(0.0, 3.0),
+                p(0.0, 0.0),
+            ]],
+            ceiling: false,
+            poses: vec![],
+        });
+        let pose = Pose::new(10.0, 1.5, 0.45, 0.0, 8f64.to_radians(), 0.0);
+        let e = elevations_centred(3, 5f64.to_radians());
+        let scanner = ScannerParams::default();
+        let mut rng = rand::rngs::ChaCha8Rng::seed_from_u64(5);
+        let plain = simulate_pose(&world, 0, &pose, &e, &scanner, &mut rng);
+        let first = level_pose(&plain, &LevelParams::default());
+        assert_eq!(first.failure, Some(FailReason::ParallelWalls));
+        let mut rng = rand::rngs::ChaCha8Rng::seed_from_u64(5);
+        let scans = simulate_pose_adaptive(
+            &world,
+            0,
+            &pose,
+            &e,
+            &scanner,
+            &AdaptiveParams::default(),
+            &mut rng,
+        );
+        assert!(scans.len() > 3, "no retake");
+        assert!(scans[3].elevation.unwrap() < e[0], "the retake looks up");
+        let est = level_pose(&scans, &LevelParams::default());
+        assert!(est.is_ok(), "{:?}", est.failure);
+        let err = est
+            .attitude
+            .unwrap()
+            .max_abs_error(&pose.attitude())
+            .to_degrees();
+        assert!(err < 0.5, "{err}");
     }
 
     #[test]

@@ -77,8 +77,10 @@ pub fn stream_rng(seed: u64, purpose: Stream, index: u64) -> ChaCha8Rng {
 
 /// Simulates the scans at `poses` in parallel; pose `k` gets `sequence = first_sequence + k`,
 /// the odometry `odometry[k]` when given, and its noise from
-/// `stream_rng(seed, Stream::Scans, sequence)`. The result is in pose order and identical for
+/// `stream_rng(seed, Stream::Scans, sequence)`. With `adaptive`, cleverRobot takes each pose's
+/// scans (its first set is the same as without). The result is in pose order and identical for
 /// any number of threads, and simulating a run in chunks gives the same scans as all at once.
+#[allow(clippy::too_many_arguments)]
 pub fn simulate_poses(
     world: &World,
     poses: &[Pose],
@@ -86,6 +88,7 @@ pub fn simulate_poses(
     first_sequence: u64,
     elevations: &[f64],
     params: &ScannerParams,
+    adaptive: Option<&AdaptiveParams>,
     seed: u64,
 ) -> Vec<Vec<Scan>> {
     poses
@@ -94,7 +97,12 @@ pub fn simulate_poses(
         .map(|(k, pose)| {
             let sequence = first_sequence + k as u64;
             let mut rng = stream_rng(seed, Stream::Scans, sequence);
-            let mut scans = simulate_pose(world, sequence, pose, elevations, params, &mut rng);
+            let mut scans = match adaptive {
+                Some(a) => {
+                    simulate_pose_adaptive(world, sequence, pose, elevations, params, a, &mut rng)
+                }
+                None => simulate_pose(world, sequence, pose, elevations, params, &mut rng),
+            };
             if let Some(odo) = odometry.and_then(|o| o.get(k)) {
                 for s in &mut scans {
                     s.odometry = Some(*odo);
@@ -130,14 +138,14 @@ mod tests {
         let odo = odometry(&poses, &OdometryParams::default(), 4);
         let e = elevations_centred(3, 0.1);
         let p = ScannerParams::default();
-        let all = simulate_poses(&world, &poses, Some(&odo), 0, &e, &p, 4);
+        let all = simulate_poses(&world, &poses, Some(&odo), 0, &e, &p, None, 4);
         let one = rayon::ThreadPoolBuilder::new()
             .num_threads(1)
             .build()
             .unwrap()
-            .install(|| simulate_poses(&world, &poses, Some(&odo), 0, &e, &p, 4));
+            .install(|| simulate_poses(&world, &poses, Some(&odo), 0, &e, &p, None, 4));
         assert_eq!(all, one);
-        let mut chunked = simulate_poses(&world, &poses[..5], Some(&odo[..5]), 0, &e, &p, 4);
+        let mut chunked = simulate_poses(&world, &poses[..5], Some(&odo[..5]), 0, &e, &p, None, 4);
         chunked.extend(simulate_poses(
             &world,
             &poses[5..],
@@ -145,6 +153,7 @@ mod tests {
             5,
             &e,
             &p,
+            None,
             4,
         ));
         assert_eq!(all, chunked);
@@ -152,7 +161,7 @@ mod tests {
         assert_eq!(all[7][2].odometry, Some(odo[7]));
         assert_ne!(
             all,
-            simulate_poses(&world, &poses, Some(&odo), 0, &e, &p, 5)
+            simulate_poses(&world, &poses, Some(&odo), 0, &e, &p, None, 5)
         );
     }
 }
