@@ -169,17 +169,6 @@ const MAX_TILT: f64 = 50.0 * std::f64::consts::PI / 180.0;
 /// 50 degrees of the robot's own up are considered. `None` with fewer than two planes or when
 /// no proposal qualifies.
 pub fn up_robust(planes: &[PlaneObs], sigma: f64, iterations: usize) -> Option<UpSolution> {
-    up_robust_prior(planes, sigma, iterations, 0.0)
-}
-
-/// [`up_robust`] with `prior_dof` pseudo degrees of freedom of a unit variance scale in the
-/// chi-square inflation of the covariance (see [`solution_at_prior`]).
-pub fn up_robust_prior(
-    planes: &[PlaneObs],
-    sigma: f64,
-    iterations: usize,
-    prior_dof: f64,
-) -> Option<UpSolution> {
     let constraints: usize = planes.iter().map(|p| if p.level { 2 } else { 1 }).sum();
     if constraints < 2 {
         return None;
@@ -241,7 +230,7 @@ pub fn up_robust_prior(
     if up.z < min_z {
         return None;
     }
-    Some(solution_at_prior(up, planes, sigma, true, prior_dof))
+    Some(solution_at(up, planes, sigma, true))
 }
 
 /// Cauchy weight for a squared standardised residual.
@@ -254,20 +243,6 @@ fn cauchy2(z2: f64) -> f64 {
 /// chi-square per degree of freedom when that exceeds one, so that a model that explains the
 /// normals worse than their noise predicts reports a larger, honest sigma.
 pub fn solution_at(up: Vector3<f64>, planes: &[PlaneObs], sigma: f64, robust: bool) -> UpSolution {
-    solution_at_prior(up, planes, sigma, robust, 0.0)
-}
-
-/// [`solution_at`] whose variance scale is `(chi2 + prior_dof) / (dof + prior_dof)`: with a
-/// handful of planes the chi-square has one or two degrees of freedom, and taken alone as the
-/// scale it would double a sigma by chance; `prior_dof` pseudo-observations of the noise
-/// model's own scale (one) steady it (a conjugate prior on the variance scale).
-pub fn solution_at_prior(
-    up: Vector3<f64>,
-    planes: &[PlaneObs],
-    sigma: f64,
-    robust: bool,
-    prior_dof: f64,
-) -> UpSolution {
     let basis = tangent_basis(&up);
     let mut h = Matrix2::zeros();
     let mut chi2 = 0.0;
@@ -288,7 +263,7 @@ pub fn solution_at_prior(
     }
     let dof = wsum - 2.0;
     let scale = if dof >= 1.0 {
-        ((chi2 + prior_dof) / (dof + prior_dof)).max(1.0)
+        (chi2 / dof).max(1.0)
     } else {
         1.0
     };
