@@ -153,30 +153,3 @@ fn refine_levels_more_poses_at_ten_centimetres_and_stays_honest() {
     );
     assert!(outside_3_sigma <= 1, "{outside_3_sigma} outside 3 sigma");
 }
-
-#[test]
-fn dbg_box_case() {
-    let mut room = Room::polygon(&[[0.0, 0.0], [7.0, 0.0], [7.0, 5.0], [0.0, 5.0]], 2.4, true);
-    let b = [[3.3, 2.3], [3.7, 2.3], [3.7, 2.7], [3.3, 2.7]];
-    room.segments.extend((0..4).map(|i| (b[i], b[(i + 1) % 4])));
-    let pose = Pose::new(1.0, 1.0, 0.45, deg(-2.717), deg(6.732), 0.0);
-    let up_true = pose.attitude().up_in_robot();
-    for seed in 0..20 {
-        let scans = scans_at(&room, &pose, &elevations(3, 5.0), 0.01, seed, 0);
-        let params = LevelParams::default();
-        let e = level_pose(&scans, &params);
-        let e0 = level_pose(&scans, &without_refine());
-        let err = |e: &LevelEstimate| e.attitude.map(|a| a.max_abs_error(&pose.attitude()).to_degrees());
-        eprintln!("seed {seed}: on {:?} {:?} off {:?} {:?}", err(&e), e.sigmas.map(|s| s.map(f64::to_degrees)), err(&e0), e0.sigmas.map(|s| s.map(f64::to_degrees)));
-        if err(&e).is_some_and(|x| x > 2.0) {
-            let (est, r) = refined(&scans, &params);
-            for m in &r.models {
-                let mut hits = std::collections::BTreeMap::new();
-                let mut rows = std::collections::BTreeMap::new();
-                for &i in &m.members { *hits.entry(format!("{:?}", hit_of(&est, &scans, i))).or_insert(0) += 1; *rows.entry(i / 181).or_insert(0) += 1; }
-                let dev = m.fit.normal.dot(&up_true).abs().acos().to_degrees();
-                eprintln!("   {:?} n {} dev-from-vertical/up {:.2} misfit {:.2} {:?} rows {:?}", m.kind, m.members.len(), dev, m.fit.misfit_ratio(0.01), hits, rows);
-            }
-        }
-    }
-}

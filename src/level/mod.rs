@@ -81,14 +81,18 @@ pub struct LevelParams {
     /// Region growing admits points within this many sigmas of a patch's plane. Default 3.
     pub grow_k: f64,
     /// Those sigmas are each point's own range noise along the plane's normal,
-    /// `sigma |d . n|`, rather than `sigma`. Default true: a floor seen at a grazing angle
-    /// lies within centimetres of its plane even at 10 cm noise, and an isotropic tolerance
-    /// let floor patches run up the walls' feet.
+    /// `sigma |d . n|`, rather than `sigma`: a floor seen at a grazing angle lies within
+    /// centimetres of its plane even at 10 cm noise, and an isotropic tolerance lets floor
+    /// patches run up the walls' feet. Default false: it levels many more poses at 5-10 cm
+    /// (see [`LevelParams::high_noise`]) but at 1 cm it let a box's face and the floor line
+    /// at its foot grow into one tilted "wall" (tests/level_synthetic.rs).
     pub ray_tolerance: bool,
     /// Smallest share of sigma used for that tolerance, `|d . n|` floor [1]. Default 0.1.
     pub min_ray_share: f64,
+    /// The same for patches grown from wall seeds [1]. Default 0.1.
+    pub min_ray_share_wall: f64,
     /// Fit walls with each point weighted by its noise along the normal, `1 / (d . n)^2`.
-    /// Default true: oblique points are the precise ones.
+    /// Oblique points are the precise ones. Default false (as `ray_tolerance`).
     pub ray_weights: bool,
     /// Floor on `|d . n|` in those weights [1]. Default 0.2.
     pub ray_weight_floor: f64,
@@ -167,8 +171,8 @@ pub struct LevelParams {
     pub max_level_misfit: f64,
     /// Factor on a level plane's normal variance [1]. The noise model does not see what
     /// cleaning leaves of a wall's foot in a floor patch; simulations at 1-10 cm noise show its
-    /// sigmas about this much too small. Default 2 (measured with `ray_tolerance`, which keeps
-    /// the wall's foot out of floor patches: 4 before it).
+    /// sigmas about this much too small. Default 4 (twice the standard deviation); 2 is
+    /// enough with `ray_tolerance`, which keeps the wall's foot out of floor patches.
     pub level_inflation: f64,
     /// Passes of re-segmentation in the provisional level frame ([`refine`], robust
     /// estimator): points re-assigned to the floor and ceiling by height and to walls as
@@ -225,9 +229,10 @@ impl Default for LevelParams {
             wall_min_angle_deg: 45.0,
             min_edge_ratio: 0.3,
             grow_k: 3.0,
-            ray_tolerance: true,
+            ray_tolerance: false,
             min_ray_share: 0.1,
-            ray_weights: true,
+            min_ray_share_wall: 0.1,
+            ray_weights: false,
             ray_weight_floor: 0.2,
             seed_span_sigmas: 6.0,
             split_misfit: 1.1,
@@ -251,7 +256,7 @@ impl Default for LevelParams {
             level_surfaces: true,
             min_level_points: 30,
             max_level_misfit: 3.0,
-            level_inflation: 2.0,
+            level_inflation: 4.0,
             refine_passes: 1,
             refine_k: 3.0,
             refine_min_rows: 2,
@@ -262,6 +267,19 @@ impl Default for LevelParams {
             refine_step_k: 1.0,
             refine_level_misfit: 1.5,
             refine_discover: true,
+        }
+    }
+}
+
+impl LevelParams {
+    /// The high-noise variant: patches grown and walls fitted by each ray's own noise along
+    /// the normal (`ray_tolerance`, `ray_weights`), level planes inflated 2x.
+    pub fn high_noise() -> Self {
+        LevelParams {
+            ray_tolerance: true,
+            ray_weights: true,
+            level_inflation: 2.0,
+            ..LevelParams::default()
         }
     }
 }

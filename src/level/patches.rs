@@ -135,7 +135,13 @@ pub fn grow_patches(
             continue;
         };
         let s_eff = sigma.max(params.min_sigma);
-        let tol_at = |fit: &PlaneFit, g: &GridPoint| ray_tolerance(fit, g, tol, s_eff, params);
+        let share = if q.kind == SurfaceKind::Wall {
+            params.min_ray_share_wall
+        } else {
+            params.min_ray_share
+        };
+        let tol_at =
+            |fit: &PlaneFit, g: &GridPoint| ray_tolerance(fit, g, tol, s_eff, share, params);
         let mut refit_at = acc.n + acc.n / 3 + 1;
         while let Some(i) = queue.pop_front() {
             let (r, c) = (i / cols, i % cols);
@@ -352,9 +358,16 @@ fn cauchy_weight(fit: &PlaneFit, g: &GridPoint, s: f64, params: &LevelParams) ->
 /// lie within centimetres of its plane even at 10 cm noise, while the foot of a wall rises
 /// out of it at once; an isotropic `grow_k sigma` (30 cm at 10 cm noise) let floor patches run
 /// up the walls and tilted them by degrees.
-fn ray_tolerance(fit: &PlaneFit, g: &GridPoint, tol: f64, sigma: f64, params: &LevelParams) -> f64 {
+fn ray_tolerance(
+    fit: &PlaneFit,
+    g: &GridPoint,
+    tol: f64,
+    sigma: f64,
+    min_share: f64,
+    params: &LevelParams,
+) -> f64 {
     if params.ray_tolerance {
-        params.grow_k * sigma * g.dir.dot(&fit.normal).abs().max(params.min_ray_share)
+        params.grow_k * sigma * g.dir.dot(&fit.normal).abs().max(min_share)
     } else {
         tol
     }
