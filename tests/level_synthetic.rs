@@ -263,6 +263,7 @@ fn a_wall_line_with_a_floor_line_at_its_foot_never_levels_a_pose_wrongly() {
     let unguarded = LevelParams {
         max_misfit_sigmas: 0.0,
         min_stacked_share: 0.0,
+        max_row_bend_sigmas: 0.0,
         ..LevelParams::default()
     };
     let (mut wrong_unguarded, mut wrong) = (0, 0);

@@ -83,16 +83,14 @@ pub struct LevelParams {
     /// Those sigmas are each point's own range noise along the plane's normal,
     /// `sigma |d . n|`, rather than `sigma`: a floor seen at a grazing angle lies within
     /// centimetres of its plane even at 10 cm noise, and an isotropic tolerance lets floor
-    /// patches run up the walls' feet. Default false: it levels many more poses at 5-10 cm
-    /// (see [`LevelParams::high_noise`]) but at 1 cm it let a box's face and the floor line
-    /// at its foot grow into one tilted "wall" (tests/level_synthetic.rs).
+    /// patches run up the walls' feet. Default true. Walls grown this tightly keep the floor
+    /// line at their foot only as a bend across rows, which `max_row_bend_sigmas` rejects;
+    /// neither helps without the other.
     pub ray_tolerance: bool,
     /// Smallest share of sigma used for that tolerance, `|d . n|` floor [1]. Default 0.1.
     pub min_ray_share: f64,
-    /// The same for patches grown from wall seeds [1]. Default 0.1.
-    pub min_ray_share_wall: f64,
     /// Fit walls with each point weighted by its noise along the normal, `1 / (d . n)^2`.
-    /// Oblique points are the precise ones. Default false (as `ray_tolerance`).
+    /// Default true: oblique points are the precise ones.
     pub ray_weights: bool,
     /// Floor on `|d . n|` in those weights [1]. Default 0.2.
     pub ray_weight_floor: f64,
@@ -136,6 +134,11 @@ pub struct LevelParams {
     /// A patch needs at least this share of its points in columns where it holds two rows or
     /// more [1]. Default 0.75; 0 accepts any patch over two rows.
     pub min_stacked_share: f64,
+    /// A patch over three or more rows is dropped when its rows' mean residuals bend away from
+    /// its plane by more than this many standard deviations of a true plane's chi-square per
+    /// degree of freedom [1] (a wall line and a floor line at its foot). Default 4; 0 keeps
+    /// every patch.
+    pub max_row_bend_sigmas: f64,
     /// Fewer wall quads than this fails the pose (too_few_polygons / facing_floor /
     /// facing_ceiling). Default 3.
     pub min_polygons: usize,
@@ -171,8 +174,8 @@ pub struct LevelParams {
     pub max_level_misfit: f64,
     /// Factor on a level plane's normal variance [1]. The noise model does not see what
     /// cleaning leaves of a wall's foot in a floor patch; simulations at 1-10 cm noise show its
-    /// sigmas about this much too small. Default 4 (twice the standard deviation); 2 is
-    /// enough with `ray_tolerance`, which keeps the wall's foot out of floor patches.
+    /// sigmas about this much too small. Default 2 (measured with `ray_tolerance`, which keeps
+    /// the wall's foot out of floor patches; 4 without it).
     pub level_inflation: f64,
     /// Passes of re-segmentation in the provisional level frame ([`refine`], robust
     /// estimator): points re-assigned to the floor and ceiling by height and to walls as
@@ -229,10 +232,9 @@ impl Default for LevelParams {
             wall_min_angle_deg: 45.0,
             min_edge_ratio: 0.3,
             grow_k: 3.0,
-            ray_tolerance: false,
+            ray_tolerance: true,
             min_ray_share: 0.1,
-            min_ray_share_wall: 0.1,
-            ray_weights: false,
+            ray_weights: true,
             ray_weight_floor: 0.2,
             seed_span_sigmas: 6.0,
             split_misfit: 1.1,
@@ -248,6 +250,7 @@ impl Default for LevelParams {
             min_patch_points: 20,
             max_misfit_sigmas: 4.0,
             min_stacked_share: 0.75,
+            max_row_bend_sigmas: 4.0,
             min_polygons: 3,
             parallel_ratio: 0.01,
             max_sigma_deg: 1.5,
@@ -256,7 +259,7 @@ impl Default for LevelParams {
             level_surfaces: true,
             min_level_points: 30,
             max_level_misfit: 3.0,
-            level_inflation: 4.0,
+            level_inflation: 2.0,
             refine_passes: 1,
             refine_k: 3.0,
             refine_min_rows: 2,
@@ -267,19 +270,6 @@ impl Default for LevelParams {
             refine_step_k: 1.0,
             refine_level_misfit: 1.5,
             refine_discover: true,
-        }
-    }
-}
-
-impl LevelParams {
-    /// The high-noise variant: patches grown and walls fitted by each ray's own noise along
-    /// the normal (`ray_tolerance`, `ray_weights`), level planes inflated 2x.
-    pub fn high_noise() -> Self {
-        LevelParams {
-            ray_tolerance: true,
-            ray_weights: true,
-            level_inflation: 2.0,
-            ..LevelParams::default()
         }
     }
 }

@@ -135,13 +135,7 @@ pub fn grow_patches(
             continue;
         };
         let s_eff = sigma.max(params.min_sigma);
-        let share = if q.kind == SurfaceKind::Wall {
-            params.min_ray_share_wall
-        } else {
-            params.min_ray_share
-        };
-        let tol_at =
-            |fit: &PlaneFit, g: &GridPoint| ray_tolerance(fit, g, tol, s_eff, share, params);
+        let tol_at = |fit: &PlaneFit, g: &GridPoint| ray_tolerance(fit, g, tol, s_eff, params);
         let mut refit_at = acc.n + acc.n / 3 + 1;
         while let Some(i) = queue.pop_front() {
             let (r, c) = (i / cols, i % cols);
@@ -246,7 +240,9 @@ fn make_patch(
         return None;
     }
     let fit = robust_fit(grid, members, params, sigma)?;
-    if too_bent_to_split(&fit, members.len(), params, sigma) {
+    if too_bent_to_split(&fit, members.len(), params, sigma)
+        || bent_across_rows(grid, members, &fit, params, sigma)
+    {
         return None;
     }
     Some(Patch {
@@ -288,6 +284,48 @@ fn too_bent_to_split(fit: &PlaneFit, members: usize, params: &LevelParams, sigma
     let dof = (fit.weight - 3.0).max(1.0);
     fit.misfit_ratio(sigma.max(params.min_sigma))
         > 1.0 + params.max_misfit_sigmas * (2.0 / dof).sqrt()
+}
+
+/// Whether the patch's scan lines do not lie on one plane: a wall line and the floor line at
+/// its foot (or a wall's lines with a floor line in front of them), in adjacent scans, make
+/// a plane that tilts to pass near all of them, and the split test cannot cut them apart when
+/// one part is a single row. A plane fitted through `R` rows absorbs their offsets along the
+/// normal up to a linear trend with height; the rest, the rows' bend, is `R - 2` degrees of
+/// freedom: `chi2 = sum_k m_k^2 / Var(m_k)` over the rows' mean residuals `m_k`, with
+/// `Var(m_k) = sigma^2 sum (d . n)^2 / n_k^2` from each point's noise along the normal. The
+/// patch is dropped when `chi2 / dof` exceeds one by `max_row_bend_sigmas` standard deviations
+/// of a true plane's (`sqrt(2 / dof)`).
+fn bent_across_rows(
+    grid: &PoseGrid,
+    members: &[usize],
+    fit: &PlaneFit,
+    params: &LevelParams,
+    sigma: f64,
+) -> bool {
+    if params.max_row_bend_sigmas <= 0.0 {
+        return false;
+    }
+    let s2 = sigma.max(params.min_sigma).powi(2);
+    // Per row: sum of residuals, sum of (d . n)^2, count.
+    let mut rows = vec![(0.0, 0.0, 0usize); grid.rows()];
+    for &i in members {
+        if let Some(g) = &grid.points[i] {
+            let r = &mut rows[i / grid.cols];
+            r.0 += fit.distance(&g.p);
+            r.1 += g.dir.dot(&fit.normal).powi(2).max(1e-4);
+            r.2 += 1;
+        }
+    }
+    let used: Vec<&(f64, f64, usize)> = rows.iter().filter(|r| r.2 > 0).collect();
+    if used.len() < 3 {
+        return false;
+    }
+    let chi2: f64 = used
+        .iter()
+        .map(|(sum, dn2, _)| sum * sum / (s2 * dn2))
+        .sum();
+    let dof = (used.len() - 2) as f64;
+    chi2 / dof > 1.0 + params.max_row_bend_sigmas * (2.0 / dof).sqrt()
 }
 
 /// Drops members farther than `tol` from the members' plane, then makes the patch.
@@ -358,16 +396,9 @@ fn cauchy_weight(fit: &PlaneFit, g: &GridPoint, s: f64, params: &LevelParams) ->
 /// lie within centimetres of its plane even at 10 cm noise, while the foot of a wall rises
 /// out of it at once; an isotropic `grow_k sigma` (30 cm at 10 cm noise) let floor patches run
 /// up the walls and tilted them by degrees.
-fn ray_tolerance(
-    fit: &PlaneFit,
-    g: &GridPoint,
-    tol: f64,
-    sigma: f64,
-    min_share: f64,
-    params: &LevelParams,
-) -> f64 {
+fn ray_tolerance(fit: &PlaneFit, g: &GridPoint, tol: f64, sigma: f64, params: &LevelParams) -> f64 {
     if params.ray_tolerance {
-        params.grow_k * sigma * g.dir.dot(&fit.normal).abs().max(min_share)
+        params.grow_k * sigma * g.dir.dot(&fit.normal).abs().max(params.min_ray_share)
     } else {
         tol
     }
@@ -636,6 +667,73 @@ mod tests {
             var_w < 1.1 * predicted,
             "observed {var_w:.3e} over predicted {predicted:.3e}"
         );
+    }
+
+    /// Three scans of 21 rays at elevations -5, 0, 5 degrees from 0.45 m above the floor,
+    /// ahead of a wall 2.3 m away: rows 0 and 1 meet the wall, row 2 (pitched down) the floor
+    /// at `foot` metres.
+    fn wall_over_floor_line(foot: f64, sigma: f64, seed: u64) -> (PoseGrid, Vec<usize>) {
+        let mut rng = rand::rngs::ChaCha8Rng::seed_from_u64(seed);
+        let noise = Normal::new(0.0, sigma).unwrap();
+        let (rows, cols) = (3, 21);
+        let elevation: Vec<f64> = (0..rows).map(|r| (r as f64 - 1.0) * 0.087).collect();
+        let mut points = Vec::new();
+        for (r, &e) in elevation.iter().enumerate() {
+            // Pitched 7 degrees towards the floor: depressions 2, 7, 12 degrees.
+            let dep = e + 0.122;
+            for c in 0..cols {
+                let bearing = (c as f64 - 10.0).to_radians();
+                let dir = Vector3::new(bearing.cos() * dep.cos(), bearing.sin(), -dep.sin());
+                let exact = if r < 2 {
+                    2.3 / dir.x
+                } else {
+                    foot / (dir.x * dir.x + dir.y * dir.y).sqrt()
+                };
+                let range = exact + noise.sample(&mut rng);
+                points.push(Some(GridPoint {
+                    p: Point3::new(0.0, 0.0, 0.45) + dir * range,
+                    dir,
+                    range,
+                }));
+            }
+        }
+        let members = (0..points.len()).collect();
+        let grid = PoseGrid {
+            scan_index: (0..rows).collect(),
+            elevation,
+            cols,
+            points,
+        };
+        (grid, members)
+    }
+
+    #[test]
+    fn wall_lines_with_the_floor_line_at_their_foot_are_bent_across_rows() {
+        let params = LevelParams::default();
+        for seed in 0..20 {
+            // The floor line 10 cm in front of the wall's foot, at 1 cm noise.
+            let (grid, members) = wall_over_floor_line(2.2, 0.01, seed);
+            let fit = accumulate(&grid, &members).fit(0.01).unwrap();
+            assert!(
+                bent_across_rows(&grid, &members, &fit, &params, 0.01),
+                "seed {seed}"
+            );
+        }
+    }
+
+    #[test]
+    fn a_true_plane_over_three_rows_is_rarely_bent() {
+        let params = LevelParams::default();
+        let n = Vector3::new(1.0, -1.2, 0.2).normalize();
+        let mut bent = 0;
+        for seed in 0..200 {
+            let grid = oblique_wall_grid(&n, 0.1, seed);
+            let members: Vec<usize> = (0..grid.points.len()).collect();
+            let fit = accumulate(&grid, &members).fit(0.1).unwrap();
+            bent += usize::from(bent_across_rows(&grid, &members, &fit, &params, 0.1));
+        }
+        // A 4-sigma threshold on one degree of freedom rejects about 1% of true planes.
+        assert!(bent <= 6, "{bent} of 200 true planes called bent");
     }
 
     #[test]
