@@ -89,8 +89,9 @@ pub struct LevelParams {
     pub ray_tolerance: bool,
     /// Smallest share of sigma used for that tolerance, `|d . n|` floor [1]. Default 0.1.
     pub min_ray_share: f64,
-    /// Fit walls with each point weighted by its noise along the normal, `1 / (d . n)^2`.
-    /// Default true: oblique points are the precise ones.
+    /// Fit each patch's plane with its points weighted by their noise along the normal,
+    /// `1 / (d . n)^2`. Default true: oblique points (on a floor, the grazing ones) are the
+    /// precise ones.
     pub ray_weights: bool,
     /// Floor on `|d . n|` in those weights [1]. Default 0.2.
     pub ray_weight_floor: f64,

@@ -365,7 +365,7 @@ fn robust_fit(
     let mut fit = accumulate(grid, members).fit(sigma)?;
     let s = sigma.max(params.min_sigma);
     let mut weights = vec![1.0; points.len()];
-    if params.ray_weights && classify(&fit.normal, &fit.centroid, params) == SurfaceKind::Wall {
+    if params.ray_weights {
         fit = ray_weighted_fit(&points, params, sigma, fit, &mut weights)?;
     } else if fit.misfit_ratio(s) > params.split_misfit {
         // A plane its noise already explains has no outliers worth reweighting.
@@ -404,7 +404,7 @@ fn ray_tolerance(fit: &PlaneFit, g: &GridPoint, tol: f64, sigma: f64, params: &L
     }
 }
 
-/// A wall's plane refitted with each point weighted by the inverse variance of its range noise
+/// A plane refitted with each point weighted by the inverse variance of its range noise
 /// along the normal, `1 / (d . n)^2` (with `|d . n|` at least `ray_weight_floor`), normalised
 /// to a mean of one so that [`PlaneFit::normal_variance_along`] stays the weighted fit's
 /// variance; plus the Cauchy weights of [`robust_fit`] when the plane misfits. Points met at
