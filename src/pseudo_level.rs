@@ -254,7 +254,9 @@ fn kept_rays(
         if params.height_test {
             let margin = params.floor_margin + dz_noise + 2.0 * attitude_sigma * lp.x.hypot(lp.y);
             let above_floor = ground_z.is_some_and(|f| lp.z > f + margin);
-            let below_top = ceiling_z.map_or(lp.z < 0.0, |h| lp.z < h - margin);
+            // Without a ceiling, up to the scanner's own height, within the same margin: a level
+            // scan meets a far wall at that height, on either side of it by the attitude's error.
+            let below_top = ceiling_z.map_or(lp.z < margin, |h| lp.z < h - margin);
             if above_floor && below_top {
                 *slot = true;
                 continue;
