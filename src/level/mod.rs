@@ -768,6 +768,7 @@ fn clean_level_fit(
         in_patch[i] = true;
     }
     let member = |i: usize| in_patch[i];
+    let rc = grid.row_col();
     // Signed scan-to-scan range steps in units of `r de`, keyed by the lower point.
     let step = |i: usize| -> Option<f64> {
         let j = i + cols;
@@ -775,7 +776,7 @@ fn clean_level_fit(
             return None;
         }
         let (a, b) = (grid.points[i].as_ref()?, grid.points[j].as_ref()?);
-        let de = grid.elevation[j / cols] - grid.elevation[i / cols];
+        let de = grid.elevation[rc.row(j)] - grid.elevation[rc.row(i)];
         let scale = 0.5 * (a.range + b.range) * de;
         (scale.abs() > 1e-9).then(|| (b.range - a.range) / scale)
     };
@@ -793,7 +794,7 @@ fn clean_level_fit(
         if levelish(i) || from_below {
             if let Some(g) = &grid.points[i] {
                 acc.add(g);
-                per_row[i / cols] += 1;
+                per_row[rc.row(i)] += 1;
             }
         }
     }

@@ -264,13 +264,14 @@ fn make_patch(
 /// tilt: a steep "wall" off by degrees.
 fn stacked(members: &[usize], grid: &PoseGrid, params: &LevelParams) -> bool {
     let mut rows_in_col = vec![0u8; grid.cols];
+    let rc = grid.row_col();
     for &i in members {
-        let c = &mut rows_in_col[i % grid.cols];
+        let c = &mut rows_in_col[rc.col(i)];
         *c = c.saturating_add(1);
     }
     let stacked = members
         .iter()
-        .filter(|&&i| rows_in_col[i % grid.cols] >= 2)
+        .filter(|&&i| rows_in_col[rc.col(i)] >= 2)
         .count();
     stacked as f64 >= params.min_stacked_share * members.len() as f64
 }
@@ -312,9 +313,10 @@ fn bent_across_rows(
     let s2 = sigma.max(params.min_sigma).powi(2);
     // Per row: sum of residuals, sum of (d . n)^2, count.
     let mut rows = vec![(0.0, 0.0, 0usize); grid.rows()];
+    let rc = grid.row_col();
     for &i in members {
         if let Some(g) = &grid.points[i] {
-            let r = &mut rows[i / grid.cols];
+            let r = &mut rows[rc.row(i)];
             r.0 += fit.distance(&g.p);
             r.1 += g.dir.dot(&fit.normal).powi(2).max(1e-4);
             r.2 += 1;
@@ -460,16 +462,17 @@ fn in_order(grid: &PoseGrid, members: &[usize], by_row: bool) -> Vec<usize> {
         return ascending;
     }
     let cols = grid.cols.max(1);
+    let rc = grid.row_col();
     let mut start = vec![0usize; cols + 1];
     for &i in &ascending {
-        start[i % cols + 1] += 1;
+        start[rc.col(i) + 1] += 1;
     }
     for c in 0..cols {
         start[c + 1] += start[c];
     }
     let mut out = vec![0usize; ascending.len()];
     for &i in &ascending {
-        let slot = &mut start[i % cols];
+        let slot = &mut start[rc.col(i)];
         out[*slot] = i;
         *slot += 1;
     }
@@ -501,6 +504,7 @@ pub fn split_members(
         return whole;
     }
     let cols = grid.cols;
+    let rc = grid.row_col();
     let Some(fit_all) = accumulate(grid, members).fit(sigma) else {
         return whole;
     };
@@ -518,7 +522,7 @@ pub fn split_members(
     let mut prefixes: [Vec<PlaneAccumulator>; 2] = [Vec::new(), Vec::new()];
     for (which, sorted) in orders.iter().enumerate() {
         let by_row = which == 1;
-        let key = |i: usize| if by_row { i / cols } else { i % cols };
+        let key = |i: usize| if by_row { rc.row(i) } else { rc.col(i) };
         let n = sorted.len();
         // Prefix plane sums, and the rows spanned by every prefix and suffix.
         let prefix = &mut prefixes[which];
@@ -531,13 +535,13 @@ pub fn split_members(
                 acc.add(g);
             }
             prefix.push(acc);
-            pre_lo[k + 1] = pre_lo[k].min(i / cols);
-            pre_hi[k + 1] = pre_hi[k].max(i / cols);
+            pre_lo[k + 1] = pre_lo[k].min(rc.row(i));
+            pre_hi[k + 1] = pre_hi[k].max(rc.row(i));
         }
         let (mut suf_lo, mut suf_hi) = (vec![usize::MAX; n + 1], vec![0usize; n + 1]);
         for k in (0..n).rev() {
-            suf_lo[k] = suf_lo[k + 1].min(sorted[k] / cols);
-            suf_hi[k] = suf_hi[k + 1].max(sorted[k] / cols);
+            suf_lo[k] = suf_lo[k + 1].min(rc.row(sorted[k]));
+            suf_hi[k] = suf_hi[k + 1].max(rc.row(sorted[k]));
         }
         let total = acc;
         let half = params.min_patch_points / 2;

@@ -456,9 +456,10 @@ pub fn levelish_points(grid: &PoseGrid, margin: f64) -> Vec<bool> {
     let cols = grid.cols;
     let rows = grid.rows();
     // Some(level step?) for a valid neighbour, None without one.
+    let rc = grid.row_col();
     let step = |i: usize, j: usize| -> Option<bool> {
         let (a, b) = (grid.points[i].as_ref()?, grid.points[j].as_ref()?);
-        let de = (grid.elevation[j / cols] - grid.elevation[i / cols]).abs();
+        let de = (grid.elevation[rc.row(j)] - grid.elevation[rc.row(i)]).abs();
         Some((b.range - a.range).abs() > 0.5 * (a.range + b.range) * de + margin)
     };
     // Each column pair of adjacent rows once: pair `i` joins point `i` to the one above.
@@ -467,7 +468,7 @@ pub fn levelish_points(grid: &PoseGrid, margin: f64) -> Vec<bool> {
         .collect();
     (0..grid.points.len())
         .map(|i| {
-            let r = i / cols;
+            let r = rc.row(i);
             let below = if r > 0 { pairs[i - cols] } else { None };
             let above = if r + 1 < rows { pairs[i] } else { None };
             // A wall point above or below a floor point steps far to it, but not to its other
@@ -517,9 +518,10 @@ fn flat_points(
     let pairs: Vec<Option<bool>> = (0..cols * rows.saturating_sub(1))
         .map(|i| pair(i, i + cols))
         .collect();
+    let rc = grid.row_col();
     (0..grid.points.len())
         .map(|i| {
-            let r = i / cols;
+            let r = rc.row(i);
             let below = if r > 0 { pairs[i - cols] } else { None };
             let above = if r + 1 < rows { pairs[i] } else { None };
             below != Some(false)
@@ -723,8 +725,9 @@ fn fit_members(grid: &PoseGrid, members: &[usize], sigma: f64) -> Option<PlaneFi
 /// Rows holding at least `share` of the members each.
 fn rows_supported(grid: &PoseGrid, members: &[usize], share: f64) -> usize {
     let mut per_row = vec![0usize; grid.rows()];
+    let rc = grid.row_col();
     for &i in members {
-        per_row[i / grid.cols] += 1;
+        per_row[rc.row(i)] += 1;
     }
     let least = (share * members.len() as f64).max(1.0);
     per_row.iter().filter(|&&n| n as f64 >= least).count()
