@@ -77,7 +77,7 @@ impl Leveled {
 
 /// Squared distance of a leveled point `q` (ray direction `d`) from a wall's vertical plane,
 /// in variances: its range noise along the wall's normal, and the error in up
-/// (`sigma_up` [rad]) at its height above the wall's pivot.
+/// (`sigma_up` [rad]) at its height above the wall's pivot; `None` when it exceeds `k2`.
 fn line_z2(
     l: &Line,
     q: &Vector3<f64>,
@@ -85,11 +85,22 @@ fn line_z2(
     s: f64,
     min_sigma: f64,
     sigma_up: f64,
-) -> f64 {
+    k2: f64,
+) -> Option<f64> {
     let dist = l.normal.x * q.x + l.normal.y * q.y - l.offset;
     let along = l.normal.x * d.x + l.normal.y * d.y;
     let lever = (q.z - l.z) * sigma_up;
-    dist * dist / (s * s * along * along + min_sigma * min_sigma + lever * lever)
+    let (num, den) = (
+        dist * dist,
+        s * s * along * along + min_sigma * min_sigma + lever * lever,
+    );
+    // Most lines are far from a point: tell so without the division when the margin is clear
+    // (a relative 1e-12 dwarfs the division's rounding, so the answer is the division's).
+    if num > k2 * den * (1.0 + 1e-12) {
+        return None;
+    }
+    let z = num / den;
+    (!(z > k2)).then_some(z)
 }
 
 fn line_of(fit: &PlaneFit, level_from_robot: &Rotation3<f64>) -> Option<Line> {
@@ -212,10 +223,9 @@ pub fn refine(
             let mut best: Option<(f64, usize)> = None;
             let mut second: Option<(f64, usize)> = None;
             for (m, l) in lines.iter().enumerate() {
-                let z = line_z2(l, q, d, s, params.min_sigma, sigma_up);
-                if z > k * k {
+                let Some(z) = line_z2(l, q, d, s, params.min_sigma, sigma_up, k * k) else {
                     continue;
-                }
+                };
                 if best.is_none_or(|b| z < b.0) {
                     second = best;
                     best = Some((z, m));
@@ -576,18 +586,24 @@ fn discover_lines(
         let mut c = 0;
         while c + width <= cols {
             let mut acc = Line2::default();
-            let mut ok = true;
+            let mut unusable = None;
             for j in c..c + width {
                 match point(row + j) {
                     Some((p, d, z)) => acc.add(&p, &d, z),
                     None => {
-                        ok = false;
+                        unusable = Some(j);
                         break;
                     }
                 }
             }
-            let seed = if ok { acc.line() } else { None };
-            let Some(mut line) = seed.filter(|l| acc.misfit(l, s, params.min_sigma) <= SEED_MISFIT)
+            // Every seed over an unusable ray fails: the next one starts past it.
+            if let Some(j) = unusable {
+                c = j + 1;
+                continue;
+            }
+            let Some(mut line) = acc
+                .line()
+                .filter(|l| acc.misfit(l, s, params.min_sigma) <= SEED_MISFIT)
             else {
                 c += 1;
                 continue;
