@@ -3,7 +3,7 @@
 
 use levelscan::level::LevelParams;
 use levelscan::level::grid::{GridPoint, PlaneAccumulator, PoseGrid};
-use levelscan::level::patches::split_members;
+use levelscan::level::patches::{seed_cols, split_members};
 use nalgebra::{Point3, Vector3};
 use proptest::prelude::*;
 use rand::{RngExt, SeedableRng};
@@ -214,4 +214,39 @@ fn split_members_cuts_a_corner() {
     let parts = split_members(&grid, &members, &params, 0.01, params.split_depth);
     assert!(parts.len() >= 2, "{} parts", parts.len());
     assert_eq!(parts.iter().map(Vec::len).sum::<usize>(), members.len());
+}
+
+/// The seed width as first written: from the median range, always found.
+fn seed_cols_reference(grid: &PoseGrid, params: &LevelParams, sigma: f64) -> usize {
+    let mut ranges: Vec<f64> = grid.points.iter().flatten().map(|g| g.range).collect();
+    if ranges.is_empty() || grid.cols < 2 {
+        return params.quad_cols;
+    }
+    let mid = ranges.len() / 2;
+    let (_, r, _) = ranges.select_nth_unstable_by(mid, f64::total_cmp);
+    let step = (0..grid.cols - 1)
+        .find_map(|c| {
+            let (a, b) = (grid.at(0, c)?, grid.at(0, c + 1)?);
+            Some(a.dir.angle(&b.dir))
+        })
+        .unwrap_or(1f64.to_radians());
+    let want = (params.seed_span_sigmas * sigma / (*r * step).max(1e-9)).ceil() as usize + 1;
+    want.clamp(params.quad_cols, params.max_seed_cols.max(params.quad_cols))
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(200))]
+
+    /// Skipping the median when enough ranges are long gives the median's width.
+    #[test]
+    fn seed_cols_matches_the_median_rule(
+        seed in 0u64..1_000_000,
+        cols in 5usize..90,
+        far in 0.3f64..8.0,
+        sigma in prop_oneof![Just(0.0), 0.0001f64..0.2],
+    ) {
+        let grid = corner_grid(cols, far, sigma, seed);
+        let params = LevelParams::default();
+        prop_assert_eq!(seed_cols(&grid, &params, sigma), seed_cols_reference(&grid, &params, sigma));
+    }
 }

@@ -37,19 +37,21 @@ pub fn seed_cols(grid: &PoseGrid, params: &LevelParams, sigma: f64) -> usize {
     let want =
         |r: f64| (params.seed_span_sigmas * sigma / (r * step).max(1e-9)).ceil() as usize + 1;
     let clamp = |w: usize| w.clamp(params.quad_cols, params.max_seed_cols.max(params.quad_cols));
-    // `want` falls as the range grows: when even the nearest point asks for no more than the
-    // quad width (low noise), so does the median, and the median need not be found.
-    let nearest = grid
-        .points
-        .iter()
-        .flatten()
-        .map(|g| g.range)
-        .fold(f64::INFINITY, f64::min);
-    if want(nearest) <= params.quad_cols {
-        return clamp(want(nearest));
+    // `want` falls as the range grows: when the median range is at least a range `t` that
+    // asks for no more than the quad width (low noise), so does the median, which then need
+    // not be found. The median (element `mid` of the sorted ranges) is at least `t` when at
+    // most `mid` ranges lie below `t`.
+    let valid = grid.points.iter().flatten().count();
+    let mid = valid / 2;
+    let slack = params.quad_cols.saturating_sub(2).max(1) as f64;
+    let t = params.seed_span_sigmas * sigma / (slack * step).max(1e-300) * (1.0 + 1e-9);
+    if t.is_finite() && want(t) <= params.quad_cols {
+        let below = grid.points.iter().flatten().filter(|g| g.range < t).count();
+        if below <= mid {
+            return params.quad_cols;
+        }
     }
     let mut ranges: Vec<f64> = grid.points.iter().flatten().map(|g| g.range).collect();
-    let mid = ranges.len() / 2;
     let (_, r, _) = ranges.select_nth_unstable_by(mid, f64::total_cmp);
     clamp(want(*r))
 }
