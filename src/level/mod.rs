@@ -520,7 +520,8 @@ pub fn refine_estimate(
             &robust_obs(est, levels, params, sigma, false),
             sigma_eff,
             params.iterations,
-        )?,
+        )
+        .or_else(|| refine::level_start(grid, params, sigma))?,
     };
     let walls: Vec<&Patch> = est
         .patches
