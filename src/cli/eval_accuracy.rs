@@ -46,6 +46,10 @@ pub struct Args {
     /// For places where the visible floor itself slopes (long ramps, rubble).
     #[arg(long)]
     pub walls_only: bool,
+    /// Passes of re-segmentation in the provisional level frame (robust estimator); 0 turns
+    /// it off.
+    #[arg(long, default_value_t = levelscan::level::LevelParams::default().refine_passes)]
+    pub refine_passes: usize,
     /// Take the scans with the adaptive robot (cleverRobot), as the paper's Table I did.
     #[arg(long)]
     pub adaptive: bool,
@@ -80,6 +84,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         level: levelscan::level::LevelParams {
             max_sigma_deg: args.max_sigma,
             level_surfaces: !args.walls_only,
+            refine_passes: args.refine_passes,
             ..levelscan::level::LevelParams::default()
         },
         ..AccuracyParams::default()

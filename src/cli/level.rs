@@ -41,6 +41,11 @@ pub struct Args {
     /// For places where the visible floor itself slopes (long ramps, rubble).
     #[arg(long)]
     pub walls_only: bool,
+    /// Passes of re-segmentation in the provisional level frame (robust estimator): points
+    /// re-assigned to the floor and ceiling by height and to walls as vertical planes, then
+    /// up re-estimated. 0 turns it off.
+    #[arg(long, default_value_t = LevelParams::default().refine_passes)]
+    pub refine_passes: usize,
     /// Gaps of at most this many rays between wall points are filled [rays].
     #[arg(long, default_value_t = PseudoLevelParams::default().max_gap)]
     pub max_gap: usize,
@@ -61,6 +66,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         quad_cols: args.quad_cols,
         max_sigma_deg: args.max_sigma,
         level_surfaces: !args.walls_only,
+        refine_passes: args.refine_passes,
         ..LevelParams::default()
     };
     if let Some(s) = params.sigma {
@@ -84,7 +90,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     // serial part of reading overlaps with leveling (both use the rayon pool for the heavy work).
     let (tx, rx) = std::sync::mpsc::sync_channel::<(Vec<Vec<Scan>>, Option<InputError>)>(2);
     let reader_thread = std::thread::spawn(move || {
-        let mut reader = ParallelScanReader::new(input.reader, name.clone());
+        let mut reader = ParallelScanReader::new(input.reader, name.clone()).skipping_hit();
         let mut grouper = Grouper::default();
         let mut batch: Vec<Vec<Scan>> = Vec::with_capacity(BATCH_POSES);
         loop {

@@ -15,6 +15,7 @@ pub mod grid;
 pub mod noise;
 pub mod patches;
 pub mod polygons;
+pub mod refine;
 pub mod up;
 
 use crate::geometry::Attitude;
@@ -180,6 +181,47 @@ pub struct LevelParams {
     /// sigmas about this much too small. Default 2 (measured with `ray_tolerance`, which keeps
     /// the wall's foot out of floor patches; 4 without it).
     pub level_inflation: f64,
+    /// Passes of re-segmentation in the provisional level frame ([`refine`], robust
+    /// estimator): points re-assigned to the floor and ceiling by height and to walls as
+    /// vertical planes, then up re-estimated from the refitted planes; the refined solution
+    /// replaces the first when it passes the gate. 0 turns it off. Default 1 (measured on
+    /// the example plans, seeds 1-3: more leveled and lower means in every cell at 1, 5 and
+    /// 10 cm; a second pass changed nothing measurable).
+    pub refine_passes: usize,
+    /// Re-segmentation admits a point within this many sigmas of a model [1]. Default 3.
+    pub refine_k: f64,
+    /// A re-segmented wall is used only when at least this many scans hold 15% of its points
+    /// each. Default 2 (the floor's points are kept out of walls, so two scan lines on a wall
+    /// are a wall).
+    pub refine_min_rows: usize,
+    /// Walls whose level-frame normals are within this angle [deg] and whose lines coincide
+    /// within the tolerance are one wall. Default 10.
+    pub refine_merge_deg: f64,
+    /// Factor on a re-segmented floor's or ceiling's normal variance [1]. Default 4 (with 2,
+    /// 3-sigma coverage fell to 96.8% at 3 scans and 10 cm, from 99.4%).
+    pub refine_level_inflation: f64,
+    /// Smallest up uncertainty assumed while assigning points [deg]. Default 0.2.
+    pub refine_min_sigma_deg: f64,
+    /// A re-segmented floor or ceiling must be within this angle of up [deg]. Default 10.
+    pub refine_level_max_deg: f64,
+    /// A point whose range steps to its neighbours in the adjacent scans like a level
+    /// surface's (by more than `r de`, plus this many sigmas of the step's noise) joins no
+    /// re-segmented wall [1]. Default 1.
+    pub refine_step_k: f64,
+    /// A re-segmented floor or ceiling is used only when its points fit one plane within this
+    /// multiple of the residual the noise explains [1]. Default 1.5 (2 or 3 leveled a few more
+    /// poses at 10 cm, but 3-sigma coverage fell to 92-94%: the extra floors were biased).
+    pub refine_level_misfit: f64,
+    /// Also look for walls the region growing missed, as lines in each leveled scan.
+    /// Default true (a small gain: 3 scans at 1 cm mean 0.180 vs 0.185 degrees).
+    pub refine_discover: bool,
+}
+
+impl LevelParams {
+    /// Cosine of `refine_level_max_deg`.
+    pub fn refine_level_cos(&self) -> f64 {
+        self.refine_level_max_deg.to_radians().cos()
+    }
 }
 
 impl Default for LevelParams {
@@ -223,6 +265,16 @@ impl Default for LevelParams {
             min_level_points: 30,
             max_level_misfit: 3.0,
             level_inflation: 2.0,
+            refine_passes: 1,
+            refine_k: 3.0,
+            refine_min_rows: 2,
+            refine_merge_deg: 10.0,
+            refine_level_inflation: 4.0,
+            refine_min_sigma_deg: 0.2,
+            refine_level_max_deg: 10.0,
+            refine_step_k: 1.0,
+            refine_level_misfit: 1.5,
+            refine_discover: true,
         }
     }
 }
@@ -385,7 +437,8 @@ pub fn level_pose(scans: &[Scan], params: &LevelParams) -> LevelEstimate {
         wall_mask: Vec::new(),
         grid: Some(grid),
     };
-    let mut result = solve(&est, params, sigma);
+    let mut levels = level_fits(&est, params);
+    let mut result = solve(&est, &levels, params, sigma);
     // Second pass: with up known, points at the floor's or ceiling's height are not wall
     // points. Walls grown a first time can have swallowed the floor at their foot (within the
     // noise of the wall's plane, and all on one side of it); growing again without those
@@ -399,11 +452,20 @@ pub fn level_pose(scans: &[Scan], params: &LevelParams) -> LevelEstimate {
                     std::mem::replace(&mut est.patches, patches),
                     std::mem::replace(&mut est.labels, labels),
                 );
-                match solve(&est, params, sigma) {
-                    Ok(sol2) => result = Ok(sol2),
+                let levels2 = level_fits(&est, params);
+                match solve(&est, &levels2, params, sigma) {
+                    Ok(sol2) => {
+                        result = Ok(sol2);
+                        levels = levels2;
+                    }
                     Err(_) => (est.patches, est.labels) = first,
                 }
             }
+        }
+    }
+    if params.estimator == Estimator::Robust && params.refine_passes > 0 {
+        if let Some(refined) = refined_solution(&est, &levels, &result, params) {
+            result = Ok(refined);
         }
     }
     let Some(grid) = &est.grid else {
@@ -441,6 +503,52 @@ pub fn level_pose(scans: &[Scan], params: &LevelParams) -> LevelEstimate {
         Err(reason) => est.failure = Some(reason),
     }
     est
+}
+
+/// Re-segmentation in the provisional level frame ([`refine`]), started from the solution
+/// found (`first`), or when the gate refused it, from the ungated robust solution. Returns the
+/// start and the refined model, not yet gated; `None` when there is nothing to start from or
+/// the refined model does not fix up.
+pub fn refine_estimate(
+    est: &LevelEstimate,
+    levels: &[PlaneFit],
+    first: &Result<UpSolution, FailReason>,
+    params: &LevelParams,
+) -> Option<(UpSolution, refine::Refined)> {
+    let grid = est.grid.as_ref()?;
+    let sigma = est.range_sigma;
+    let sigma_eff = sigma.max(params.min_sigma);
+    let start = match first {
+        Ok(sol) => *sol,
+        Err(_) => up::up_robust(
+            &robust_obs(est, levels, params, sigma, false),
+            sigma_eff,
+            params.iterations,
+        )?,
+    };
+    let walls: Vec<&Patch> = est
+        .patches
+        .iter()
+        .filter(|p| p.kind == SurfaceKind::Wall)
+        .collect();
+    let refined = refine::refine(grid, &start, &walls, params, sigma)?;
+    Some((start, refined))
+}
+
+/// The refined solution when it passes the gate. When it does not, the first stands: the
+/// refined model sometimes keeps fewer points (ambiguous ones are left out), and letting its
+/// verdict overrule a first solution that passed failed 4-8% more poses at 10 cm for a
+/// small gain in the mean error (0.43 to 0.36 degrees at 5 scans).
+fn refined_solution(
+    est: &LevelEstimate,
+    levels: &[PlaneFit],
+    first: &Result<UpSolution, FailReason>,
+    params: &LevelParams,
+) -> Option<UpSolution> {
+    let (_, refined) = refine_estimate(est, levels, first, params)?;
+    let with_level = refined.models.iter().any(|m| m.kind != SurfaceKind::Wall);
+    acceptable(&refined.solution, params, with_level).ok()?;
+    Some(refined.solution)
 }
 
 /// Points at the height of the floor or ceiling patches once leveled with `att` (within
@@ -512,7 +620,12 @@ fn flat_points(
 /// few, or all parallel) while floor or ceiling quads outnumber wall quads, the reason is
 /// facing_floor / facing_ceiling: the scanner looks at the wrong surface, and a robot can
 /// retake its scans tilted the other way (sect. 5.5, 7.2.2).
-fn solve(est: &LevelEstimate, params: &LevelParams, sigma: f64) -> Result<UpSolution, FailReason> {
+fn solve(
+    est: &LevelEstimate,
+    levels: &[PlaneFit],
+    params: &LevelParams,
+    sigma: f64,
+) -> Result<UpSolution, FailReason> {
     let count = |k: SurfaceKind| est.quads.iter().filter(|q| q.kind == k).count();
     let (walls, floors, ceilings) = (
         count(SurfaceKind::Wall),
@@ -528,11 +641,10 @@ fn solve(est: &LevelEstimate, params: &LevelParams, sigma: f64) -> Result<UpSolu
             otherwise
         }
     };
-    let levels = level_fits(est, params);
     if walls < params.min_polygons && levels.is_empty() {
         return Err(facing(FailReason::TooFewPolygons));
     }
-    solve_up(est, &levels, params, sigma).map_err(facing)
+    solve_up(est, levels, params, sigma).map_err(facing)
 }
 
 fn solve_up(
@@ -563,26 +675,7 @@ fn solve_up(
             // Patches over three or more scans first. A plane through just two scan lines can
             // be a wall line and a floor line that happen to be coplanar, so two-row patches
             // only help when the others cannot fix up, and then only clearly vertical ones.
-            let full_rows = params.quad_rows.min(grid_rows(est)).saturating_sub(1);
-            let strict = (params.two_row_min_angle_deg.to_radians()).cos();
-            let obs_with = |two_rows: bool| -> Vec<PlaneObs> {
-                est.patches
-                    .iter()
-                    .filter(|p| p.kind == SurfaceKind::Wall)
-                    .filter(|p| {
-                        p.row_range.1 - p.row_range.0 >= full_rows
-                            || (two_rows
-                                && p.fit.normal.z.abs() < strict
-                                && est.grid.as_ref().is_some_and(|g| steep(g, p)))
-                    })
-                    .map(|p| PlaneObs::wall(&p.fit, misfit(&p.fit)))
-                    .chain(
-                        levels
-                            .iter()
-                            .map(|f| PlaneObs::level(f, misfit(f) * params.level_inflation)),
-                    )
-                    .collect()
-            };
+            let obs_with = |two_rows: bool| robust_obs(est, levels, params, sigma, two_rows);
             let first = obs_with(false);
             let attempt = up::up_robust(&first, sigma_eff, params.iterations)
                 .filter(|sol| acceptable(sol, params, !levels.is_empty()).is_ok());
@@ -610,6 +703,36 @@ fn solve_up(
     Ok(sol)
 }
 
+/// The robust estimator's observations: wall patches over three or more scans (with
+/// `two_rows`, also steep two-row ones) and the level planes.
+fn robust_obs<'a>(
+    est: &'a LevelEstimate,
+    levels: &'a [PlaneFit],
+    params: &LevelParams,
+    sigma: f64,
+    two_rows: bool,
+) -> Vec<PlaneObs<'a>> {
+    let misfit = |f: &grid::PlaneFit| f.misfit_ratio(sigma.max(params.min_sigma)).max(1.0);
+    let full_rows = params.quad_rows.min(grid_rows(est)).saturating_sub(1);
+    let strict = (params.two_row_min_angle_deg.to_radians()).cos();
+    est.patches
+        .iter()
+        .filter(|p| p.kind == SurfaceKind::Wall)
+        .filter(|p| {
+            p.row_range.1 - p.row_range.0 >= full_rows
+                || (two_rows
+                    && p.fit.normal.z.abs() < strict
+                    && est.grid.as_ref().is_some_and(|g| steep(g, p)))
+        })
+        .map(|p| PlaneObs::wall(&p.fit, misfit(&p.fit)))
+        .chain(
+            levels
+                .iter()
+                .map(|f| PlaneObs::level(f, misfit(f) * params.level_inflation)),
+        )
+        .collect()
+}
+
 /// Floor and ceiling planes usable as level (when `level_surfaces` is on): each floor or
 /// ceiling patch cleaned of the points that do not behave like a level surface, and refitted.
 ///
@@ -621,7 +744,7 @@ fn solve_up(
 /// neighbouring scan, in the patch's prevailing direction, are kept. A patch mostly in one scan
 /// line is dropped: it fits that scan's own plane, whose normal is near the robot's z axis
 /// whatever the surface.
-fn level_fits(est: &LevelEstimate, params: &LevelParams) -> Vec<PlaneFit> {
+pub fn level_fits(est: &LevelEstimate, params: &LevelParams) -> Vec<PlaneFit> {
     let (Some(grid), true) = (
         est.grid.as_ref(),
         params.level_surfaces && params.estimator == Estimator::Robust,

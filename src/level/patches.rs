@@ -128,6 +128,8 @@ pub fn grow_patches(
     let seeds: Vec<&Polygon> = seeds.into_iter().map(|s| s.3).collect();
     let mut queue = VecDeque::new();
     let mut members = Vec::new();
+    // Column of every grid point, without a division per visit.
+    let col_of: Vec<usize> = (0..grid.rows()).flat_map(|_| 0..cols).collect();
     for q in seeds {
         if q.span(cols).any(|i| labels[i] != UNLABELLED) {
             continue;
@@ -151,7 +153,7 @@ pub fn grow_patches(
         let tol_at = |fit: &PlaneFit, g: &GridPoint| ray_tolerance(fit, g, tol, s_eff, params);
         let mut refit_at = acc.n + acc.n / 3 + 1;
         while let Some(i) = queue.pop_front() {
-            let (r, c) = (i / cols, i % cols);
+            let c = col_of[i];
             let mut neighbours = [usize::MAX; 4];
             if c > 0 {
                 neighbours[0] = i - 1;
@@ -159,10 +161,10 @@ pub fn grow_patches(
             if c + 1 < cols {
                 neighbours[1] = i + 1;
             }
-            if r > 0 {
+            if i >= cols {
                 neighbours[2] = i - cols;
             }
-            if r + 1 < grid.rows() {
+            if i + cols < n {
                 neighbours[3] = i + cols;
             }
             for j in neighbours {
@@ -233,9 +235,11 @@ pub fn grow_patches(
 }
 
 fn rows_span(members: &[usize], cols: usize) -> (usize, usize) {
-    members.iter().fold((usize::MAX, 0), |(lo, hi), &i| {
-        (lo.min(i / cols), hi.max(i / cols))
-    })
+    // Rows grow with the grid index: the lowest and highest rows are those of the lowest and
+    // highest index.
+    let lo = members.iter().min().map_or(usize::MAX, |&i| i / cols);
+    let hi = members.iter().max().map_or(0, |&i| i / cols);
+    (lo, hi)
 }
 
 /// A patch from members when it is big enough and spans at least two rows (one row is a

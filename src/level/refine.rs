@@ -1,0 +1,827 @@
+//! Re-segmentation in the provisional level frame: EM-style plane fitting (the paper's sect. 9
+//! points to Thrun et al. 2004, "Learning compact 3D models of indoor and outdoor environments
+//! with a mobile robot", which alternates assigning points to planes and refitting them).
+//!
+//! Region growing over the scan grid (`patches`) works in the robot frame at a tolerance that
+//! follows the range noise: at 10 cm noise that is 30 cm, and patches run across a wall's foot or
+//! a corner. Once a first up exists (even one the sigma gate rejects), segmenting is easier in the
+//! provisional level frame: the floor lies at one height, the ceiling at another, and every wall
+//! is a vertical plane, a 2D line onto which the points of all scans pile. Each pass
+//! 1. levels every point with the current up;
+//! 2. assigns points to the floor and the ceiling by their distance from those planes, and the
+//!    others to walls by their horizontal distance from each wall's vertical plane; a point in
+//!    reach of two models (a corner, a wall's foot or top) is left out;
+//! 3. refits each model's plane from its points (bias-corrected TLS, [`PlaneAccumulator`]) and
+//!    re-estimates up from them with the robust estimator ([`up::up_robust`]), whose information
+//!    matrix gives the sigmas;
+//!
+//! until up moves by a small fraction of its uncertainty (one pass by default: more did not
+//! measurably help). The walls' planes are refitted free (not forced vertical): their tilt
+//! is the evidence of up; verticality only steers which points they get.
+
+use super::grid::{GridPoint, PlaneAccumulator, PlaneFit, PoseGrid};
+use super::patches::Patch;
+use super::up::{self, PlaneObs, UpSolution};
+use super::{LevelParams, SurfaceKind};
+use crate::geometry::Attitude;
+use nalgebra::{Rotation3, Vector2, Vector3};
+
+/// One model of the refined segmentation: a plane and the grid points assigned to it.
+#[derive(Clone, Debug)]
+pub struct Model {
+    pub kind: SurfaceKind,
+    /// The plane in the robot frame, fitted free from `members`.
+    pub fit: PlaneFit,
+    /// Grid indices of its points, ascending.
+    pub members: Vec<usize>,
+}
+
+/// The refined segmentation and the up vector it gives.
+#[derive(Clone, Debug)]
+pub struct Refined {
+    pub solution: UpSolution,
+    /// Walls, then the floor and the ceiling when seen.
+    pub models: Vec<Model>,
+}
+
+/// A wall as a vertical plane in the level frame: `normal . (x, y) = offset`, with the height
+/// of its points' centroid (the pivot of an error in up).
+#[derive(Clone, Copy, Debug)]
+struct Line {
+    normal: Vector2<f64>,
+    offset: f64,
+    z: f64,
+    /// Points behind it (merged lines average by it).
+    weight: f64,
+}
+
+/// Every valid grid point in the provisional level frame: position and ray direction.
+struct Leveled {
+    q: Vec<Option<(Vector3<f64>, Vector3<f64>)>>,
+}
+
+impl Leveled {
+    fn new(grid: &PoseGrid, level_from_robot: &Rotation3<f64>) -> Self {
+        Leveled {
+            q: grid
+                .points
+                .iter()
+                .map(|g| {
+                    g.as_ref()
+                        .map(|g| (level_from_robot * g.p.coords, level_from_robot * g.dir))
+                })
+                .collect(),
+        }
+    }
+}
+
+/// Squared distance of a leveled point `q` (ray direction `d`) from a wall's vertical plane,
+/// in variances: its range noise along the wall's normal, and the error in up
+/// (`sigma_up` [rad]) at its height above the wall's pivot.
+fn line_z2(
+    l: &Line,
+    q: &Vector3<f64>,
+    d: &Vector3<f64>,
+    s: f64,
+    min_sigma: f64,
+    sigma_up: f64,
+) -> f64 {
+    let dist = l.normal.x * q.x + l.normal.y * q.y - l.offset;
+    let along = l.normal.x * d.x + l.normal.y * d.y;
+    let lever = (q.z - l.z) * sigma_up;
+    dist * dist / (s * s * along * along + min_sigma * min_sigma + lever * lever)
+}
+
+fn line_of(fit: &PlaneFit, level_from_robot: &Rotation3<f64>) -> Option<Line> {
+    let n = level_from_robot * fit.normal;
+    let normal = Vector2::new(n.x, n.y).try_normalize(1e-9)?;
+    let c = level_from_robot * fit.centroid.coords;
+    Some(Line {
+        normal,
+        offset: normal.dot(&Vector2::new(c.x, c.y)),
+        z: c.z,
+        weight: fit.weight,
+    })
+}
+
+/// Refines up from a provisional solution by re-segmenting the grid in its level frame.
+/// `walls` are the wall patches of region growing (the first walls to assign points to); the
+/// floor and ceiling are found afresh. `None` when the refined model does not fix up.
+pub fn refine(
+    grid: &PoseGrid,
+    start: &UpSolution,
+    walls: &[&Patch],
+    params: &LevelParams,
+    sigma: f64,
+) -> Option<Refined> {
+    let s = sigma.max(params.min_sigma);
+    let k = params.refine_k;
+    let mut up = start.up;
+    let mut sigma_up = start_sigma(start, params);
+    // Wall planes to assign from, robot frame.
+    let mut wall_fits: Vec<PlaneFit> = walls.iter().map(|p| p.fit).collect();
+    let mut level_fits: Vec<PlaneFit> = Vec::new();
+    // The step's noise is that of two ranges.
+    let levelish = levelish_points(grid, params.refine_step_k * std::f64::consts::SQRT_2 * s);
+    let mut result: Option<Refined> = None;
+    let seed_width = if params.refine_discover {
+        super::patches::seed_cols(grid, params, s).max(3)
+    } else {
+        0
+    };
+    for pass in 0..params.refine_passes {
+        let level_from_robot = Attitude::from_up(&up).level_from_robot();
+        let lv = Leveled::new(grid, &level_from_robot);
+        let level_ok = flat_points(grid, &lv, s, params.min_sigma, sigma_up, k);
+        if params.level_surfaces {
+            // The first pass looks for the floor and ceiling in its level frame (the region-grown
+            // ones can have run up a wall's foot); later passes start from what it found.
+            let fresh = pass == 0;
+            level_fits = find_levels(
+                grid,
+                &lv,
+                &level_ok,
+                &level_fits,
+                fresh,
+                &up,
+                params,
+                s,
+                sigma_up,
+            );
+        }
+        // Floor and ceiling members, and the band around them that walls may not take.
+        let mut level_members: Vec<Vec<usize>> = vec![Vec::new(); level_fits.len()];
+        let mut near_level = vec![false; grid.points.len()];
+        let level_models: Vec<LevelModel> =
+            level_fits.iter().map(|f| LevelModel::new(f, s)).collect();
+        for (i, g) in grid.points.iter().enumerate() {
+            let Some(g) = g else { continue };
+            let mut reach = 0;
+            let mut which = 0;
+            for (m, f) in level_models.iter().enumerate() {
+                let (d, sd) = f.distance_sd(g, s, params.min_sigma);
+                if d <= k * sd {
+                    reach += 1;
+                    which = m;
+                }
+                if d <= k * sd + params.flat_margin {
+                    near_level[i] = true;
+                }
+            }
+            if reach == 1 && level_ok[i] {
+                level_members[which].push(i);
+            }
+        }
+        // Without a floor model, the lowest points seen stand for the floor: the band above
+        // them holds a wall's foot and the floor just in front of it, which no vertical plane
+        // tells apart at high noise. If no floor is in view, this only trims the lowest wall
+        // points.
+        if !level_fits.iter().any(|f| f.centroid.coords.dot(&up) < 0.0) {
+            if let Some(low) = lowest_height(&lv) {
+                for (i, q) in lv.q.iter().enumerate() {
+                    let Some((q, d)) = q else { continue };
+                    let lever = q.xy().norm() * sigma_up;
+                    let band = k * (s * s * d.z * d.z + lever * lever).sqrt() + params.flat_margin;
+                    if q.z - low < band {
+                        near_level[i] = true;
+                    }
+                }
+            }
+        }
+        // Walls: merge those that are one wall, then assign by horizontal distance.
+        let mut lines: Vec<Line> = wall_fits
+            .iter()
+            .filter_map(|f| line_of(f, &level_from_robot))
+            .collect();
+        let candidate: Vec<bool> = (0..grid.points.len())
+            .map(|i| lv.q[i].is_some() && !near_level[i] && !levelish[i])
+            .collect();
+        // New walls are looked for once; later passes carry them as models.
+        if params.refine_discover && pass == 0 {
+            lines.extend(discover_lines(grid, &lv, &candidate, seed_width, params, s));
+        }
+        merge_lines(&mut lines, params, s);
+        let cos_similar = SIMILAR_LINES_DEG.to_radians().cos();
+        let mut wall_members: Vec<Vec<usize>> = vec![Vec::new(); lines.len()];
+        for (i, q) in lv.q.iter().enumerate() {
+            let Some((q, d)) = q else { continue };
+            if !candidate[i] {
+                continue;
+            }
+            // The nearest line in sigmas, and the runner-up within reach.
+            let mut best: Option<(f64, usize)> = None;
+            let mut second: Option<(f64, usize)> = None;
+            for (m, l) in lines.iter().enumerate() {
+                let z = line_z2(l, q, d, s, params.min_sigma, sigma_up);
+                if z > k * k {
+                    continue;
+                }
+                if best.is_none_or(|b| z < b.0) {
+                    second = best;
+                    best = Some((z, m));
+                } else if second.is_none_or(|b| z < b.0) {
+                    second = Some((z, m));
+                }
+            }
+            let Some((_, m)) = best else { continue };
+            // In reach of two walls that meet (a corner): no one's point. Two nearly parallel
+            // lines in reach are one wall's pieces left unmerged: the nearer takes it.
+            if second
+                .is_some_and(|(_, o)| lines[m].normal.dot(&lines[o].normal).abs() < cos_similar)
+            {
+                continue;
+            }
+            wall_members[m].push(i);
+        }
+        let min_rows = params.refine_min_rows.max(2);
+        let mut models: Vec<Model> = Vec::new();
+        for members in wall_members {
+            if members.len() < params.min_patch_points
+                || rows_supported(grid, &members, WALL_ROW_SHARE) < min_rows
+            {
+                continue;
+            }
+            let Some(fit) = fit_members(grid, &members, sigma) else {
+                continue;
+            };
+            // A wall must stay a wall; what turned towards up was floor after all.
+            if fit.normal.dot(&up).abs() > params.wall_min_angle_deg.to_radians().cos() {
+                continue;
+            }
+            models.push(Model {
+                kind: SurfaceKind::Wall,
+                fit,
+                members,
+            });
+        }
+        let walls_found = models.len();
+        for (f, members) in level_fits.iter().zip(level_members) {
+            if members.len() < params.min_level_points || !two_rows_support(grid, &members) {
+                continue;
+            }
+            let Some(fit) = fit_members(grid, &members, sigma) else {
+                continue;
+            };
+            let kind = if f.centroid.coords.dot(&up) < 0.0 {
+                SurfaceKind::Floor
+            } else {
+                SurfaceKind::Ceiling
+            };
+            if fit.misfit_ratio(s) > params.refine_level_misfit
+                || fit.normal.dot(&up).abs() < params.refine_level_cos()
+            {
+                continue;
+            }
+            models.push(Model { kind, fit, members });
+        }
+        let obs: Vec<PlaneObs> = models
+            .iter()
+            .map(|m| {
+                let misfit = m.fit.misfit_ratio(s).max(1.0);
+                if m.kind == SurfaceKind::Wall {
+                    PlaneObs::wall(&m.fit, misfit)
+                } else {
+                    PlaneObs::level(&m.fit, misfit * params.refine_level_inflation)
+                }
+            })
+            .collect();
+        let sol = up::up_robust(&obs, s, params.iterations)?;
+        let change = sol.up.angle(&up);
+        up = sol.up;
+        sigma_up = sol
+            .attitude_sigmas()
+            .iter()
+            .fold(0f64, |a, &b| a.max(b))
+            .clamp(params.refine_min_sigma_deg.to_radians(), MAX_SIGMA_UP);
+        wall_fits = models[..walls_found].iter().map(|m| m.fit).collect();
+        level_fits = models[walls_found..].iter().map(|m| m.fit).collect();
+        result = Some(Refined {
+            solution: sol,
+            models,
+        });
+        // Converged when up moved by a small fraction of its own uncertainty.
+        if change < CONVERGED * sigma_up {
+            break;
+        }
+    }
+    result
+}
+
+/// A level plane with what assigning points to it needs.
+struct LevelModel<'a> {
+    fit: &'a PlaneFit,
+    /// The plane's own tilt uncertainty [rad].
+    tilt: f64,
+}
+
+impl<'a> LevelModel<'a> {
+    fn new(fit: &'a PlaneFit, s: f64) -> Self {
+        let tilt = fit
+            .in_plane
+            .iter()
+            .map(|(_, e)| fit.normal_variance_along(e, s))
+            .fold(0f64, f64::max)
+            .sqrt()
+            .min(MAX_SIGMA_UP);
+        LevelModel { fit, tilt }
+    }
+
+    /// A point's distance from the plane and its standard deviation: the range noise along
+    /// the normal, and the plane's tilt uncertainty at the point's distance from its centroid.
+    fn distance_sd(&self, g: &GridPoint, s: f64, min_sigma: f64) -> (f64, f64) {
+        let f = self.fit;
+        let v = g.p - f.centroid;
+        let d = f.normal.dot(&v);
+        let lever2 = (v.norm_squared() - d * d).max(0.0) * self.tilt * self.tilt;
+        let sd = (s * s * g.dir.dot(&f.normal).powi(2) + min_sigma * min_sigma + lever2).sqrt();
+        (d.abs(), sd)
+    }
+}
+
+/// Passes stop when up moves by less than this fraction of its uncertainty.
+const CONVERGED: f64 = 0.05;
+
+/// Largest up uncertainty used for assignment tolerances [rad].
+const MAX_SIGMA_UP: f64 = 0.06;
+
+fn start_sigma(start: &UpSolution, params: &LevelParams) -> f64 {
+    let s = start.attitude_sigmas().iter().fold(0f64, |a, &b| a.max(b));
+    if s.is_finite() {
+        s.clamp(params.refine_min_sigma_deg.to_radians(), MAX_SIGMA_UP)
+    } else {
+        MAX_SIGMA_UP
+    }
+}
+
+/// The floor and ceiling planes to assign from: the ones given, else the densest height below
+/// (floor) and above (ceiling) the scanner in the level frame, where at least
+/// `min_level_points` points lie within the tolerance of one height.
+#[allow(clippy::too_many_arguments)]
+fn find_levels(
+    grid: &PoseGrid,
+    lv: &Leveled,
+    ok: &[bool],
+    given: &[PlaneFit],
+    fresh: bool,
+    up: &Vector3<f64>,
+    params: &LevelParams,
+    s: f64,
+    sigma_up: f64,
+) -> Vec<PlaneFit> {
+    let below = |f: &PlaneFit| f.centroid.coords.dot(up) < 0.0;
+    let mut out: Vec<PlaneFit> = Vec::new();
+    for floor in [true, false] {
+        if !fresh {
+            // Later passes carry what the first found, and look for nothing new.
+            if let Some(f) = given.iter().find(|f| below(f) == floor) {
+                out.push(*f);
+            }
+            continue;
+        }
+        // Heights of the candidates, with the tolerance of each: the noise along the vertical
+        // plus what an error in up does at the point's horizontal distance.
+        let mut zs: Vec<(f64, usize)> = lv
+            .q
+            .iter()
+            .enumerate()
+            .filter_map(|(i, q)| {
+                let (q, _) = q.as_ref()?;
+                (ok[i] && (q.z < -MIN_LEVEL_DISTANCE) == floor && q.z.abs() > MIN_LEVEL_DISTANCE)
+                    .then_some((q.z, i))
+            })
+            .collect();
+        if zs.len() < params.min_level_points {
+            continue;
+        }
+        zs.sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
+        // A window as wide as the vertical tolerance of a typical grazing floor hit.
+        let half = params.refine_k * (0.3 * s + 2.0 * sigma_up) + params.flat_margin;
+        let mut best = (0usize, 0usize);
+        let mut lo = 0;
+        for hi in 0..zs.len() {
+            while zs[hi].0 - zs[lo].0 > 2.0 * half {
+                lo += 1;
+            }
+            if hi + 1 - lo > best.1 - best.0 {
+                best = (lo, hi + 1);
+            }
+        }
+        if best.1 - best.0 < params.min_level_points {
+            continue;
+        }
+        let mut members: Vec<usize> = zs[best.0..best.1].iter().map(|&(_, i)| i).collect();
+        // A few rounds of refit and reassignment: the window's plane is only as level as the
+        // provisional up, so far points fall outside it at first.
+        let mut fit = None;
+        for _ in 0..LEVEL_ROUNDS {
+            if members.len() < params.min_level_points || !two_rows_support(grid, &members) {
+                fit = None;
+                break;
+            }
+            let Some(f) = fit_members(grid, &members, s) else {
+                fit = None;
+                break;
+            };
+            fit = Some(f);
+            let model = LevelModel::new(&f, s);
+            members = zs
+                .iter()
+                .map(|&(_, i)| i)
+                .filter(|&i| {
+                    grid.points[i].as_ref().is_some_and(|g| {
+                        let (d, sd) = model.distance_sd(g, s, params.min_sigma);
+                        d <= params.refine_k * sd
+                    })
+                })
+                .collect();
+        }
+        if let Some(f) = fit {
+            if f.normal.dot(up).abs() >= params.refine_level_cos()
+                && f.misfit_ratio(s) <= params.refine_level_misfit
+            {
+                out.push(f);
+            }
+        }
+    }
+    out
+}
+
+/// Points whose range changes from scan to scan like a level surface's: in their column, the
+/// range to a neighbouring row's point differs by more than `r de` for the elevation step `de`
+/// (`r cot(a) de` on a surface seen `a` < 45 degrees off the beams' plane, `r tan(b) de` on a
+/// wall met at vertical incidence `b`, see [`super::steep`]), plus `margin` for the noise. A floor or ceiling takes no other
+/// point: at high noise a wall's foot lies within a floor's tolerance, and a band of wall points
+/// at one height could pass for a floor.
+pub fn levelish_points(grid: &PoseGrid, margin: f64) -> Vec<bool> {
+    let cols = grid.cols;
+    let rows = grid.rows();
+    // Some(level step?) for a valid neighbour, None without one.
+    let step = |i: usize, j: usize| -> Option<bool> {
+        let (a, b) = (grid.points[i].as_ref()?, grid.points[j].as_ref()?);
+        let de = (grid.elevation[j / cols] - grid.elevation[i / cols]).abs();
+        Some((b.range - a.range).abs() > 0.5 * (a.range + b.range) * de + margin)
+    };
+    // Each column pair of adjacent rows once: pair `i` joins point `i` to the one above.
+    let pairs: Vec<Option<bool>> = (0..cols * rows.saturating_sub(1))
+        .map(|i| step(i, i + cols))
+        .collect();
+    (0..grid.points.len())
+        .map(|i| {
+            let r = i / cols;
+            let below = if r > 0 { pairs[i - cols] } else { None };
+            let above = if r + 1 < rows { pairs[i] } else { None };
+            // A wall point above or below a floor point steps far to it, but not to its other
+            // neighbour on the wall: every neighbour must agree.
+            match (below, above) {
+                (None, None) => false,
+                (a, b) => a.unwrap_or(true) && b.unwrap_or(true),
+            }
+        })
+        .collect()
+}
+
+/// Points that can belong to a floor or ceiling, judged against their neighbours in the same
+/// column (adjacent scans) in the provisional level frame: at least one neighbour lies at the
+/// same height (within the vertical noise of both and what an error in up does across their
+/// horizontal separation), and none rises steeply from it (a height step larger than the
+/// noise and larger than the horizontal step, as up a wall). A wall's foot lies within a
+/// floor plane's tolerance, but the wall point above it rises steeply; on a floor the scans
+/// step far outwards at one height. The vertical noise of grazing floor hits is small, so
+/// the test stays sharp at high range noise, unlike steps in range.
+fn flat_points(
+    grid: &PoseGrid,
+    lv: &Leveled,
+    s: f64,
+    min_sigma: f64,
+    sigma_up: f64,
+    k: f64,
+) -> Vec<bool> {
+    let cols = grid.cols;
+    let rows = grid.rows();
+    // Some(true) flat, Some(false) steep, None neither or no neighbour.
+    let pair = |i: usize, j: usize| -> Option<bool> {
+        let ((a, da), (b, db)) = (lv.q[i].as_ref()?, lv.q[j].as_ref()?);
+        let dz2 = (a.z - b.z).powi(2);
+        let dxy2 = (a.xy() - b.xy()).norm_squared();
+        let var = s * s * (da.z * da.z + db.z * db.z)
+            + min_sigma * min_sigma
+            + dxy2 * sigma_up * sigma_up;
+        if dz2 <= k * k * var {
+            Some(true)
+        } else if dz2 > dxy2 {
+            Some(false)
+        } else {
+            None
+        }
+    };
+    let pairs: Vec<Option<bool>> = (0..cols * rows.saturating_sub(1))
+        .map(|i| pair(i, i + cols))
+        .collect();
+    (0..grid.points.len())
+        .map(|i| {
+            let r = i / cols;
+            let below = if r > 0 { pairs[i - cols] } else { None };
+            let above = if r + 1 < rows { pairs[i] } else { None };
+            below != Some(false)
+                && above != Some(false)
+                && (below == Some(true) || above == Some(true))
+        })
+        .collect()
+}
+
+/// The 2nd percentile of the leveled heights when it lies below the scanner (a floor may be in
+/// view), else `None`.
+fn lowest_height(lv: &Leveled) -> Option<f64> {
+    let mut z: Vec<f64> = lv.q.iter().flatten().map(|(q, _)| q.z).collect();
+    if z.len() < 50 {
+        return None;
+    }
+    let k = z.len() / 50;
+    let (_, m, _) = z.select_nth_unstable_by(k, f64::total_cmp);
+    (*m < -MIN_LEVEL_DISTANCE).then_some(*m)
+}
+
+/// Lines closer in direction than this [deg] are pieces of one wall when both reach a point.
+const SIMILAR_LINES_DEG: f64 = 20.0;
+
+/// New walls in the level frame, found scan by scan: a run of consecutive rays whose points
+/// lie on one 2D line within their noise (along-beam noise projected on the line's normal)
+/// seeds a line, which grows ray by ray while the next point stays within `refine_k` sigmas.
+/// This is the classic line extraction of a planar scan (e.g. Nguyen et al. 2005, "A
+/// comparison of line extraction algorithms using 2D laser rangefinder"), applied to each
+/// leveled scan; lines of different scans on one wall are merged afterwards.
+fn discover_lines(
+    grid: &PoseGrid,
+    lv: &Leveled,
+    candidate: &[bool],
+    width: usize,
+    params: &LevelParams,
+    s: f64,
+) -> Vec<Line> {
+    let cols = grid.cols;
+    let min_points = params.min_patch_points.max(width);
+    let k = params.refine_k;
+    let point = |i: usize| -> Option<(Vector2<f64>, Vector2<f64>, f64)> {
+        if !candidate[i] {
+            return None;
+        }
+        let (q, d) = lv.q[i].as_ref()?;
+        Some((Vector2::new(q.x, q.y), Vector2::new(d.x, d.y), q.z))
+    };
+    let mut out = Vec::new();
+    for r in 0..grid.rows() {
+        let row = r * cols;
+        let mut c = 0;
+        while c + width <= cols {
+            let mut acc = Line2::default();
+            let mut ok = true;
+            for j in c..c + width {
+                match point(row + j) {
+                    Some((p, d, z)) => acc.add(&p, &d, z),
+                    None => {
+                        ok = false;
+                        break;
+                    }
+                }
+            }
+            let seed = if ok { acc.line() } else { None };
+            let Some(mut line) = seed.filter(|l| acc.misfit(l, s, params.min_sigma) <= SEED_MISFIT)
+            else {
+                c += 1;
+                continue;
+            };
+            let mut end = c + width;
+            let mut gap = 0;
+            let mut refit_at = acc.n * 5 / 4 + 1;
+            while end < cols && gap <= MAX_GAP {
+                let Some((p, d, z)) = point(row + end) else {
+                    gap += 1;
+                    end += 1;
+                    continue;
+                };
+                let along = line.normal.dot(&d);
+                let sd = (s * s * along * along + params.min_sigma.powi(2)).sqrt();
+                if (line.normal.dot(&p) - line.offset).abs() > k * sd {
+                    break;
+                }
+                gap = 0;
+                acc.add(&p, &d, z);
+                end += 1;
+                if acc.n >= refit_at {
+                    if let Some(l) = acc.line() {
+                        line = l;
+                    }
+                    refit_at = acc.n * 5 / 4 + 1;
+                }
+            }
+            if acc.n >= min_points {
+                if let Some(l) = acc.line() {
+                    out.push(l);
+                }
+            }
+            c = end;
+        }
+    }
+    out
+}
+
+/// A seed's points must fit its line within this multiple of the residual their noise
+/// explains [1].
+const SEED_MISFIT: f64 = 2.0;
+
+/// Rays without a usable point that a growing line may step over.
+const MAX_GAP: usize = 2;
+
+/// Sums for a 2D total-least-squares line.
+#[derive(Clone, Copy, Debug, Default)]
+struct Line2 {
+    n: usize,
+    sum: Vector2<f64>,
+    sxx: f64,
+    sxy: f64,
+    syy: f64,
+    z: f64,
+    /// Sum of the squared ray directions (for the noise along the normal).
+    dxx: f64,
+    dxy: f64,
+    dyy: f64,
+}
+
+impl Line2 {
+    fn add(&mut self, p: &Vector2<f64>, d: &Vector2<f64>, z: f64) {
+        self.n += 1;
+        self.sum += p;
+        self.sxx += p.x * p.x;
+        self.sxy += p.x * p.y;
+        self.syy += p.y * p.y;
+        self.z += z;
+        self.dxx += d.x * d.x;
+        self.dxy += d.x * d.y;
+        self.dyy += d.y * d.y;
+    }
+
+    fn line(&self) -> Option<Line> {
+        if self.n < 3 {
+            return None;
+        }
+        let n = self.n as f64;
+        let c = self.sum / n;
+        let (a, b, d) = (
+            self.sxx / n - c.x * c.x,
+            self.sxy / n - c.x * c.y,
+            self.syy / n - c.y * c.y,
+        );
+        // Minor axis of the 2x2 scatter [[a, b], [b, d]].
+        let half = 0.5 * (a - d);
+        let root = (half * half + b * b).sqrt();
+        let minor = 0.5 * (a + d) - root;
+        let normal = if b.abs() > 1e-15 {
+            Vector2::new(b, minor - a)
+        } else if a < d {
+            Vector2::new(1.0, 0.0)
+        } else {
+            Vector2::new(0.0, 1.0)
+        }
+        .try_normalize(1e-300)?;
+        Some(Line {
+            normal,
+            offset: normal.dot(&c),
+            z: self.z / n,
+            weight: n,
+        })
+    }
+
+    /// Residual variance about `l` over what the noise explains.
+    fn misfit(&self, l: &Line, s: f64, min_sigma: f64) -> f64 {
+        let n = self.n as f64;
+        let c = self.sum / n;
+        let (u, v) = (l.normal.x, l.normal.y);
+        let scatter = (self.sxx / n - c.x * c.x) * u * u
+            + 2.0 * (self.sxy / n - c.x * c.y) * u * v
+            + (self.syy / n - c.y * c.y) * v * v;
+        let dn2 = (self.dxx * u * u + 2.0 * self.dxy * u * v + self.dyy * v * v) / n;
+        let expected = s * s * dn2 + min_sigma * min_sigma;
+        scatter * n / (n - 2.0).max(1.0) / expected
+    }
+}
+
+/// Refit-and-reassign rounds when a floor or ceiling is first found.
+const LEVEL_ROUNDS: usize = 3;
+
+/// Floor or ceiling candidates must be this far from the scanner's height [m]: a level plane
+/// through the scanner is seen edge-on.
+const MIN_LEVEL_DISTANCE: f64 = 0.1;
+
+fn fit_members(grid: &PoseGrid, members: &[usize], sigma: f64) -> Option<PlaneFit> {
+    let mut acc = PlaneAccumulator::default();
+    for g in members.iter().filter_map(|&i| grid.points[i].as_ref()) {
+        acc.add(g);
+    }
+    acc.fit(sigma)
+}
+
+/// Rows holding at least `share` of the members each.
+fn rows_supported(grid: &PoseGrid, members: &[usize], share: f64) -> usize {
+    let mut per_row = vec![0usize; grid.rows()];
+    for &i in members {
+        per_row[i / grid.cols] += 1;
+    }
+    let least = (share * members.len() as f64).max(1.0);
+    per_row.iter().filter(|&&n| n as f64 >= least).count()
+}
+
+/// A wall's rows count towards `refine_min_rows` only with this share of its points each: a
+/// scan line plus a few stray points of another scan leaves the plane free to turn about the
+/// line.
+const WALL_ROW_SHARE: f64 = 0.15;
+
+/// A level plane from one scan line is that scan's own plane (a line on the floor leaves the
+/// plane free to turn about it): at least two rows must each hold a fifth of the points.
+fn two_rows_support(grid: &PoseGrid, members: &[usize]) -> bool {
+    rows_supported(grid, members, 0.2) >= 2
+}
+
+/// Merges lines that are one wall: normals within `refine_merge_deg` and each one's pivot
+/// within the tolerance of the other (region growing splits one noisy wall into several
+/// patches; left apart they would claim the same points, which would then be dropped as
+/// ambiguous).
+fn merge_lines(lines: &mut Vec<Line>, params: &LevelParams, s: f64) {
+    let cos_max = params.refine_merge_deg.to_radians().cos();
+    let tol = params.refine_k * s + params.flat_margin;
+    let mut i = 0;
+    while i < lines.len() {
+        let mut j = i + 1;
+        while j < lines.len() {
+            let (a, b) = (lines[i], lines[j]);
+            let c = a.normal.dot(&b.normal);
+            let (bn, bo) = if c < 0.0 {
+                (-b.normal, -b.offset)
+            } else {
+                (b.normal, b.offset)
+            };
+            if c.abs() >= cos_max && (a.offset - bo).abs() <= tol {
+                let w = a.weight + b.weight;
+                let normal = (a.normal * a.weight + bn * b.weight).normalize();
+                lines[i] = Line {
+                    normal,
+                    offset: (a.offset * a.weight + bo * b.weight) / w,
+                    z: (a.z * a.weight + b.z * b.weight) / w,
+                    weight: w,
+                };
+                lines.swap_remove(j);
+            } else {
+                j += 1;
+            }
+        }
+        i += 1;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn line2_fits_points_on_a_line_exactly() {
+        // The line x cos(a) + y sin(a) = 2.
+        let a: f64 = 0.7;
+        let n = Vector2::new(a.cos(), a.sin());
+        let t = Vector2::new(-a.sin(), a.cos());
+        let mut acc = Line2::default();
+        for k in 0..10 {
+            let p = n * 2.0 + t * (k as f64 * 0.3 - 1.0);
+            acc.add(&p, &p.normalize(), 0.1 * k as f64);
+        }
+        let l = acc.line().unwrap();
+        let sign = l.normal.dot(&n).signum();
+        assert!((l.normal * sign - n).norm() < 1e-12);
+        assert!((l.offset * sign - 2.0).abs() < 1e-12);
+        assert!((l.z - 0.45).abs() < 1e-12);
+        assert!(acc.misfit(&l, 0.01, 0.001) < 1e-12);
+    }
+
+    #[test]
+    fn merge_lines_joins_pieces_of_one_wall_but_not_a_corner() {
+        let line = |deg: f64, offset: f64, weight: f64| {
+            let a = deg.to_radians();
+            Line {
+                normal: Vector2::new(a.cos(), a.sin()),
+                offset,
+                z: 0.0,
+                weight,
+            }
+        };
+        let params = LevelParams::default();
+        // Two pieces of the wall x = 3 (one with the opposite normal), and the wall y = 3.
+        let mut lines = vec![
+            line(0.0, 3.0, 100.0),
+            line(182.0, -3.02, 50.0),
+            line(90.0, 3.0, 80.0),
+        ];
+        merge_lines(&mut lines, &params, 0.01);
+        assert_eq!(lines.len(), 2);
+        let x_wall = lines.iter().find(|l| l.normal.x.abs() > 0.9).unwrap();
+        assert_eq!(x_wall.weight, 150.0);
+        assert!((x_wall.offset.abs() - 3.0).abs() < 0.02);
+    }
+}
