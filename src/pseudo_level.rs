@@ -139,13 +139,38 @@ fn lowest_crowded_height(mut heights: Vec<f64>, window: f64, min_count: usize) -
     if min_count == 0 || heights.len() < min_count {
         return None;
     }
+    // The crowd is nearly always among the lowest few crowds' worth of points: sort only
+    // those (the same values in the same order as the full sort's start), and sort the rest
+    // only when the answer could depend on them.
+    let lowest = 4 * min_count;
+    if lowest < heights.len() {
+        heights.select_nth_unstable_by(lowest, f64::total_cmp);
+        let prefix = &mut heights[..lowest];
+        prefix.sort_by(f64::total_cmp);
+        if let Some(answer) = crowd_in_sorted(prefix, window, min_count, false) {
+            return answer;
+        }
+    }
     heights.sort_by(f64::total_cmp);
-    (0..=heights.len() - min_count)
-        .find(|&i| heights[i + min_count - 1] - heights[i] <= window)
-        .map(|i| {
-            let end = heights.partition_point(|&z| z <= heights[i] + window);
-            heights[(i + end) / 2]
-        })
+    crowd_in_sorted(&heights, window, min_count, true).flatten()
+}
+
+/// [`lowest_crowded_height`] on sorted heights, all of them (`complete`) or only the lowest
+/// of them (the rest lie at or above the last): `Some(answer)` when these settle it.
+fn crowd_in_sorted(
+    sorted: &[f64],
+    window: f64,
+    min_count: usize,
+    complete: bool,
+) -> Option<Option<f64>> {
+    let Some(i) =
+        (0..=sorted.len() - min_count).find(|&i| sorted[i + min_count - 1] - sorted[i] <= window)
+    else {
+        return complete.then_some(None);
+    };
+    let top = sorted[i] + window;
+    let end = sorted.partition_point(|&z| z <= top);
+    (complete || end < sorted.len()).then(|| Some(sorted[(i + end) / 2]))
 }
 
 /// Slack on how far a filled gap point may stray from its wall neighbours [m].
@@ -303,5 +328,38 @@ mod tests {
         let spread: Vec<f64> = (0..50).map(|k| 0.1 * k as f64).collect();
         assert_eq!(lowest_crowded_height(spread, 0.05, 20), None);
         assert_eq!(lowest_crowded_height(vec![0.0; 5], 0.05, 20), None);
+    }
+
+    /// Sorting only the lowest heights gives what sorting all of them gives.
+    #[test]
+    fn lowest_crowd_matches_sorting_everything() {
+        use rand::{RngExt, SeedableRng};
+        let full = |mut h: Vec<f64>, window: f64, min_count: usize| {
+            h.sort_by(f64::total_cmp);
+            (0..=h.len() - min_count)
+                .find(|&i| h[i + min_count - 1] - h[i] <= window)
+                .map(|i| h[(i + h.partition_point(|&z| z <= h[i] + window)) / 2])
+        };
+        let mut rng = rand::rngs::ChaCha8Rng::seed_from_u64(9);
+        for case in 0..400 {
+            let n = rng.random_range(20..400);
+            let floor_share = [0.0, 0.02, 0.3, 0.9][case % 4];
+            let heights: Vec<f64> = (0..n)
+                .map(|_| {
+                    if rng.random::<f64>() < floor_share {
+                        -0.45 + 0.01 * rng.random::<f64>()
+                    } else {
+                        rng.random_range(-1.0..2.0)
+                    }
+                })
+                .collect();
+            let min_count = rng.random_range(1..20);
+            let window = rng.random_range(0.001..0.1);
+            assert_eq!(
+                lowest_crowded_height(heights.clone(), window, min_count),
+                full(heights, window, min_count),
+                "case {case}"
+            );
+        }
     }
 }

@@ -90,7 +90,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     // serial part of reading overlaps with leveling (both use the rayon pool for the heavy work).
     let (tx, rx) = std::sync::mpsc::sync_channel::<(Vec<Vec<Scan>>, Option<InputError>)>(2);
     let reader_thread = std::thread::spawn(move || {
-        let mut reader = ParallelScanReader::new(input.reader, name.clone());
+        let mut reader = ParallelScanReader::new(input.reader, name.clone()).skipping_hit();
         let mut grouper = Grouper::default();
         let mut batch: Vec<Vec<Scan>> = Vec::with_capacity(BATCH_POSES);
         loop {

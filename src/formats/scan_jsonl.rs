@@ -21,7 +21,17 @@ use std::io::{self, BufRead, Write};
 /// Parses one line of scan JSON Lines into a [`Scan`]. The error is the message alone; the
 /// readers add the file name and line number.
 pub fn parse_scan_line(text: &str) -> Result<Scan, String> {
-    let raw: RawScan = serde_json::from_str(text).map_err(|e| json_error_message(&e))?;
+    parse_scan_line_with(text, false)
+}
+
+/// [`parse_scan_line`], skipping over the simulator's `hit` labels when `skip_hit` (they are
+/// left out of the scan, unchecked): `level` never reads them (contract), and they are a
+/// tenth of what a simulated line holds to parse.
+fn parse_scan_line_with(text: &str, skip_hit: bool) -> Result<Scan, String> {
+    let mut de = serde_json::Deserializer::from_str(text);
+    let raw = de::DeserializeSeed::deserialize(RawScanVisitor { skip_hit }, &mut de)
+        .and_then(|raw| de.end().map(|()| raw))
+        .map_err(|e| json_error_message(&e))?;
     raw.into_scan()
 }
 
@@ -109,6 +119,7 @@ pub struct ParallelScanReader<R> {
     ready: VecDeque<Result<(usize, Scan), InputError>>,
     started: bool,
     done: bool,
+    skip_hit: bool,
 }
 
 struct LineSource<R> {
@@ -178,7 +189,15 @@ impl<R: BufRead + Send> ParallelScanReader<R> {
             ready: VecDeque::new(),
             started: false,
             done: false,
+            skip_hit: false,
         }
+    }
+
+    /// Skips over `hit` labels without reading them (see [`parse_scan_line`]); for `level`,
+    /// which never reads them.
+    pub fn skipping_hit(mut self) -> Self {
+        self.skip_hit = true;
+        self
     }
 
     /// Parses the read-ahead batch while reading the one after it.
@@ -191,12 +210,13 @@ impl<R: BufRead + Send> ParallelScanReader<R> {
         let current = &self.current;
         let name = self.source.name.clone();
         let (source, next) = (&mut self.source, &mut self.next);
+        let skip_hit = self.skip_hit;
         let (parsed, ()) = rayon::join(
             || {
                 current.lines[..current.used]
                     .par_iter()
                     .map(|(line, text)| {
-                        parse_scan_line(text)
+                        parse_scan_line_with(text, skip_hit)
                             .map(|scan| (*line, scan))
                             .map_err(|m| InputError::at_line(&name, *line, m))
                     })
@@ -381,11 +401,22 @@ fn in_field<E: de::Error>(field: &str, e: E) -> E {
 
 impl<'de> Deserialize<'de> for RawScan {
     fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
-        d.deserialize_map(RawScanVisitor)
+        d.deserialize_map(RawScanVisitor { skip_hit: false })
     }
 }
 
-struct RawScanVisitor;
+struct RawScanVisitor {
+    /// Skip over `hit` instead of reading it.
+    skip_hit: bool,
+}
+
+impl<'de> de::DeserializeSeed<'de> for RawScanVisitor {
+    type Value = RawScan;
+
+    fn deserialize<D: Deserializer<'de>>(self, d: D) -> Result<RawScan, D::Error> {
+        d.deserialize_map(self)
+    }
+}
 
 impl<'de> Visitor<'de> for RawScanVisitor {
     type Value = RawScan;
@@ -433,6 +464,9 @@ impl<'de> Visitor<'de> for RawScanVisitor {
                         .get()
                 }
                 "valid" => raw.valid = map.next_value::<Opt<Array<Flag>>>().map_err(wrap)?.get(),
+                "hit" if self.skip_hit => {
+                    map.next_value::<de::IgnoredAny>().map_err(wrap)?;
+                }
                 "hit" => raw.hit = map.next_value::<Opt<Array<HitCode>>>().map_err(wrap)?.get(),
                 "odometry" => raw.odometry = map.next_value::<PoseField>().map_err(wrap)?.0,
                 "estimate" => raw.estimate = map.next_value::<PoseField>().map_err(wrap)?.0,
@@ -1251,6 +1285,50 @@ mod tests {
             let extra: Vec<_> = back.extra.clone().into_iter().rev().collect();
             back.extra = extra.into_iter().collect();
             prop_assert_eq!(back, scan);
+        }
+    }
+
+    /// `level`'s reader skips `hit` (never read by `level`), and reads everything else as
+    /// the plain parser does; a duplicate `hit` is still an error.
+    #[test]
+    fn skipping_hit_leaves_the_rest_alone() {
+        let line = r#"{"sequence": 4, "elevation": 0.1, "theta": [0, 1], "readings": [2, null], "hit": [1, 9], "extra": [1]}"#;
+        assert!(err(line).contains("hit[1]"), "{}", err(line));
+        let skipped = parse_scan_line_with(line, true).unwrap();
+        let mut plain = parse(&line.replace(r#""hit": [1, 9], "#, ""));
+        assert_eq!(skipped, plain);
+        plain.hit = Some(vec![Hit::Wall, Hit::Nothing]);
+        assert_ne!(skipped, plain);
+        let twice = r#"{"theta": [0], "readings": [2], "hit": [1], "hit": [1]}"#;
+        assert!(
+            parse_scan_line_with(twice, true)
+                .unwrap_err()
+                .contains("duplicate field `hit`")
+        );
+    }
+
+    #[test]
+    fn parallel_reader_skipping_hit_reads_the_same_scans_without_hits() {
+        let lines = "{\"sequence\": 1, \"elevation\": 0, \"theta\": [0], \"readings\": [2], \"hit\": [1]}\n\n{\"sequence\": 2, \"elevation\": 0.1, \"theta\": [0], \"readings\": [3], \"hit\": [0]}\n";
+        let plain: Vec<(usize, Scan)> = ParallelScanReader::new(Cursor::new(lines), "p")
+            .collect::<Result<_, _>>()
+            .unwrap();
+        let skipped: Vec<(usize, Scan)> = ParallelScanReader::new(Cursor::new(lines), "p")
+            .skipping_hit()
+            .collect::<Result<_, _>>()
+            .unwrap();
+        assert_eq!(plain.len(), 2);
+        assert_eq!(plain[1].0, 3);
+        for ((la, a), (lb, b)) in plain.iter().zip(&skipped) {
+            assert_eq!(la, lb);
+            assert!(a.hit.is_some() && b.hit.is_none());
+            assert_eq!(
+                Scan {
+                    hit: None,
+                    ..a.clone()
+                },
+                *b
+            );
         }
     }
 }

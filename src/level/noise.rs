@@ -17,15 +17,16 @@ const MAD_TO_SIGMA: f64 = 1.482_602_218_505_602;
 /// there are too few triples of consecutive valid rays (fewer than 20).
 pub fn estimate_range_sigma(scans: &[Scan]) -> Option<f64> {
     let mut z = Vec::new();
-    let mut trig: Vec<(f64, f64)> = Vec::new();
+    let mut steps = BearingSteps::default();
     let mut trig_of: Option<&[f64]> = None;
+    let mut inverse = Vec::new();
     for s in scans {
-        // Scans of one pose nearly always share their bearings: one sincos per bearing.
+        // Scans of one pose nearly always share their bearings: their sines once per pose.
         if trig_of != Some(&s.theta[..]) {
-            trig = s.theta.iter().map(|t| t.sin_cos()).collect();
+            steps = BearingSteps::new(&s.theta);
             trig_of = Some(&s.theta[..]);
         }
-        standardised_residuals(s, &trig, &mut z);
+        standardised_residuals(s, &steps, &mut inverse, &mut z);
     }
     if z.len() < 20 {
         return None;
@@ -35,27 +36,59 @@ pub fn estimate_range_sigma(scans: &[Scan]) -> Option<f64> {
     Some(*m * MAD_TO_SIGMA)
 }
 
+/// Sines of the bearing differences of a scan: `one[i] = sin(phi_i - phi_{i-1})` and
+/// `two[i] = sin(phi_{i+1} - phi_{i-1})`, as `s_j c_i - c_j s_i` (no sines per triple).
+#[derive(Default)]
+struct BearingSteps {
+    one: Vec<f64>,
+    two: Vec<f64>,
+}
+
+impl BearingSteps {
+    fn new(theta: &[f64]) -> Self {
+        let sc: Vec<(f64, f64)> = theta.iter().map(|t| t.sin_cos()).collect();
+        let sin_diff = |i: usize, j: usize| sc[j].0 * sc[i].1 - sc[j].1 * sc[i].0;
+        let n = sc.len();
+        Self {
+            one: (0..n)
+                .map(|i| if i > 0 { sin_diff(i - 1, i) } else { 0.0 })
+                .collect(),
+            two: (0..n)
+                .map(|i| {
+                    if i > 0 && i + 1 < n {
+                        sin_diff(i - 1, i + 1)
+                    } else {
+                        0.0
+                    }
+                })
+                .collect(),
+        }
+    }
+}
+
 /// Appends |e| / (sd of e at sigma = 1) for every triple of consecutive valid rays.
-/// `sc` holds `(sin, cos)` of the scan's bearings.
-fn standardised_residuals(s: &Scan, sc: &[(f64, f64)], out: &mut Vec<f64>) {
-    let n = s.nrays();
-    // sin(phi_j - phi_i) = s_j c_i - c_j s_i: no sines per triple.
-    let sin_diff = |i: usize, j: usize| sc[j].0 * sc[i].1 - sc[j].1 * sc[i].0;
+/// `inverse` is scratch space for the rays' `(1 / r, 1 / r^4)`.
+fn standardised_residuals(
+    s: &Scan,
+    steps: &BearingSteps,
+    inverse: &mut Vec<Option<(f64, f64)>>,
+    out: &mut Vec<f64>,
+) {
+    let n = s.nrays().min(steps.one.len());
+    inverse.clear();
+    inverse.extend((0..n).map(|i| {
+        let u = 1.0 / s.range(i).filter(|&r| r > 0.0)?;
+        Some((u, u.powi(4)))
+    }));
     for i in 1..n.saturating_sub(1) {
-        let (Some(r0), Some(r1), Some(r2)) = (s.range(i - 1), s.range(i), s.range(i + 1)) else {
+        let (Some((u0, q0)), Some((u1, q1)), Some((u2, q2))) =
+            (inverse[i - 1], inverse[i], inverse[i + 1])
+        else {
             continue;
         };
-        if r0 <= 0.0 || r1 <= 0.0 || r2 <= 0.0 {
-            continue;
-        }
-        let (sa, sb, sab) = (
-            sin_diff(i - 1, i),
-            sin_diff(i, i + 1),
-            sin_diff(i - 1, i + 1),
-        );
-        let (u0, u1, u2) = (1.0 / r0, 1.0 / r1, 1.0 / r2);
+        let (sa, sb, sab) = (steps.one[i], steps.one[i + 1], steps.two[i]);
         let e = sb * u0 + sa * u2 - sab * u1;
-        let var = sb * sb * u0.powi(4) + sa * sa * u2.powi(4) + sab * sab * u1.powi(4);
+        let var = sb * sb * q0 + sa * sa * q2 + sab * sab * q1;
         if var > 0.0 && e.is_finite() {
             out.push(e.abs() / var.sqrt());
         }

@@ -101,10 +101,23 @@ pub fn grow_patches(
     } else {
         Vec::new()
     };
+    // Floors and ceilings also seed from the paper's narrow quads when the seeds are wide:
+    // along a level surface's normal the grazing rays carry little noise, so a narrow quad
+    // pins its plane well, and a wide quad rarely fits where the floor is seen only near an
+    // edge of the scans (its far and near sides too unequal, or a wall inside it).
+    let narrow_level: Vec<&Polygon> = if params.narrow_level_seeds && width != params.quad_cols {
+        quads
+            .iter()
+            .filter(|q| q.kind != SurfaceKind::Wall)
+            .collect()
+    } else {
+        Vec::new()
+    };
     let mut seeds: Vec<(u8, f64, usize, &Polygon)> = three_row
         .iter()
         .map(|q| (0u8, q))
         .chain(two_row.iter().map(|q| (1u8, q)))
+        .chain(narrow_level.iter().map(|q| (2u8, *q)))
         .enumerate()
         .map(|(i, (band, q))| {
             let rank = band + if q.kind == SurfaceKind::Wall { 0 } else { 2 };
@@ -115,6 +128,8 @@ pub fn grow_patches(
     let seeds: Vec<&Polygon> = seeds.into_iter().map(|s| s.3).collect();
     let mut queue = VecDeque::new();
     let mut members = Vec::new();
+    // Column of every grid point, without a division per visit.
+    let col_of: Vec<usize> = (0..grid.rows()).flat_map(|_| 0..cols).collect();
     for q in seeds {
         if q.span(cols).any(|i| labels[i] != UNLABELLED) {
             continue;
@@ -138,7 +153,7 @@ pub fn grow_patches(
         let tol_at = |fit: &PlaneFit, g: &GridPoint| ray_tolerance(fit, g, tol, s_eff, params);
         let mut refit_at = acc.n + acc.n / 3 + 1;
         while let Some(i) = queue.pop_front() {
-            let (r, c) = (i / cols, i % cols);
+            let c = col_of[i];
             let mut neighbours = [usize::MAX; 4];
             if c > 0 {
                 neighbours[0] = i - 1;
@@ -146,10 +161,10 @@ pub fn grow_patches(
             if c + 1 < cols {
                 neighbours[1] = i + 1;
             }
-            if r > 0 {
+            if i >= cols {
                 neighbours[2] = i - cols;
             }
-            if r + 1 < grid.rows() {
+            if i + cols < n {
                 neighbours[3] = i + cols;
             }
             for j in neighbours {
@@ -188,7 +203,8 @@ pub fn grow_patches(
                 false
             }
         });
-        match make_patch(grid, &members, params, sigma) {
+        let made = make_patch(grid, &members, params, sigma);
+        match made {
             Some(p) => patches.push(p),
             None => {
                 for &i in &members {
@@ -219,9 +235,11 @@ pub fn grow_patches(
 }
 
 fn rows_span(members: &[usize], cols: usize) -> (usize, usize) {
-    members.iter().fold((usize::MAX, 0), |(lo, hi), &i| {
-        (lo.min(i / cols), hi.max(i / cols))
-    })
+    // Rows grow with the grid index: the lowest and highest rows are those of the lowest and
+    // highest index.
+    let lo = members.iter().min().map_or(usize::MAX, |&i| i / cols);
+    let hi = members.iter().max().map_or(0, |&i| i / cols);
+    (lo, hi)
 }
 
 /// A patch from members when it is big enough and spans at least two rows (one row is a

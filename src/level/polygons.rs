@@ -40,7 +40,16 @@ pub fn classify(
     centroid: &Point3<f64>,
     params: &LevelParams,
 ) -> SurfaceKind {
-    if normal.z.abs() < params.wall_min_angle_deg.to_radians().cos() {
+    classify_below(
+        normal,
+        centroid,
+        params.wall_min_angle_deg.to_radians().cos(),
+    )
+}
+
+/// [`classify`] with the cosine of the wall angle given (computed once for many quads).
+fn classify_below(normal: &Vector3<f64>, centroid: &Point3<f64>, wall_cos: f64) -> SurfaceKind {
+    if normal.z.abs() < wall_cos {
         SurfaceKind::Wall
     } else if normal.dot(&centroid.coords) * normal.z.signum() < 0.0 {
         SurfaceKind::Floor
@@ -73,10 +82,11 @@ pub fn extract_quads_sized(
         return out;
     }
     let tol = params.coplanar_k * sigma.max(params.min_sigma);
+    let wall_cos = params.wall_min_angle_deg.to_radians().cos();
     for r in 0..=grid.rows() - qr {
         let mut c = 0;
         while c + qc <= grid.cols {
-            match quad_at(grid, r, c, qr, qc, tol, sigma, params) {
+            match quad_at(grid, r, c, qr, qc, tol, sigma, wall_cos, params) {
                 Some(q) => {
                     out.push(q);
                     c += qc - 1;
@@ -97,6 +107,7 @@ fn quad_at(
     qc: usize,
     tol: f64,
     sigma: f64,
+    wall_cos: f64,
     params: &LevelParams,
 ) -> Option<Polygon> {
     let mut acc = PlaneAccumulator::default();
@@ -143,10 +154,7 @@ fn quad_at(
             }
         }
     }
-    let area = 0.5
-        * (corners[2] - corners[0])
-            .cross(&(corners[3] - corners[1]))
-            .norm();
+    let area = 0.5 * diag.norm();
     Some(Polygon {
         row: r,
         col: c,
@@ -154,7 +162,7 @@ fn quad_at(
         cols: qc,
         corners,
         area,
-        kind: classify(&fit.normal, &fit.centroid, params),
+        kind: classify_below(&fit.normal, &fit.centroid, wall_cos),
         fit,
     })
 }
