@@ -153,3 +153,18 @@ fn refine_levels_more_poses_at_ten_centimetres_and_stays_honest() {
     );
     assert!(outside_3_sigma <= 1, "{outside_3_sigma} outside 3 sigma");
 }
+
+#[test]
+fn level_start_finds_the_floor_without_any_up() {
+    // Facing the floor of a big room at 10 cm noise, walls far beyond the beams: the start
+    // comes from the points whose range steps like a level surface's, with no up given.
+    let room = Room::box_room(60.0, 60.0);
+    let pose = Pose::new(30.0, 30.0, 0.45, deg(10.0), deg(14.0), deg(-9.0));
+    let scans = scans_at(&room, &pose, &elevations(3, 5.0), 0.10, 9, 0);
+    let est = level_pose(&scans, &without_refine());
+    let grid = est.grid.as_ref().unwrap();
+    let start = levelscan::level::refine::level_start(grid, &LevelParams::default(), 0.10)
+        .expect("a level start");
+    let err = start.attitude().max_abs_error(&pose.attitude());
+    assert!(err.to_degrees() < 1.0, "error {} deg", err.to_degrees());
+}

@@ -99,6 +99,9 @@ pub struct LevelParams {
     pub seed_span_sigmas: f64,
     /// Widest seed [columns]. Default 25.
     pub max_seed_cols: usize,
+    /// Floors and ceilings also seed from the paper's narrow quads when the seeds are wider.
+    /// Default true: along a level surface's normal the grazing rays carry little noise.
+    pub narrow_level_seeds: bool,
     /// Patches whose residuals exceed this multiple of what the noise explains are tested for
     /// being two planes [1]. Default 1.1.
     pub split_misfit: f64,
@@ -248,6 +251,7 @@ impl Default for LevelParams {
             split_f: 20.0,
             split_depth: 3,
             max_seed_cols: 25,
+            narrow_level_seeds: true,
             min_patch_points: 20,
             max_misfit_sigmas: 4.0,
             min_stacked_share: 0.75,
@@ -520,7 +524,8 @@ pub fn refine_estimate(
             &robust_obs(est, levels, params, sigma, false),
             sigma_eff,
             params.iterations,
-        )?,
+        )
+        .or_else(|| refine::level_start(grid, params, sigma))?,
     };
     let walls: Vec<&Patch> = est
         .patches

@@ -103,10 +103,23 @@ pub fn grow_patches(
     } else {
         Vec::new()
     };
+    // Floors and ceilings also seed from the paper's narrow quads when the seeds are wide:
+    // along a level surface's normal the grazing rays carry little noise, so a narrow quad
+    // pins its plane well, and a wide quad rarely fits where the floor is seen only near an
+    // edge of the scans (its far and near sides too unequal, or a wall inside it).
+    let narrow_level: Vec<&Polygon> = if params.narrow_level_seeds && width != params.quad_cols {
+        quads
+            .iter()
+            .filter(|q| q.kind != SurfaceKind::Wall)
+            .collect()
+    } else {
+        Vec::new()
+    };
     let mut seeds: Vec<(u8, f64, usize, &Polygon)> = three_row
         .iter()
         .map(|q| (0u8, q))
         .chain(two_row.iter().map(|q| (1u8, q)))
+        .chain(narrow_level.iter().map(|q| (2u8, *q)))
         .enumerate()
         .map(|(i, (band, q))| {
             let rank = band + if q.kind == SurfaceKind::Wall { 0 } else { 2 };
@@ -192,7 +205,8 @@ pub fn grow_patches(
                 false
             }
         });
-        match make_patch(grid, &members, params, sigma) {
+        let made = make_patch(grid, &members, params, sigma);
+        match made {
             Some(p) => patches.push(p),
             None => {
                 for &i in &members {

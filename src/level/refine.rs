@@ -348,6 +348,78 @@ impl<'a> LevelModel<'a> {
     }
 }
 
+/// A start for poses where no first solution exists (the walls and region-grown floor could not
+/// fix up): the plane through most of the points whose range steps like a level surface's
+/// ([`levelish_points`], which needs no up), found by a deterministic sample of point triples
+/// (RANSAC, Fischler and Bolles 1981), taken as level. `None` when no such plane holds
+/// `min_level_points` points in at least two scans with a normal within 50 degrees of the
+/// robot's own up.
+pub fn level_start(grid: &PoseGrid, params: &LevelParams, sigma: f64) -> Option<UpSolution> {
+    let s = sigma.max(params.min_sigma);
+    let levelish = levelish_points(grid, params.refine_step_k * std::f64::consts::SQRT_2 * s);
+    let idx: Vec<usize> = (0..grid.points.len())
+        .filter(|&i| levelish[i] && grid.points[i].is_some())
+        .collect();
+    let n = idx.len();
+    if n < params.min_level_points {
+        return None;
+    }
+    let min_z = START_MAX_TILT_DEG.to_radians().cos();
+    let inliers = |p0: &nalgebra::Point3<f64>, normal: &Vector3<f64>| -> Vec<usize> {
+        idx.iter()
+            .copied()
+            .filter(|&i| {
+                grid.points[i].as_ref().is_some_and(|g| {
+                    let sd = (s * s * g.dir.dot(normal).powi(2) + params.min_sigma.powi(2)).sqrt();
+                    normal.dot(&(g.p - p0)).abs() <= params.refine_k * sd + params.flat_margin
+                })
+            })
+            .collect()
+    };
+    let mut best: Option<Vec<usize>> = None;
+    for h in 0..START_HYPOTHESES {
+        // Three points spread over the candidates: a fixed stride walk, no random state.
+        let pick = |k: usize| idx[(h * (2 * k + 1) * 7 + k * n / 3) % n];
+        let (a, b, c) = (pick(0), pick(1), pick(2));
+        let (Some(pa), Some(pb), Some(pc)) = (
+            grid.points[a].as_ref(),
+            grid.points[b].as_ref(),
+            grid.points[c].as_ref(),
+        ) else {
+            continue;
+        };
+        let (u, v) = (pb.p - pa.p, pc.p - pa.p);
+        let cross = u.cross(&v);
+        // Nearly collinear triples (one scan line) leave the plane free to turn.
+        if cross.norm() < 0.1 * u.norm() * v.norm() {
+            continue;
+        }
+        let normal = cross.normalize();
+        if normal.z.abs() < min_z {
+            continue;
+        }
+        let members = inliers(&pa.p, &normal);
+        if best.as_ref().is_none_or(|b| members.len() > b.len()) {
+            best = Some(members);
+        }
+    }
+    let members = best?;
+    if members.len() < params.min_level_points || !two_rows_support(grid, &members) {
+        return None;
+    }
+    let fit = fit_members(grid, &members, sigma)?;
+    if fit.normal.z.abs() < min_z {
+        return None;
+    }
+    up::up_robust(&[PlaneObs::level(&fit, 1.0)], s, params.iterations)
+}
+
+/// Point triples tried by [`level_start`].
+const START_HYPOTHESES: usize = 48;
+
+/// Largest tilt of a [`level_start`] plane from the robot's own up [deg].
+const START_MAX_TILT_DEG: f64 = 50.0;
+
 /// Passes stop when up moves by less than this fraction of its uncertainty.
 const CONVERGED: f64 = 0.05;
 
