@@ -100,7 +100,7 @@ fn line_z2(
         return None;
     }
     let z = num / den;
-    (!(z > k2)).then_some(z)
+    (z.is_nan() || z <= k2).then_some(z)
 }
 
 fn line_of(fit: &PlaneFit, level_from_robot: &Rotation3<f64>) -> Option<Line> {
