@@ -60,6 +60,17 @@ fn level_one_pose_robust(bencher: divan::Bencher, noise: f64) {
     bencher.bench(|| level_pose(divan::black_box(&scans), &params));
 }
 
+/// The robust estimator without re-segmentation in the level frame: the cost of `refine`.
+#[divan::bench(args = [0.01, 0.10])]
+fn level_one_pose_robust_without_refine(bencher: divan::Bencher, noise: f64) {
+    let scans = pose_scans(noise);
+    let params = LevelParams {
+        refine_passes: 0,
+        ..LevelParams::default()
+    };
+    bencher.bench(|| level_pose(divan::black_box(&scans), &params));
+}
+
 #[divan::bench(args = [0.01, 0.10])]
 fn level_one_pose_paper(bencher: divan::Bencher, noise: f64) {
     let scans = pose_scans(noise);

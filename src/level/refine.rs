@@ -495,7 +495,7 @@ fn find_levels(
         // A few rounds of refit and reassignment: the window's plane is only as level as the
         // provisional up, so far points fall outside it at first.
         let mut fit = None;
-        for _ in 0..LEVEL_ROUNDS {
+        for round in 0..LEVEL_ROUNDS {
             if members.len() < params.min_level_points || !two_rows_support(grid, &members) {
                 fit = None;
                 break;
@@ -505,6 +505,9 @@ fn find_levels(
                 break;
             };
             fit = Some(f);
+            if round + 1 == LEVEL_ROUNDS {
+                break;
+            }
             let model = LevelModel::new(&f, s);
             members = zs
                 .iter()
