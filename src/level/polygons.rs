@@ -110,10 +110,13 @@ fn quad_at(
     wall_cos: f64,
     params: &LevelParams,
 ) -> Option<Polygon> {
-    let mut acc = PlaneAccumulator::default();
+    // Every point valid, and their plain sum: the same sum and division as
+    // `PlaneAccumulator::centroid` (weights of one), for the cheap test below, before the
+    // scatter sums that only quads passing it need.
+    let mut sum = Vector3::zeros();
     for rr in r..r + qr {
         for cc in c..c + qc {
-            acc.add(grid.at(rr, cc)?);
+            sum += grid.at(rr, cc)?.p.coords;
         }
     }
     let corner = |rr: usize, cc: usize| grid.at(rr, cc).map(|g| g.p);
@@ -135,7 +138,7 @@ fn quad_at(
     // beyond three times the tolerance from it means a corner or an edge.
     let diag = (corners[2] - corners[0]).cross(&(corners[3] - corners[1]));
     if let Some(n) = diag.try_normalize(1e-12) {
-        let centroid = acc.centroid();
+        let centroid = Point3::from(sum / (qr * qc) as f64);
         for rr in r..r + qr {
             for cc in c..c + qc {
                 let p = grid.at(rr, cc)?.p;
@@ -143,6 +146,12 @@ fn quad_at(
                     return None;
                 }
             }
+        }
+    }
+    let mut acc = PlaneAccumulator::default();
+    for rr in r..r + qr {
+        for cc in c..c + qc {
+            acc.add(grid.at(rr, cc)?);
         }
     }
     let fit = acc.fit(sigma)?;
