@@ -132,6 +132,10 @@ pub fn base_scan_index(scans: &[Scan], est: &LevelEstimate) -> usize {
 
 /// Fewest points that make a crowd at the floor's height.
 const MIN_GROUND_POINTS: usize = 20;
+/// Half-width of the band around a crowd-found floor whose points are floor hits [m].
+const GROUND_BAND: f64 = 0.02;
+/// Fewest points of one scan in that crowd for the scan to count as seeing the floor there.
+const MIN_ROW_CROWD: usize = 5;
 
 /// The lowest height with at least `min_count` of `heights` within `window` above it: the
 /// median of that crowd. `None` when no window holds that many.
@@ -227,6 +231,22 @@ fn kept_rays(
         let min_count = (heights.len() / 20).max(MIN_GROUND_POINTS);
         lowest_crowded_height(heights, params.floor_margin, min_count)
     });
+    // The crowd is the floor itself (not only a height nothing is below) when two scans at
+    // different elevations put points there: one scan's line along a wall is a crowd of one.
+    let ground_floor_z = floor_z.or_else(|| {
+        let z0 = ground_z?;
+        let mut per_row = vec![0usize; grid.rows()];
+        for (i, g) in grid.points.iter().enumerate() {
+            if let Some(g) = g {
+                let z = level(&g.p).z;
+                if z >= z0 - params.floor_margin && z <= z0 + params.floor_margin {
+                    per_row[i / grid.cols] += 1;
+                }
+            }
+        }
+        let rows = per_row.iter().filter(|&&k| k >= MIN_ROW_CROWD).count();
+        (rows >= 2).then_some(z0)
+    });
     let mut is_wall = vec![false; n];
     let mut blocked = vec![false; n];
     let mut flat_points: Vec<Option<Vector2<f64>>> = vec![None; n];
@@ -239,11 +259,15 @@ fn kept_rays(
         let lp = level(&g.p);
         flat_points[c] = Some(lp.xy());
         let dz_noise = 3.0 * sigma * (level_from_robot * g.dir).z.abs();
-        let near =
-            |h: Option<f64>| h.is_some_and(|h| (lp.z - h).abs() < params.floor_margin + dz_noise);
+        let near_within =
+            |h: Option<f64>, margin: f64| h.is_some_and(|h| (lp.z - h).abs() < margin + dz_noise);
+        let near = |h: Option<f64>| near_within(h, params.floor_margin);
+        // Without floor patches, only the floor's own hits: a crowd's height is exact to the
+        // noise, and a wider band would take the foot of every wall with it.
+        let on_ground = floor_z.is_none() && near_within(ground_floor_z, GROUND_BAND);
         let label = est.labels.get(i).copied().unwrap_or(UNLABELLED);
         let on_flat = label != UNLABELLED && est.patches[label as usize].kind != SurfaceKind::Wall;
-        if near(floor_z) || near(ceiling_z) || on_flat {
+        if near(floor_z) || on_ground || near(ceiling_z) || on_flat {
             blocked[c] = true;
             continue;
         }
