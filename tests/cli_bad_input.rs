@@ -49,7 +49,7 @@ const GOOD: &str =
     r#"{"sequence": 0, "nrays": 3, "elevation": 0, "theta": [-1, 0, 1], "readings": [1, 2, 3]}"#;
 
 /// Scan files whose third line is bad, and what the message must say after `FILE:3: `.
-const BAD_SCAN_LINES: [(&str, &str, &str); 7] = [
+const BAD_SCAN_LINES: [(&str, &str, &str); 9] = [
     (
         "malformed",
         r#"{"sequence": 1, "nrays": 3, "theta": [-1, 0, 1], "readings": [1, 2, 3]"#,
@@ -79,6 +79,16 @@ const BAD_SCAN_LINES: [(&str, &str, &str); 7] = [
         "valid_not_01",
         r#"{"sequence": 1, "nrays": 3, "theta": [-1, 0, 1], "readings": [1, 2, 3], "valid": [1, 1, 7]}"#,
         "valid[2]: must be 0 or 1, not 7",
+    ),
+    (
+        "hit_length",
+        r#"{"sequence": 1, "nrays": 3, "theta": [-1, 0, 1], "readings": [1, 2, 3], "hit": [1, 1]}"#,
+        "hit has 2 entries but nrays is 3",
+    ),
+    (
+        "hit_code",
+        r#"{"sequence": 1, "nrays": 3, "theta": [-1, 0, 1], "readings": [1, 2, 3], "hit": [1, 9, 1]}"#,
+        "hit[1]: must be 0, 1, 2 or 3, not 9",
     ),
     (
         "not_json",

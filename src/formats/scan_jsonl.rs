@@ -275,6 +275,8 @@ struct RawScan {
     readings_sigma: Option<Vec<Option<f64>>>,
     hinge_offset: Option<[f64; 3]>,
     hit: Option<Vec<Hit>>,
+    /// Entries of a `hit` that was checked but not kept.
+    hit_len: Option<usize>,
     extra: serde_json::Map<String, serde_json::Value>,
 }
 
@@ -319,8 +321,8 @@ impl RawScan {
         if let Some(s) = &self.readings_sigma {
             check_len("readings_sigma", s.len())?;
         }
-        if let Some(h) = &self.hit {
-            check_len("hit", h.len())?;
+        if let Some(n) = self.hit.as_ref().map(Vec::len).or(self.hit_len) {
+            check_len("hit", n)?;
         }
         Ok(Scan {
             sequence: self.sequence,
@@ -464,9 +466,7 @@ impl<'de> Visitor<'de> for RawScanVisitor {
                         .get()
                 }
                 "valid" => raw.valid = map.next_value::<Opt<Array<Flag>>>().map_err(wrap)?.get(),
-                "hit" if self.skip_hit => {
-                    map.next_value::<de::IgnoredAny>().map_err(wrap)?;
-                }
+                "hit" if self.skip_hit => raw.hit_len = map.next_value::<HitLen>().map_err(wrap)?.0,
                 "hit" => raw.hit = map.next_value::<Opt<Array<HitCode>>>().map_err(wrap)?.get(),
                 "odometry" => raw.odometry = map.next_value::<PoseField>().map_err(wrap)?.0,
                 "estimate" => raw.estimate = map.next_value::<PoseField>().map_err(wrap)?.0,
@@ -674,6 +674,42 @@ impl<'de> Deserialize<'de> for HitCode {
         Hit::from_code(code)
             .map(HitCode)
             .ok_or_else(|| de::Error::custom(format!("must be 0, 1, 2 or 3, not {code}")))
+    }
+}
+
+/// A `hit` array checked entry by entry (as [`HitCode`]s) and counted, but not kept: `level`
+/// never reads the labels, yet a bad one is still bad input.
+struct HitLen(Option<usize>);
+
+impl<'de> Deserialize<'de> for HitLen {
+    fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        struct V;
+        impl<'de> Visitor<'de> for V {
+            type Value = HitLen;
+            fn expecting(&self, f: &mut fmt::Formatter) -> fmt::Result {
+                f.write_str("an array or null")
+            }
+            fn visit_unit<E: de::Error>(self) -> Result<HitLen, E> {
+                Ok(HitLen(None))
+            }
+            fn visit_none<E: de::Error>(self) -> Result<HitLen, E> {
+                Ok(HitLen(None))
+            }
+            fn visit_some<D: Deserializer<'de>>(self, d: D) -> Result<HitLen, D::Error> {
+                d.deserialize_seq(V)
+            }
+            fn visit_seq<A: SeqAccess<'de>>(self, mut seq: A) -> Result<HitLen, A::Error> {
+                let mut n = 0;
+                loop {
+                    match seq.next_element::<HitCode>() {
+                        Ok(Some(_)) => n += 1,
+                        Ok(None) => return Ok(HitLen(Some(n))),
+                        Err(e) => return Err(in_field(&format!("[{n}]"), e)),
+                    }
+                }
+            }
+        }
+        d.deserialize_option(V)
     }
 }
 
