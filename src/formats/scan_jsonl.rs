@@ -1324,17 +1324,28 @@ mod tests {
         }
     }
 
-    /// `level`'s reader skips `hit` (never read by `level`), and reads everything else as
-    /// the plain parser does; a duplicate `hit` is still an error.
+    /// `level`'s reader checks and counts `hit` but does not keep it (never read by `level`),
+    /// and reads everything else as the plain parser does; bad labels are still errors.
     #[test]
     fn skipping_hit_leaves_the_rest_alone() {
-        let line = r#"{"sequence": 4, "elevation": 0.1, "theta": [0, 1], "readings": [2, null], "hit": [1, 9], "extra": [1]}"#;
-        assert!(err(line).contains("hit[1]"), "{}", err(line));
+        let line = r#"{"sequence": 4, "elevation": 0.1, "theta": [0, 1], "readings": [2, null], "hit": [1, 0], "extra": [1]}"#;
         let skipped = parse_scan_line_with(line, true).unwrap();
-        let mut plain = parse(&line.replace(r#""hit": [1, 9], "#, ""));
+        let mut plain = parse(&line.replace(r#""hit": [1, 0], "#, ""));
         assert_eq!(skipped, plain);
         plain.hit = Some(vec![Hit::Wall, Hit::Nothing]);
         assert_ne!(skipped, plain);
+        let bad_code = line.replace("[1, 0]", "[1, 9]");
+        assert!(
+            parse_scan_line_with(&bad_code, true)
+                .unwrap_err()
+                .contains("hit[1]")
+        );
+        let short = line.replace("[1, 0]", "[1]");
+        assert!(
+            parse_scan_line_with(&short, true)
+                .unwrap_err()
+                .contains("hit has 1 entries but nrays is 2")
+        );
         let twice = r#"{"theta": [0], "readings": [2], "hit": [1], "hit": [1]}"#;
         assert!(
             parse_scan_line_with(twice, true)
