@@ -18,40 +18,48 @@ fn main() {
 const SIDE: f64 = 60.0;
 const RAYS: usize = 1000;
 
-/// The four walls of the box plus `n - 4` random segments 0.2-1.0 m long inside it.
-fn box_with_clutter(n: usize) -> World {
-    let mut rng = ChaCha8Rng::seed_from_u64(1);
-    let c = |x: f64, y: f64| Point2::new(x, y);
-    let mut segments = vec![
-        Segment {
-            a: c(0.0, 0.0),
-            b: c(SIDE, 0.0),
-        },
-        Segment {
-            a: c(SIDE, 0.0),
-            b: c(SIDE, SIDE),
-        },
-        Segment {
-            a: c(SIDE, SIDE),
-            b: c(0.0, SIDE),
-        },
-        Segment {
-            a: c(0.0, SIDE),
-            b: c(0.0, 0.0),
-        },
-    ];
+/// The four walls of the square `[0, side]^2`.
+fn square(side: f64) -> Vec<Segment> {
+    let c = [[0.0, 0.0], [side, 0.0], [side, side], [0.0, side]].map(|[x, y]| Point2::new(x, y));
+    (0..4)
+        .map(|i| Segment {
+            a: c[i],
+            b: c[(i + 1) % 4],
+        })
+        .collect()
+}
+
+/// Adds random pieces inside the square `[inset, side - inset]^2` until there are `n`
+/// segments, each of the length `length` draws.
+fn add_clutter(
+    segments: &mut Vec<Segment>,
+    n: usize,
+    rng: &mut ChaCha8Rng,
+    inset: f64,
+    side: f64,
+    length: impl Fn(&mut ChaCha8Rng) -> f64,
+) {
     while segments.len() < n {
-        let a = c(
-            rng.random_range(1.0..SIDE - 1.0),
-            rng.random_range(1.0..SIDE - 1.0),
+        let a = Point2::new(
+            rng.random_range(inset..side - inset),
+            rng.random_range(inset..side - inset),
         );
         let t = rng.random_range(0.0..std::f64::consts::TAU);
-        let l = rng.random_range(0.2..1.0);
+        let l = length(rng);
         segments.push(Segment {
             a,
             b: a + nalgebra::Vector2::new(t.cos(), t.sin()) * l,
         });
     }
+}
+
+/// The four walls of the box plus `n - 4` random segments 0.2-1.0 m long inside it.
+fn box_with_clutter(n: usize) -> World {
+    let mut rng = ChaCha8Rng::seed_from_u64(1);
+    let mut segments = square(SIDE);
+    add_clutter(&mut segments, n, &mut rng, 1.0, SIDE, |r| {
+        r.random_range(0.2..1.0)
+    });
     World::from_segments(segments, 3.0, false)
 }
 
@@ -115,36 +123,8 @@ const ROOM: f64 = 6.0;
 /// pieces), side by side: the same local scene in a plan 1 or 100 times as large.
 fn tiled_rooms(tiles: usize) -> World {
     let mut rng = ChaCha8Rng::seed_from_u64(4);
-    let c = |x: f64, y: f64| Point2::new(x, y);
-    let mut room = vec![
-        Segment {
-            a: c(0.0, 0.0),
-            b: c(ROOM, 0.0),
-        },
-        Segment {
-            a: c(ROOM, 0.0),
-            b: c(ROOM, ROOM),
-        },
-        Segment {
-            a: c(ROOM, ROOM),
-            b: c(0.0, ROOM),
-        },
-        Segment {
-            a: c(0.0, ROOM),
-            b: c(0.0, 0.0),
-        },
-    ];
-    while room.len() < 100 {
-        let a = c(
-            rng.random_range(0.5..ROOM - 0.5),
-            rng.random_range(0.5..ROOM - 0.5),
-        );
-        let t = rng.random_range(0.0..std::f64::consts::TAU);
-        room.push(Segment {
-            a,
-            b: a + nalgebra::Vector2::new(t.cos(), t.sin()) * 0.3,
-        });
-    }
+    let mut room = square(ROOM);
+    add_clutter(&mut room, 100, &mut rng, 0.5, ROOM, |_| 0.3);
     let mut segments = Vec::new();
     for i in 0..tiles {
         for j in 0..tiles {

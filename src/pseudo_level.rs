@@ -17,7 +17,8 @@
 //! Then gaps of at most `max_gap` rays between kept points are filled, for rays with a return.
 
 use crate::geometry::{Pose, rot_y};
-use crate::level::patches::UNLABELLED;
+use crate::level::grid::PoseGrid;
+use crate::level::patches::{UNLABELLED, level_height};
 use crate::level::{LevelEstimate, SurfaceKind};
 use crate::scan::Scan;
 use nalgebra::{Matrix3, Point3, Vector2, Vector3};
@@ -177,6 +178,39 @@ fn crowd_in_sorted(
     (complete || end < sorted.len()).then(|| Some(sorted[(i + end) / 2]))
 }
 
+/// Where no floor patch gives the floor's height: the lowest crowd of leveled points (a
+/// height nothing lies below), and that same height when it is the floor itself, i.e. when two
+/// scans at different elevations put points there (one scan's line along a wall is a crowd of
+/// one).
+fn ground_crowd(
+    grid: &PoseGrid,
+    level_from_robot: &Matrix3<f64>,
+    margin: f64,
+) -> (Option<f64>, Option<f64>) {
+    let heights: Vec<(f64, usize)> = grid
+        .points
+        .iter()
+        .enumerate()
+        .filter_map(|(i, g)| {
+            g.as_ref()
+                .map(|g| ((level_from_robot * g.p.coords).z, i / grid.cols))
+        })
+        .collect();
+    let min_count = (heights.len() / 20).max(MIN_GROUND_POINTS);
+    let Some(z0) = lowest_crowded_height(heights.iter().map(|h| h.0).collect(), margin, min_count)
+    else {
+        return (None, None);
+    };
+    let mut per_row = vec![0usize; grid.rows()];
+    for &(z, row) in &heights {
+        if z >= z0 - margin && z <= z0 + margin {
+            per_row[row] += 1;
+        }
+    }
+    let rows = per_row.iter().filter(|&&k| k >= MIN_ROW_CROWD).count();
+    (Some(z0), (rows >= 2).then_some(z0))
+}
+
 /// Slack on how far a filled gap point may stray from its wall neighbours [m].
 const GAP_SLACK: f64 = 0.05;
 
@@ -203,50 +237,14 @@ fn kept_rays(
     let sigma = est.range_sigma;
     let level = |p: &Point3<f64>| level_from_robot * p.coords;
     // Floor and ceiling heights in the level frame, from their patches (median of members).
-    let height_of = |kind: SurfaceKind| -> Option<f64> {
-        let mut z: Vec<f64> = est
-            .patches
-            .iter()
-            .filter(|p| p.kind == kind)
-            .flat_map(|p| p.members.iter())
-            .filter_map(|&i| grid.points[i].as_ref().map(|g| level(&g.p).z))
-            .collect();
-        if z.is_empty() {
-            return None;
-        }
-        let mid = z.len() / 2;
-        let (_, m, _) = z.select_nth_unstable_by(mid, f64::total_cmp);
-        Some(*m)
-    };
+    let height_of = |kind| level_height(grid, &est.patches, kind, level_from_robot, 1);
     let floor_z = height_of(SurfaceKind::Floor);
     let ceiling_z = height_of(SurfaceKind::Ceiling);
     let attitude_sigma = est.sigmas.map_or(0.0, |s| s[0].max(s[1]));
-    let ground_z = floor_z.or_else(|| {
-        let heights: Vec<f64> = grid
-            .points
-            .iter()
-            .flatten()
-            .map(|g| level(&g.p).z)
-            .collect();
-        let min_count = (heights.len() / 20).max(MIN_GROUND_POINTS);
-        lowest_crowded_height(heights, params.floor_margin, min_count)
-    });
-    // The crowd is the floor itself (not only a height nothing is below) when two scans at
-    // different elevations put points there: one scan's line along a wall is a crowd of one.
-    let ground_floor_z = floor_z.or_else(|| {
-        let z0 = ground_z?;
-        let mut per_row = vec![0usize; grid.rows()];
-        for (i, g) in grid.points.iter().enumerate() {
-            if let Some(g) = g {
-                let z = level(&g.p).z;
-                if z >= z0 - params.floor_margin && z <= z0 + params.floor_margin {
-                    per_row[i / grid.cols] += 1;
-                }
-            }
-        }
-        let rows = per_row.iter().filter(|&&k| k >= MIN_ROW_CROWD).count();
-        (rows >= 2).then_some(z0)
-    });
+    let (ground_z, ground_floor_z) = match floor_z {
+        Some(f) => (Some(f), Some(f)),
+        None => ground_crowd(grid, level_from_robot, params.floor_margin),
+    };
     let mut is_wall = vec![false; n];
     let mut blocked = vec![false; n];
     let mut flat_points: Vec<Option<Vector2<f64>>> = vec![None; n];

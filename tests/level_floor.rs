@@ -120,13 +120,7 @@ fn a_far_wall_only_the_top_scan_reaches_is_kept() {
     // Pitched 5 degrees towards the floor: the top scan is level and meets the wall 10 m ahead;
     // the lower two meet the floor 5 and 2.6 m ahead. The side walls and a pillar 2 m ahead
     // level the pose.
-    let mut room = Room::box_room(12.0, 6.0);
-    room.segments.extend([
-        ([4.0, 4.0], [4.0, 4.6]),
-        ([4.0, 4.6], [4.6, 4.6]),
-        ([4.6, 4.6], [4.6, 4.0]),
-        ([4.6, 4.0], [4.0, 4.0]),
-    ]);
+    let room = Room::box_room(12.0, 6.0).with_box([4.0, 4.0], [4.6, 4.6]);
     let pose = Pose::new(2.0, 3.0, 0.45, 0.0, deg(5.0), deg(0.0));
     let scans = scans_at(&room, &pose, &elevations(3, 5.0), 0.01, 4, 0);
     let e = level_pose(&scans, &LevelParams::default());
@@ -160,13 +154,7 @@ fn floor_hits_at_a_walls_foot_are_not_kept_when_two_scans_see_the_floor() {
     // the middle one the floor 0.16 m before it (right under the wall's points), the lowest
     // the floor at 2.2 m. Those floor hits look vertical against the wall points above them.
     // A pillar ahead on the right pins the pitch.
-    let mut room = Room::box_room(6.0, 5.2);
-    room.segments.extend([
-        ([2.4, 2.6], [2.8, 2.6]),
-        ([2.8, 2.6], [2.8, 3.0]),
-        ([2.8, 3.0], [2.4, 3.0]),
-        ([2.4, 3.0], [2.4, 2.6]),
-    ]);
+    let room = Room::box_room(6.0, 5.2).with_box([2.4, 2.6], [2.8, 3.0]);
     let pose = Pose::new(1.2, 1.2, 0.45, deg(86.1), deg(6.7), 0.0);
     for seed in 0..5 {
         let scans = scans_at(&room, &pose, &elevations(3, 5.0), 0.01, seed, 0);

@@ -261,9 +261,8 @@ fn attitude_from_up_matches_truth_sign_conventions() {
 /// floor: the lowest scan meets the floor at the box's foot, at nearly the box's range, and the
 /// box is the only thing that pins the pitch (the side walls are parallel).
 fn room_with_a_box_at_the_floor_line() -> (Room, Pose) {
-    let mut room = Room::polygon(&[[0.0, 0.0], [7.0, 0.0], [7.0, 5.0], [0.0, 5.0]], 2.4, true);
-    let b = [[3.3, 2.3], [3.7, 2.3], [3.7, 2.7], [3.3, 2.7]];
-    room.segments.extend((0..4).map(|i| (b[i], b[(i + 1) % 4])));
+    let room = Room::polygon(&[[0.0, 0.0], [7.0, 0.0], [7.0, 5.0], [0.0, 5.0]], 2.4, true)
+        .with_box([3.3, 2.3], [3.7, 2.7]);
     let pose = Pose::new(1.0, 1.0, 0.45, deg(-2.717), deg(6.732), 0.0);
     (room, pose)
 }

@@ -599,19 +599,30 @@ impl<'de, T: Deserialize<'de>> Deserialize<'de> for Array<T> {
             fn expecting(&self, f: &mut fmt::Formatter) -> fmt::Result {
                 f.write_str("an array")
             }
-            fn visit_seq<A: SeqAccess<'de>>(self, mut seq: A) -> Result<Vec<T>, A::Error> {
+            fn visit_seq<A: SeqAccess<'de>>(self, seq: A) -> Result<Vec<T>, A::Error> {
                 let mut out = Vec::with_capacity(seq.size_hint().unwrap_or(256).min(1 << 16));
-                loop {
-                    let i = out.len();
-                    match seq.next_element::<T>() {
-                        Ok(Some(v)) => out.push(v),
-                        Ok(None) => return Ok(out),
-                        Err(e) => return Err(in_field(&format!("[{i}]"), e)),
-                    }
-                }
+                each_element(seq, |v| out.push(v))?;
+                Ok(out)
             }
         }
         d.deserialize_seq(V(std::marker::PhantomData)).map(Array)
+    }
+}
+
+/// Reads every element of a JSON array as a `T`, handing each to `f`; an element's error
+/// names its index (`[i]: ...`).
+fn each_element<'de, A: SeqAccess<'de>, T: Deserialize<'de>>(
+    mut seq: A,
+    mut f: impl FnMut(T),
+) -> Result<(), A::Error> {
+    let mut i = 0;
+    loop {
+        match seq.next_element::<T>() {
+            Ok(Some(v)) => f(v),
+            Ok(None) => return Ok(()),
+            Err(e) => return Err(in_field(&format!("[{i}]"), e)),
+        }
+        i += 1;
     }
 }
 
@@ -698,15 +709,10 @@ impl<'de> Deserialize<'de> for HitLen {
             fn visit_some<D: Deserializer<'de>>(self, d: D) -> Result<HitLen, D::Error> {
                 d.deserialize_seq(V)
             }
-            fn visit_seq<A: SeqAccess<'de>>(self, mut seq: A) -> Result<HitLen, A::Error> {
+            fn visit_seq<A: SeqAccess<'de>>(self, seq: A) -> Result<HitLen, A::Error> {
                 let mut n = 0;
-                loop {
-                    match seq.next_element::<HitCode>() {
-                        Ok(Some(_)) => n += 1,
-                        Ok(None) => return Ok(HitLen(Some(n))),
-                        Err(e) => return Err(in_field(&format!("[{n}]"), e)),
-                    }
-                }
+                each_element(seq, |_: HitCode| n += 1)?;
+                Ok(HitLen(Some(n)))
             }
         }
         d.deserialize_option(V)

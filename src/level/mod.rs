@@ -577,20 +577,9 @@ fn flat_points(
     params: &LevelParams,
 ) -> Option<Vec<bool>> {
     let level_from_robot = att.level_from_robot();
-    let height = |kind: SurfaceKind| -> Option<f64> {
-        let mut z: Vec<f64> = patches
-            .iter()
-            .filter(|p| p.kind == kind)
-            .flat_map(|p| p.members.iter())
-            .filter_map(|&i| grid.points[i].as_ref())
-            .map(|g| (level_from_robot * g.p).z)
-            .collect();
-        if z.len() < params.min_patch_points {
-            return None;
-        }
-        let mid = z.len() / 2;
-        let (_, m, _) = z.select_nth_unstable_by(mid, f64::total_cmp);
-        Some(*m)
+    let matrix = *level_from_robot.matrix();
+    let height = |kind: SurfaceKind| {
+        patches::level_height(grid, patches, kind, &matrix, params.min_patch_points)
     };
     // Without a floor patch (the walls may have swallowed it), the floor is the lowest
     // points seen: the 2nd percentile of the leveled heights. If no floor is in view, this

@@ -6,6 +6,7 @@
 use super::grid::{GridPoint, PlaneAccumulator, PlaneFit, PoseGrid};
 use super::polygons::{Polygon, classify, extract_quads_sized};
 use super::{LevelParams, SurfaceKind};
+use nalgebra::Matrix3;
 use std::collections::VecDeque;
 
 /// One grown planar patch.
@@ -17,6 +18,30 @@ pub struct Patch {
     pub members: Vec<usize>,
     /// Lowest and highest row it reaches.
     pub row_range: (usize, usize),
+}
+
+/// The height in the level frame (`level_from_robot` applied) of the patches of `kind`: the
+/// median over all their points, or `None` with fewer than `min_points` of them.
+pub fn level_height(
+    grid: &PoseGrid,
+    patches: &[Patch],
+    kind: SurfaceKind,
+    level_from_robot: &Matrix3<f64>,
+    min_points: usize,
+) -> Option<f64> {
+    let mut z: Vec<f64> = patches
+        .iter()
+        .filter(|p| p.kind == kind)
+        .flat_map(|p| p.members.iter())
+        .filter_map(|&i| grid.points[i].as_ref())
+        .map(|g| (level_from_robot * g.p.coords).z)
+        .collect();
+    if z.len() < min_points.max(1) {
+        return None;
+    }
+    let mid = z.len() / 2;
+    let (_, m, _) = z.select_nth_unstable_by(mid, f64::total_cmp);
+    Some(*m)
 }
 
 /// Seed width [columns]: the paper's quad width, or wider where the range noise would leave a

@@ -154,55 +154,86 @@ mod tests {
     use nalgebra::Point2;
     use rand::SeedableRng;
 
-    fn big_room() -> World {
-        let p = |x: f64, y: f64| Point2::new(x, y);
+    /// Closed polygons of walls 3 m high, no ceiling.
+    fn walled(polygons: &[&[[f64; 2]]]) -> World {
+        let closed = |poly: &[[f64; 2]]| -> Vec<Point2<f64>> {
+            poly.iter()
+                .chain(poly.first())
+                .map(|&[x, y]| Point2::new(x, y))
+                .collect()
+        };
         World::from_plan(&Plan {
             wall_height: 3.0,
-            walls: vec![vec![
-                p(0.0, 0.0),
-                p(12.0, 0.0),
-                p(12.0, 12.0),
-                p(0.0, 12.0),
-                p(0.0, 0.0),
-            ]],
+            walls: polygons.iter().map(|poly| closed(poly)).collect(),
             ceiling: false,
             poses: vec![],
         })
     }
 
-    #[test]
-    fn a_robot_pitched_at_the_floor_retakes_looking_up_and_levels() {
-        let world = big_room();
-        let pose = Pose::new(6.0, 6.0, 0.45, 0.3, 25f64.to_radians(), 3f64.to_radians());
-        let e = elevations_centred(3, 5f64.to_radians());
+    fn big_room() -> World {
+        walled(&[&[[0.0, 0.0], [12.0, 0.0], [12.0, 12.0], [0.0, 12.0]]])
+    }
+
+    /// Three scans 5 degrees apart centred on level, as the robot takes them first.
+    fn elevations() -> Vec<f64> {
+        elevations_centred(3, 5f64.to_radians())
+    }
+
+    /// One set of scans at `pose`, and the scans cleverRobot takes there with `level`, both
+    /// from the same seed (so its first set is the plain one).
+    fn plain_and_adaptive(
+        world: &World,
+        sequence: u64,
+        pose: &Pose,
+        seed: u64,
+        level: LevelParams,
+    ) -> (Vec<Scan>, Vec<Scan>) {
         let scanner = ScannerParams::default();
-        let mut rng = rand::rngs::ChaCha8Rng::seed_from_u64(3);
-        let plain = simulate_pose(&world, 4, &pose, &e, &scanner, &mut rng);
-        let first = level_pose(&plain, &LevelParams::default());
-        assert_eq!(first.facing(), Some(FailReason::FacingFloor));
-        let mut rng = rand::rngs::ChaCha8Rng::seed_from_u64(3);
-        let scans = simulate_pose_adaptive(
-            &world,
-            4,
-            &pose,
-            &e,
+        let mut rng = rand::rngs::ChaCha8Rng::seed_from_u64(seed);
+        let plain = simulate_pose(world, sequence, pose, &elevations(), &scanner, &mut rng);
+        let mut rng = rand::rngs::ChaCha8Rng::seed_from_u64(seed);
+        let params = AdaptiveParams {
+            level,
+            ..AdaptiveParams::default()
+        };
+        let adaptive = simulate_pose_adaptive(
+            world,
+            sequence,
+            pose,
+            &elevations(),
             &scanner,
-            &AdaptiveParams::default(),
+            &params,
             &mut rng,
         );
+        (plain, adaptive)
+    }
+
+    /// The attitude error of leveling `scans` [deg]; the pose must level.
+    fn leveled_error_deg(scans: &[Scan], pose: &Pose) -> f64 {
+        let est = level_pose(scans, &LevelParams::default());
+        assert!(est.is_ok(), "{:?}", est.failure);
+        est.attitude
+            .unwrap()
+            .max_abs_error(&pose.attitude())
+            .to_degrees()
+    }
+
+    #[test]
+    fn a_robot_pitched_at_the_floor_retakes_looking_up_and_levels() {
+        let pose = Pose::new(6.0, 6.0, 0.45, 0.3, 25f64.to_radians(), 3f64.to_radians());
+        let (plain, scans) = plain_and_adaptive(&big_room(), 4, &pose, 3, LevelParams::default());
+        let first = level_pose(&plain, &LevelParams::default());
+        assert_eq!(first.facing(), Some(FailReason::FacingFloor));
         assert!(scans.len() > 3, "no retake");
         assert!(scans.iter().all(|s| s.sequence == Some(4)));
         let last = &scans[scans.len() - 1];
-        assert!(last.elevation.unwrap() < e[0], "the retake looks up");
+        assert!(
+            last.elevation.unwrap() < elevations()[0],
+            "the retake looks up"
+        );
         assert!(last.extra["adaptive"]["attempt"].as_u64().unwrap() >= 1);
         assert!(last.extra["adaptive"]["shift"].as_f64().unwrap() < 0.0);
-        let est = level_pose(&scans, &LevelParams::default());
-        assert!(est.is_ok(), "{:?}", est.failure);
-        let err = est
-            .attitude
-            .unwrap()
-            .max_abs_error(&pose.attitude())
-            .to_degrees();
+        let err = leveled_error_deg(&scans, &pose);
         assert!(err < 1.0, "{err}");
     }
 
@@ -210,55 +241,24 @@ mod tests {
     fn a_robot_between_parallel_walls_retakes_until_it_sees_the_end_wall() {
         // A corridor 20 m long, pitched 8 degrees down: its first scans see the two side walls
         // (parallel) and meet the floor before the end wall 10 m ahead.
-        let p = |x: f64, y: f64| Point2::new(x, y);
-        let world = World::from_plan(&Plan {
-            wall_height: 3.0,
-            walls: vec![vec![
-                p(0.0, 0.0),
-                p(20.0, 0.0),
-                p(20.0, 3.0),
-                p(0.0, 3.0),
-                p(0.0, 0.0),
-            ]],
-            ceiling: false,
-            poses: vec![],
-        });
+        let world = walled(&[&[[0.0, 0.0], [20.0, 0.0], [20.0, 3.0], [0.0, 3.0]]]);
         let pose = Pose::new(10.0, 1.5, 0.45, 0.0, 8f64.to_radians(), 0.0);
-        let e = elevations_centred(3, 5f64.to_radians());
-        let scanner = ScannerParams::default();
-        let mut rng = rand::rngs::ChaCha8Rng::seed_from_u64(5);
-        let plain = simulate_pose(&world, 0, &pose, &e, &scanner, &mut rng);
         // Walls only, as the paper's cleverRobot: with the floor taken as level the floor
         // alone levels this pose and no retake is needed.
         let walls_only = LevelParams {
             level_surfaces: false,
             ..LevelParams::default()
         };
+        let (plain, scans) = plain_and_adaptive(&world, 0, &pose, 5, walls_only.clone());
         let first = level_pose(&plain, &walls_only);
         assert_eq!(first.failure, Some(FailReason::ParallelWalls));
         assert!(level_pose(&plain, &LevelParams::default()).is_ok());
-        let mut rng = rand::rngs::ChaCha8Rng::seed_from_u64(5);
-        let scans = simulate_pose_adaptive(
-            &world,
-            0,
-            &pose,
-            &e,
-            &scanner,
-            &AdaptiveParams {
-                level: walls_only,
-                ..AdaptiveParams::default()
-            },
-            &mut rng,
-        );
         assert!(scans.len() > 3, "no retake");
-        assert!(scans[3].elevation.unwrap() < e[0], "the retake looks up");
-        let est = level_pose(&scans, &LevelParams::default());
-        assert!(est.is_ok(), "{:?}", est.failure);
-        let err = est
-            .attitude
-            .unwrap()
-            .max_abs_error(&pose.attitude())
-            .to_degrees();
+        assert!(
+            scans[3].elevation.unwrap() < elevations()[0],
+            "the retake looks up"
+        );
+        let err = leveled_error_deg(&scans, &pose);
         assert!(err < 0.5, "{err}");
     }
 
@@ -266,67 +266,28 @@ mod tests {
     fn a_pose_leveled_from_few_of_its_points_is_retaken() {
         // 8 degrees towards the floor in a 12 m room: a pillar 1.5 m ahead levels the pose,
         // while most of every scan meets the floor or walls only one scan reaches.
-        let p = |x: f64, y: f64| Point2::new(x, y);
-        let world = World::from_plan(&Plan {
-            wall_height: 3.0,
-            walls: vec![
-                vec![
-                    p(0.0, 0.0),
-                    p(12.0, 0.0),
-                    p(12.0, 12.0),
-                    p(0.0, 12.0),
-                    p(0.0, 0.0),
-                ],
-                vec![
-                    p(7.3, 5.7),
-                    p(7.9, 6.0),
-                    p(7.6, 6.6),
-                    p(7.0, 6.3),
-                    p(7.3, 5.7),
-                ],
-            ],
-            ceiling: false,
-            poses: vec![],
-        });
+        let world = walled(&[
+            &[[0.0, 0.0], [12.0, 0.0], [12.0, 12.0], [0.0, 12.0]],
+            &[[7.3, 5.7], [7.9, 6.0], [7.6, 6.6], [7.0, 6.3]],
+        ]);
         let pose = Pose::new(6.0, 6.0, 0.45, 0.0, 8f64.to_radians(), 2f64.to_radians());
-        let e = elevations_centred(3, 5f64.to_radians());
-        let scanner = ScannerParams::default();
-        let mut rng = rand::rngs::ChaCha8Rng::seed_from_u64(2);
-        let plain = simulate_pose(&world, 0, &pose, &e, &scanner, &mut rng);
+        let (plain, scans) = plain_and_adaptive(&world, 0, &pose, 2, LevelParams::default());
         let first = level_pose(&plain, &LevelParams::default());
         assert!(first.is_ok(), "{:?}", first.failure);
         assert!(few_wall_points(&first));
-        let mut rng = rand::rngs::ChaCha8Rng::seed_from_u64(2);
-        let scans = simulate_pose_adaptive(
-            &world,
-            0,
-            &pose,
-            &e,
-            &scanner,
-            &AdaptiveParams::default(),
-            &mut rng,
-        );
         assert!(scans.len() > 3, "no retake");
-        assert!(scans[3].elevation.unwrap() < e[0], "the retake looks up");
+        assert!(
+            scans[3].elevation.unwrap() < elevations()[0],
+            "the retake looks up"
+        );
         let est = level_pose(&scans, &LevelParams::default());
         assert!(est.is_ok(), "{:?}", est.failure);
     }
 
     #[test]
     fn a_pose_that_levels_first_time_is_not_retaken() {
-        let world = big_room();
         let pose = Pose::new(3.0, 3.0, 0.45, 0.8, 0.05, -0.05);
-        let e = elevations_centred(3, 5f64.to_radians());
-        let mut rng = rand::rngs::ChaCha8Rng::seed_from_u64(1);
-        let scans = simulate_pose_adaptive(
-            &world,
-            0,
-            &pose,
-            &e,
-            &ScannerParams::default(),
-            &AdaptiveParams::default(),
-            &mut rng,
-        );
+        let (_, scans) = plain_and_adaptive(&big_room(), 0, &pose, 1, LevelParams::default());
         assert_eq!(scans.len(), 3);
         assert!(scans.iter().all(|s| s.extra["adaptive"]["attempt"] == 0));
     }

@@ -28,6 +28,14 @@ impl Room {
         }
     }
 
+    /// The room with an axis-aligned box (a pillar) from corner `lo` to corner `hi`.
+    #[allow(dead_code)] // not every test file places pillars
+    pub fn with_box(mut self, lo: [f64; 2], hi: [f64; 2]) -> Room {
+        let c = [lo, [hi[0], lo[1]], hi, [lo[0], hi[1]]];
+        self.segments.extend((0..4).map(|i| (c[i], c[(i + 1) % 4])));
+        self
+    }
+
     pub fn box_room(w: f64, d: f64) -> Room {
         Room::polygon(&[[0.0, 0.0], [w, 0.0], [w, d], [0.0, d]], 3.0, false)
     }
