@@ -151,12 +151,13 @@ fn lowest_crowded_height(mut heights: Vec<f64>, window: f64, min_count: usize) -
     if lowest < heights.len() {
         heights.select_nth_unstable_by(lowest, f64::total_cmp);
         let prefix = &mut heights[..lowest];
-        prefix.sort_by(f64::total_cmp);
+        // Values equal under total_cmp are the same bits: unstable is as good as stable.
+        prefix.sort_unstable_by(f64::total_cmp);
         if let Some(answer) = crowd_in_sorted(prefix, window, min_count, false) {
             return answer;
         }
     }
-    heights.sort_by(f64::total_cmp);
+    heights.sort_unstable_by(f64::total_cmp);
     crowd_in_sorted(&heights, window, min_count, true).flatten()
 }
 

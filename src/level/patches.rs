@@ -151,7 +151,8 @@ pub fn grow_patches(
             (rank, q.fit.residual_ss / q.fit.n as f64, i, q)
         })
         .collect();
-    seeds.sort_by(|a, b| a.0.cmp(&b.0).then(a.1.total_cmp(&b.1)).then(a.2.cmp(&b.2)));
+    // Keys are unique (the index breaks ties): an unstable sort gives the stable order.
+    seeds.sort_unstable_by(|a, b| a.0.cmp(&b.0).then(a.1.total_cmp(&b.1)).then(a.2.cmp(&b.2)));
     let seeds: Vec<&Polygon> = seeds.into_iter().map(|s| s.3).collect();
     let mut queue = VecDeque::new();
     let mut members = Vec::new();
@@ -230,7 +231,7 @@ pub fn grow_patches(
                 false
             }
         });
-        let made = make_patch(grid, &members, params, sigma);
+        let made = make_patch(grid, &members, kept, params, sigma);
         match made {
             Some(p) => patches.push(p),
             None => {
@@ -270,10 +271,12 @@ fn rows_span(members: &[usize], cols: usize) -> (usize, usize) {
 }
 
 /// A patch from members when it is big enough and spans at least two rows (one row is a
-/// line, which leaves its plane free to turn about it).
+/// line, which leaves its plane free to turn about it). `acc` holds the members' points,
+/// added in the members' order (the callers have just visited them).
 fn make_patch(
     grid: &PoseGrid,
     members: &[usize],
+    acc: PlaneAccumulator,
     params: &LevelParams,
     sigma: f64,
 ) -> Option<Patch> {
@@ -284,7 +287,7 @@ fn make_patch(
     if !stacked(members, grid, params) {
         return None;
     }
-    let fit = robust_fit(grid, members, params, sigma)?;
+    let fit = robust_fit(grid, members, acc, params, sigma)?;
     if too_bent_to_split(&fit, members.len(), params, sigma)
         || bent_across_rows(grid, members, &fit, params, sigma)
     {
@@ -384,16 +387,21 @@ fn release_and_make(
     tol: f64,
 ) -> Option<Patch> {
     let fit = accumulate(grid, members).fit(sigma)?;
+    let mut acc = PlaneAccumulator::default();
     let kept: Vec<usize> = members
         .iter()
         .copied()
         .filter(|&i| {
-            grid.points[i]
-                .as_ref()
-                .is_some_and(|g| fit.distance(&g.p).abs() <= tol)
+            grid.points[i].as_ref().is_some_and(|g| {
+                let near = fit.distance(&g.p).abs() <= tol;
+                if near {
+                    acc.add(g);
+                }
+                near
+            })
         })
         .collect();
-    make_patch(grid, &kept, params, sigma)
+    make_patch(grid, &kept, acc, params, sigma)
 }
 
 /// The patch's plane refitted with Cauchy weights on each point's residual over its own noise
@@ -402,6 +410,7 @@ fn release_and_make(
 fn robust_fit(
     grid: &PoseGrid,
     members: &[usize],
+    acc: PlaneAccumulator,
     params: &LevelParams,
     sigma: f64,
 ) -> Option<PlaneFit> {
@@ -409,7 +418,7 @@ fn robust_fit(
         .iter()
         .filter_map(|&i| grid.points[i].as_ref())
         .collect();
-    let mut fit = accumulate(grid, members).fit(sigma)?;
+    let mut fit = acc.fit(sigma)?;
     let s = sigma.max(params.min_sigma);
     let mut weights = vec![1.0; points.len()];
     if params.ray_weights {
@@ -495,10 +504,7 @@ fn ray_weighted_fit(
 /// sort by `(row or column, index)` would give: ascending grid index is row-major, and a
 /// stable counting sort of that by column is column-major (members are distinct).
 fn in_order(grid: &PoseGrid, members: &[usize], by_row: bool) -> Vec<usize> {
-    let mut ascending = members.to_vec();
-    if !ascending.is_sorted() {
-        ascending.sort_unstable();
-    }
+    let ascending = ascending(members);
     if by_row {
         return ascending;
     }
@@ -518,6 +524,31 @@ fn in_order(grid: &PoseGrid, members: &[usize], by_row: bool) -> Vec<usize> {
         *slot += 1;
     }
     out
+}
+
+/// Distinct grid indices in ascending order: marked in a bitmap over their range and read
+/// back, cheaper than a comparison sort for a patch's members (dense in their range).
+fn ascending(members: &[usize]) -> Vec<usize> {
+    let (Some(&lo), Some(&hi)) = (members.iter().min(), members.iter().max()) else {
+        return Vec::new();
+    };
+    if members.is_sorted() {
+        return members.to_vec();
+    }
+    if hi - lo > 16 * members.len() {
+        let mut v = members.to_vec();
+        v.sort_unstable();
+        return v;
+    }
+    let mut seen = vec![false; hi - lo + 1];
+    for &i in members {
+        seen[i - lo] = true;
+    }
+    seen.iter()
+        .enumerate()
+        .filter(|&(_, &s)| s)
+        .map(|(k, _)| lo + k)
+        .collect()
 }
 
 fn accumulate(grid: &PoseGrid, members: &[usize]) -> PlaneAccumulator {
@@ -652,8 +683,24 @@ pub fn split_members(
 mod tests {
     use super::*;
     use nalgebra::{Point3, Vector3};
+    use proptest::prelude::*;
     use rand::SeedableRng;
     use rand_distr::{Distribution, Normal};
+
+    proptest! {
+        /// The bitmap ordering gives what a sort gives, dense or sparse, sorted or not.
+        #[test]
+        fn ascending_is_a_sort_of_distinct_indices(
+            set in proptest::collection::btree_set(0usize..5000, 0..300),
+            seed in any::<u64>(),
+        ) {
+            let mut members: Vec<usize> = set.iter().copied().collect();
+            let mut rng = rand::rngs::ChaCha8Rng::seed_from_u64(seed);
+            rand::seq::SliceRandom::shuffle(&mut members[..], &mut rng);
+            let sorted: Vec<usize> = set.into_iter().collect();
+            prop_assert_eq!(ascending(&members), sorted);
+        }
+    }
 
     /// A wall met obliquely: the plane through (3, 0, 0) with normal `n`, seen by 3 scans of
     /// 61 rays from the origin, with Gaussian range noise `sigma`.
