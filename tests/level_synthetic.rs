@@ -294,3 +294,46 @@ fn a_wall_line_with_a_floor_line_at_its_foot_never_levels_a_pose_wrongly() {
     );
     assert_eq!(wrong, 0);
 }
+
+/// The office example's walls (examples/plans/office.wall), in the twin ray caster.
+fn office_room() -> Room {
+    let mut room = Room::polygon(
+        &[[0.0, 0.0], [10.0, 0.0], [10.0, 8.0], [0.0, 8.0]],
+        3.0,
+        false,
+    )
+    .with_box([4.6, 4.4], [5.0, 4.8])
+    .with_box([5.0, 1.8], [5.4, 2.2]);
+    room.segments.extend([
+        ([3.0, 0.0], [3.0, 3.0]),
+        ([0.0, 5.2], [2.4, 5.2]),
+        ([7.0, 8.0], [7.0, 5.5]),
+        ([6.2, 2.6], [8.6, 2.6]),
+    ]);
+    room
+}
+
+/// Rolled 19.6 degrees with its scans tilted down (elevations 0, 5 and 10 degrees), a robot
+/// sees the wall ahead-right only in its two upper scans, in different columns, and the floor
+/// below both in the third. Taken as one stacked "wall" (every column had two rows), that
+/// plane tilted 22 degrees decided the attitude against the one other wall: in the simulator
+/// 6 of 30 noise seeds were leveled 12-21 degrees off with sigmas near 1 degree, and here
+/// seed 1 was 20.4 degrees off. Only rows next to each other now stack.
+#[test]
+fn two_wall_lines_over_a_floor_line_never_level_a_pose_wrongly() {
+    let room = office_room();
+    let pose = Pose::new(5.638, 6.050, 0.45, 1.1520, -0.06199, 0.34266);
+    let down: Vec<f64> = [0.0, 5.0, 10.0].iter().map(|&e| deg(e)).collect();
+    let mut leveled = 0;
+    for seed in 0..30 {
+        let scans = scans_at(&room, &pose, &down, 0.01, seed, 0);
+        let est = level_pose(&scans, &LevelParams::default());
+        if let Some(a) = est.attitude {
+            leveled += 1;
+            let err = a.max_abs_error(&pose.attitude()).to_degrees();
+            assert!(err < 5.0, "seed {seed}: leveled {err:.1} deg off");
+        }
+    }
+    // The scene still levels sometimes: the test is not passed by failing every pose.
+    assert!(leveled > 0);
+}

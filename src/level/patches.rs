@@ -301,21 +301,24 @@ fn make_patch(
     })
 }
 
-/// Whether the members are stacked: at least `min_stacked_share` of them lie in columns where
-/// the patch holds two rows or more. On a wall the scans meet the same stretch one above the
-/// other; a floor line with a few wall points at one end of it (the floor at a wall's foot,
-/// at nearly the wall's range) is mostly single-row columns, and those few points decide its
-/// tilt: a steep "wall" off by degrees.
+/// Whether the members are stacked: at least `min_stacked_share` of them have a member in an
+/// adjacent row of their column (the scan next in elevation). On a wall the scans meet the
+/// same stretch one above the other. A floor line with a few wall points at one end of it (the
+/// floor at a wall's foot, at nearly the wall's range) is mostly single points in their
+/// columns, and those few points decide its tilt: a steep "wall" off by degrees. Rows that
+/// are not adjacent do not count: two wall lines over a floor line (the middle scan's beam
+/// meets the floor, or another surface, between them) once passed as stacked and tilted a
+/// pose's attitude by 20 degrees with a small sigma.
 fn stacked(members: &[usize], grid: &PoseGrid, params: &LevelParams) -> bool {
-    let mut rows_in_col = vec![0u8; grid.cols];
-    let rc = grid.row_col();
+    let n = grid.points.len();
+    let cols = grid.cols;
+    let mut member = vec![false; n];
     for &i in members {
-        let c = &mut rows_in_col[rc.col(i)];
-        *c = c.saturating_add(1);
+        member[i] = true;
     }
     let stacked = members
         .iter()
-        .filter(|&&i| rows_in_col[rc.col(i)] >= 2)
+        .filter(|&&i| (i >= cols && member[i - cols]) || (i + cols < n && member[i + cols]))
         .count();
     stacked as f64 >= params.min_stacked_share * members.len() as f64
 }
@@ -686,6 +689,33 @@ mod tests {
     use proptest::prelude::*;
     use rand::SeedableRng;
     use rand_distr::{Distribution, Normal};
+
+    /// Membership alone decides stacking: points with a member in the adjacent row of their
+    /// column stack; two rows that are not adjacent do not, even where both hold the column.
+    #[test]
+    fn only_adjacent_rows_stack() {
+        let (rows, cols) = (3, 20);
+        let grid = PoseGrid {
+            scan_index: (0..rows).collect(),
+            elevation: (0..rows).map(|r| r as f64 * 0.087).collect(),
+            cols,
+            points: vec![None; rows * cols],
+        };
+        let at = |r: usize, c: usize| r * cols + c;
+        let params = LevelParams::default();
+        let wall: Vec<usize> = (0..rows)
+            .flat_map(|r| (0..cols).map(move |c| at(r, c)))
+            .collect();
+        assert!(stacked(&wall, &grid, &params));
+        // Row 0 on the left, row 1 on the right, row 2 under both: every column holds two
+        // rows, but only the right half's rows 1 and 2 are neighbours.
+        let split: Vec<usize> = (0..10)
+            .map(|c| at(0, c))
+            .chain((10..20).map(|c| at(1, c)))
+            .chain((0..20).map(|c| at(2, c)))
+            .collect();
+        assert!(!stacked(&split, &grid, &params));
+    }
 
     proptest! {
         /// The bitmap ordering gives what a sort gives, dense or sparse, sorted or not.
