@@ -305,7 +305,7 @@ impl Default for LevelParams {
             refine_step_k: 1.0,
             refine_level_misfit: 1.5,
             refine_discover: true,
-            level_lines: false,
+            level_lines: true,
             level_line_plane: true,
             level_line_min_points: 10,
             level_line_misfit: 1.5,
@@ -562,12 +562,38 @@ pub fn refine_estimate(
     let sigma_eff = sigma.max(params.min_sigma);
     let start = match first {
         Ok(sol) => *sol,
-        Err(_) => up::up_robust(
-            &robust_obs(est, levels, params, sigma, false),
-            sigma_eff,
-            params.iterations,
-        )
-        .or_else(|| refine::level_start(grid, params, sigma))?,
+        Err(_) => {
+            let obs = robust_obs(est, levels, params, sigma, false);
+            let walls = up::up_robust(&obs, sigma_eff, params.iterations);
+            // Walls that cannot fix up alone (one wall split into patches leaves up free to
+            // turn about its normal), with the floor's or ceiling's lines: the start that
+            // claims the smaller uncertainty.
+            let with_lines = (params.level_lines && params.level_surfaces)
+                .then(|| refine::start_lines(grid, params, sigma))
+                .filter(|lines| !lines.is_empty())
+                .and_then(|lines| {
+                    let mut obs = obs.clone();
+                    obs.extend(
+                        lines
+                            .iter()
+                            .map(|l| up::PlaneObs::level_line(l, params.level_line_inflation)),
+                    );
+                    up::up_robust(&obs, sigma_eff, params.iterations)
+                });
+            let width = |s: &UpSolution| s.attitude_sigmas().iter().fold(0f64, |a, &b| a.max(b));
+            match (walls, with_lines) {
+                (Some(a), Some(b)) => {
+                    if width(&b) < width(&a) {
+                        b
+                    } else {
+                        a
+                    }
+                }
+                (a, b) => a
+                    .or(b)
+                    .or_else(|| refine::level_start(grid, params, sigma))?,
+            }
+        }
     };
     let walls: Vec<&Patch> = est
         .patches
@@ -591,18 +617,24 @@ fn refined_solution(
     let (_, refined) = refine_estimate(est, levels, first, params)?;
     let with_level =
         refined.models.iter().any(|m| m.kind != SurfaceKind::Wall) || !refined.lines.is_empty();
+    if refined.lines.is_empty() {
+        acceptable(&refined.solution, params, with_level).ok()?;
+        return Some(refined.solution);
+    }
     // A line pins up down across it only: the other direction rests on the walls that alone
-    // could not pass the gate, so it is held to a stricter one.
-    let gate = if refined.lines.is_empty() {
-        params.clone()
-    } else {
-        LevelParams {
-            max_sigma_deg: params.max_sigma_deg.min(params.level_line_max_sigma_deg),
-            ..params.clone()
-        }
+    // could not pass the gate, so it is held to a stricter one; failing that, the models
+    // without the lines are gated as usual.
+    let strict = LevelParams {
+        max_sigma_deg: params.max_sigma_deg.min(params.level_line_max_sigma_deg),
+        ..params.clone()
     };
-    acceptable(&refined.solution, &gate, with_level).ok()?;
-    Some(refined.solution)
+    if acceptable(&refined.solution, &strict, with_level).is_ok() {
+        return Some(refined.solution);
+    }
+    let without = refined.without_lines?;
+    let with_level = refined.models.iter().any(|m| m.kind != SurfaceKind::Wall);
+    acceptable(&without, params, with_level).ok()?;
+    Some(without)
 }
 
 /// Points at the height of the floor or ceiling patches once leveled with `att` (within

@@ -45,6 +45,9 @@ pub struct Refined {
     /// Lines on the floor or ceiling used where no level plane was found
     /// (`level_lines`).
     pub lines: Vec<LevelLine>,
+    /// With lines, up from the models alone (`None` without lines, or when the models alone
+    /// do not fix up).
+    pub without_lines: Option<UpSolution>,
 }
 
 /// A wall as a vertical plane in the level frame: `normal . (x, y) = offset`, with the height
@@ -348,6 +351,11 @@ pub fn refine(
                     .map(|l| PlaneObs::level_line(l, params.level_line_inflation)),
             )
             .collect();
+        let without_lines = if flat_lines.is_empty() {
+            None
+        } else {
+            up::up_robust(&obs[..models.len()], s, params.iterations)
+        };
         let sol = up::up_robust(&obs, s, params.iterations)?;
         let change = sol.up.angle(&up);
         up = sol.up;
@@ -362,6 +370,7 @@ pub fn refine(
             solution: sol,
             models,
             lines: flat_lines,
+            without_lines,
         });
         // Converged when up moved by a small fraction of its own uncertainty.
         if change < CONVERGED * sigma_up {
@@ -690,6 +699,27 @@ pub fn level_start(grid: &PoseGrid, params: &LevelParams, sigma: f64) -> Option<
         return None;
     }
     up::up_robust(&[PlaneObs::level(&fit, 1.0)], s, params.iterations)
+}
+
+/// Floor and ceiling lines found without a level frame, for a start where neither the walls
+/// nor a level plane fix up ([`level_start`]): in each scan, the points whose range steps to
+/// the adjacent scans like the floor's ([`level_sides`]) as one line, and likewise the
+/// ceiling's. Their height is not checked (no frame to check it in); the lines only start
+/// re-segmentation, which finds them again in its provisional level frame.
+pub fn start_lines(grid: &PoseGrid, params: &LevelParams, sigma: f64) -> Vec<LevelLine> {
+    let s = sigma.max(params.min_sigma);
+    let (floor, ceiling) = level_sides(grid, params.refine_step_k * std::f64::consts::SQRT_2 * s);
+    let cols = grid.cols;
+    let mut out = Vec::new();
+    for mask in [&floor, &ceiling] {
+        for r in 0..grid.rows() {
+            let idx: Vec<usize> = (r * cols..(r + 1) * cols).filter(|&i| mask[i]).collect();
+            if let Some((line, _)) = fit_line(grid, idx, &Vector3::z(), s, params) {
+                out.push(line);
+            }
+        }
+    }
+    out
 }
 
 /// Point triples tried by [`level_start`].
@@ -1195,6 +1225,108 @@ fn merge_lines(lines: &mut Vec<Line>, params: &LevelParams, s: f64) {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::level::grid::GridPoint;
+
+    /// A level robot's grid of three rows with the given noise-free points per row.
+    fn grid_of(rows: [Vec<Vector3<f64>>; 3]) -> PoseGrid {
+        let cols = rows.iter().map(Vec::len).max().unwrap_or(0);
+        let mut points = Vec::new();
+        for row in &rows {
+            for c in 0..cols {
+                points.push(row.get(c).map(|p| GridPoint {
+                    p: nalgebra::Point3::from(*p),
+                    dir: p.normalize(),
+                    range: p.norm(),
+                }));
+            }
+        }
+        PoseGrid {
+            scan_index: vec![0, 1, 2],
+            elevation: vec![-0.087, 0.0, 0.087],
+            cols,
+            points,
+        }
+    }
+
+    /// `n` points from `a` to `b`.
+    fn run(a: Vector3<f64>, b: Vector3<f64>, n: usize) -> Vec<Vector3<f64>> {
+        (0..n)
+            .map(|k| a + (b - a) * (k as f64 / (n - 1) as f64))
+            .collect()
+    }
+
+    fn floor_evidence(grid: &PoseGrid) -> LevelEvidence {
+        let lv = Leveled::new(grid, &Rotation3::identity());
+        let all = vec![true; grid.points.len()];
+        let none = vec![false; grid.points.len()];
+        let ctx = LineContext {
+            grid,
+            lv: &lv,
+            levelish: &all,
+            taken: &none,
+            up: &Vector3::z(),
+            s: 0.01,
+            sigma_up: 0.2f64.to_radians(),
+        };
+        level_lines(&ctx, SurfaceKind::Floor, &LevelParams::default())
+    }
+
+    #[test]
+    fn level_lines_take_the_floor_not_a_raised_box_top() {
+        // A box top 25 cm above the floor holds twice the floor's points; the floor is the
+        // lowest level surface.
+        let box_top = run(
+            Vector3::new(1.5, -0.4, -0.2),
+            Vector3::new(1.5, 0.4, -0.2),
+            40,
+        );
+        let floor = run(
+            Vector3::new(1.2, -1.0, -0.45),
+            Vector3::new(1.2, 1.0, -0.45),
+            20,
+        );
+        let grid = grid_of([Vec::new(), box_top, floor]);
+        let LevelEvidence::Lines(lines) = floor_evidence(&grid) else {
+            panic!("expected one floor line");
+        };
+        assert_eq!(lines.len(), 1);
+        assert_eq!(lines[0].n, 20);
+        assert!((lines[0].centroid.z + 0.45).abs() < 1e-9);
+        assert!(lines[0].dir.z.abs() < 1e-9);
+    }
+
+    #[test]
+    fn level_lines_refuse_a_wall_line_near_its_foot() {
+        // Two floor lines 0.8 m apart, and a wall's line 3 m ahead running up from 1.5 to
+        // 4.5 cm above the floor: at the floor's height within the tolerance, but not in the
+        // plane of the other two. Which line is wrong is not known, so none is used.
+        let wall = run(
+            Vector3::new(3.0, -1.0, -0.435),
+            Vector3::new(3.0, 1.0, -0.405),
+            30,
+        );
+        let near = run(
+            Vector3::new(1.2, -1.0, -0.45),
+            Vector3::new(1.2, 1.0, -0.45),
+            30,
+        );
+        let far = run(
+            Vector3::new(2.0, -1.0, -0.45),
+            Vector3::new(2.0, 1.0, -0.45),
+            30,
+        );
+        let grid = grid_of([wall.clone(), far.clone(), near.clone()]);
+        assert!(matches!(floor_evidence(&grid), LevelEvidence::None));
+        // Without the wall's line, the two floor lines are one level plane.
+        let grid = grid_of([Vec::new(), far, near]);
+        let LevelEvidence::Plane(fit, members) = floor_evidence(&grid) else {
+            panic!("expected the floor plane");
+        };
+        assert_eq!(members.len(), 60);
+        // (The fit removes range noise that these exact points do not have.)
+        assert!(fit.normal.z.abs() > 1.0 - 1e-6);
+        assert!((fit.centroid.z + 0.45).abs() < 1e-9);
+    }
 
     #[test]
     fn line2_fits_points_on_a_line_exactly() {
