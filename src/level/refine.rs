@@ -889,9 +889,7 @@ pub fn level_sides(grid: &PoseGrid, margin: f64) -> (Vec<bool>, Vec<bool>) {
         let (a, b) = (grid.points[i].as_ref()?, grid.points[j].as_ref()?);
         let de = grid.elevation[rc.row(j)] - grid.elevation[rc.row(i)];
         let change = (b.range - a.range) * de.signum() * a.dir.x.signum();
-        // Tilting the scan turns a ray by `de |cos(bearing)|`: rays to the side barely move.
-        let turn = de.abs() * a.dir.x.hypot(a.dir.z);
-        let bound = 0.5 * (a.range + b.range) * turn + margin;
+        let bound = 0.5 * (a.range + b.range) * de.abs() + margin;
         Some(if change < -bound {
             1
         } else if change > bound {
