@@ -351,12 +351,20 @@ pub fn refine(
                     .map(|l| PlaneObs::level_line(l, params.level_line_inflation)),
             )
             .collect();
-        let without_lines = if flat_lines.is_empty() {
+        let mut without_lines = if flat_lines.is_empty() {
             None
         } else {
             up::up_robust(&obs[..models.len()], s, params.iterations)
         };
-        let sol = up::up_robust(&obs, s, params.iterations)?;
+        let sol = match up::up_robust(&obs, s, params.iterations) {
+            Some(sol) => sol,
+            // Lines that leave no up within reach were wrong: the models stand alone.
+            None => {
+                let sol = without_lines.take()?;
+                flat_lines.clear();
+                sol
+            }
+        };
         let change = sol.up.angle(&up);
         up = sol.up;
         sigma_up = sol
