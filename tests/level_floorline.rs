@@ -1,8 +1,11 @@
 //! Floor lines as evidence of up (`LevelParams::level_lines`): at 10 cm range noise, floors
 //! seen by one scan (or by scans that do not overlap) level poses that walls alone cannot.
 
+mod common;
+
+use common::{Room, elevations, scans_at};
 use levelscan::geometry::Pose;
-use levelscan::level::{LevelParams, level_pose};
+use levelscan::level::{LevelParams, level_fits, level_pose};
 use levelscan::plan::Plan;
 use levelscan::scan::Scan;
 use levelscan::simulate::{
@@ -102,5 +105,56 @@ fn floor_lines_level_more_poses_at_10cm_and_none_wrong() {
             on.2,
             on.0
         );
+    }
+}
+
+/// A robot 4 degrees nose-down in a box room at 10 cm noise: only its lowest scan meets the
+/// floor, and the scan above it runs along the wall's foot. The floor line and that wall line
+/// are coplanar within the noise, and region growing joins them into one "floor" patch 11
+/// degrees off level, which passed the gate with sigmas under 1 degree.
+#[test]
+fn a_floor_line_and_a_wall_line_at_its_foot_are_no_floor() {
+    let room = Room::box_room(6.0, 5.0);
+    let pose = Pose::new(
+        2.3,
+        1.9,
+        0.45,
+        (-4f64).to_radians(),
+        4.2f64.to_radians(),
+        (-1.0f64).to_radians(),
+    );
+    let scans = scans_at(&room, &pose, &elevations(3, 5.0), 0.10, 134, 0);
+    let floor_rows = scans
+        .iter()
+        .filter(|s| {
+            s.hit
+                .as_ref()
+                .unwrap()
+                .contains(&levelscan::scan::Hit::Floor)
+        })
+        .count();
+    assert_eq!(floor_rows, 1, "the case needs the floor in one scan");
+    let up = pose.attitude().up_in_robot();
+    let tilt = |p: &LevelParams| {
+        let e = level_pose(&scans, p);
+        level_fits(&e, p)
+            .iter()
+            .map(|f| f.normal.dot(&up).abs().min(1.0).acos().to_degrees())
+            .fold(0f64, f64::max)
+    };
+    let without = LevelParams {
+        level_steep_veto: false,
+        ..LevelParams::default()
+    };
+    assert!(
+        tilt(&without) > 5.0,
+        "without the veto the case has no wrong floor"
+    );
+    assert!(tilt(&LevelParams::default()) < 2.0);
+    let e = level_pose(&scans, &LevelParams::default());
+    if let (Some(a), Some(s)) = (e.attitude, e.sigmas) {
+        let t = pose.attitude();
+        assert!((a.theta_x - t.theta_x).abs() <= 3.0 * s[0]);
+        assert!((a.theta_y - t.theta_y).abs() <= 3.0 * s[1]);
     }
 }
