@@ -71,6 +71,17 @@ fn level_one_pose_robust_without_refine(bencher: divan::Bencher, noise: f64) {
     bencher.bench(|| level_pose(divan::black_box(&scans), &params));
 }
 
+/// The robust estimator without floor and ceiling lines: the cost of `level_lines`.
+#[divan::bench(args = [0.01, 0.10])]
+fn level_one_pose_robust_without_floor_lines(bencher: divan::Bencher, noise: f64) {
+    let scans = pose_scans(noise);
+    let params = LevelParams {
+        level_lines: false,
+        ..LevelParams::default()
+    };
+    bencher.bench(|| level_pose(divan::black_box(&scans), &params));
+}
+
 #[divan::bench(args = [0.01, 0.10])]
 fn level_one_pose_paper(bencher: divan::Bencher, noise: f64) {
     let scans = pose_scans(noise);

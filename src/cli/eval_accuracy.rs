@@ -46,6 +46,11 @@ pub struct Args {
     /// For places where the visible floor itself slopes (long ramps, rubble).
     #[arg(long)]
     pub walls_only: bool,
+    /// Do not use each scan's floor (or ceiling) points as a line that must be level where
+    /// no floor plane is found (on by default: it levels poses that see the floor in one
+    /// scan only).
+    #[arg(long)]
+    pub no_floor_lines: bool,
     /// Passes of re-segmentation in the provisional level frame (robust estimator); 0 turns
     /// it off.
     #[arg(long, default_value_t = levelscan::level::LevelParams::default().refine_passes)]
@@ -84,6 +89,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         level: levelscan::level::LevelParams {
             max_sigma_deg: args.max_sigma,
             level_surfaces: !args.walls_only,
+            level_lines: !args.no_floor_lines,
             refine_passes: args.refine_passes,
             ..levelscan::level::LevelParams::default()
         },

@@ -41,6 +41,11 @@ pub struct Args {
     /// For places where the visible floor itself slopes (long ramps, rubble).
     #[arg(long)]
     pub walls_only: bool,
+    /// Do not use each scan's floor (or ceiling) points as a line that must be level where
+    /// no floor plane is found (on by default: it levels poses that see the floor in one
+    /// scan only).
+    #[arg(long)]
+    pub no_floor_lines: bool,
     /// Passes of re-segmentation in the provisional level frame (robust estimator): points
     /// re-assigned to the floor and ceiling by height and to walls as vertical planes, then
     /// up re-estimated. 0 turns it off.
@@ -66,6 +71,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         quad_cols: args.quad_cols,
         max_sigma_deg: args.max_sigma,
         level_surfaces: !args.walls_only,
+        level_lines: !args.no_floor_lines,
         refine_passes: args.refine_passes,
         ..LevelParams::default()
     };

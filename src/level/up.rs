@@ -12,18 +12,99 @@ use super::grid::PlaneFit;
 use crate::geometry::Attitude;
 use nalgebra::{Matrix2, Matrix3, Vector2, Vector3};
 
-/// A plane fit with a variance inflation (>= 1) for misfit.
-///
-/// A wall plane is vertical, so it observes `n . up = 0` (one residual). A level plane (the floor
-/// or a ceiling, when they are taken as level) has up along its normal, so it observes
-/// `e_k . up = 0` for both of its in-plane axes `e_k` (two residuals).
+/// A straight run of floor (or ceiling) points in one scan. A scan's plane meets a level
+/// surface in a straight line, so the line's direction `dir` must be level: `dir . up = 0`
+/// (one residual). Floor points seen at grazing incidence put their range noise almost along
+/// the floor, so the line's vertical slope is precise even at high noise, and a floor seen
+/// in one scan only (no plane: it is free to turn about the line) still pins up down across it.
+#[derive(Clone, Copy, Debug)]
+pub struct LevelLine {
+    /// Unit direction in the robot frame (sign arbitrary).
+    pub dir: Vector3<f64>,
+    /// Mean of the points [m], robot frame.
+    pub centroid: nalgebra::Point3<f64>,
+    /// Points behind it.
+    pub n: usize,
+    /// `sum_i t_i^2 d_i d_i^T` over the points' positions `t_i` along the line (from the
+    /// centroid) and their ray directions `d_i`.
+    spread_dd: Matrix3<f64>,
+    /// `sum_i t_i^2` [m^2].
+    spread: f64,
+    /// Noise floor of a point [m] (`min_sigma`).
+    min_sigma: f64,
+}
+
+impl LevelLine {
+    /// A line through `points` (position, unit ray direction), by total least squares with
+    /// the range-noise bias removed from the scatter (as [`super::grid::PlaneAccumulator`]
+    /// does for planes: grazing rays run nearly along the line, and their noise would tilt
+    /// it). `None` with fewer than three points.
+    pub fn fit(
+        points: &[(nalgebra::Point3<f64>, Vector3<f64>)],
+        sigma: f64,
+        min_sigma: f64,
+    ) -> Option<LevelLine> {
+        let n = points.len();
+        if n < 3 {
+            return None;
+        }
+        let nf = n as f64;
+        let c = points.iter().map(|(p, _)| p.coords).sum::<Vector3<f64>>() / nf;
+        let mut scatter = Matrix3::zeros();
+        let mut dd = Matrix3::zeros();
+        for (p, d) in points {
+            let v = p.coords - c;
+            scatter += v * v.transpose();
+            dd += d * d.transpose();
+        }
+        let corrected = scatter - dd * (sigma * sigma * (nf - 1.0) / nf);
+        let eig = super::eigen3::sym_eigen3(&corrected);
+        let dir = eig.vectors[2].try_normalize(1e-300)?;
+        let mut spread_dd = Matrix3::zeros();
+        let mut spread = 0.0;
+        for (p, d) in points {
+            let t = dir.dot(&(p.coords - c));
+            spread += t * t;
+            spread_dd += d * d.transpose() * (t * t);
+        }
+        (spread > 0.0).then_some(LevelLine {
+            dir,
+            centroid: nalgebra::Point3::from(c),
+            n,
+            spread_dd,
+            spread,
+            min_sigma,
+        })
+    }
+
+    /// Variance of `dir . u` for a unit `u` perpendicular to `dir`, from first-order TLS
+    /// perturbation: `sum_i t_i^2 Var(u . e_i) / (sum_i t_i^2)^2`, where each point's error
+    /// `e_i` is its range noise along its ray plus the `min_sigma` floor.
+    pub fn variance_along(&self, u: &Vector3<f64>, sigma: f64) -> f64 {
+        let along = (u.transpose() * self.spread_dd * u)[0];
+        (sigma * sigma * along + self.min_sigma * self.min_sigma * self.spread)
+            / (self.spread * self.spread)
+    }
+}
+
+/// What one piece of evidence says about up.
+#[derive(Clone, Copy, Debug)]
+pub enum Evidence<'a> {
+    /// A wall plane: vertical, so `n . up = 0` (one residual).
+    Wall(&'a PlaneFit),
+    /// A floor or ceiling plane taken as level: up along its normal, so `e_k . up = 0` for
+    /// both of its in-plane axes `e_k` (two residuals).
+    Level(&'a PlaneFit),
+    /// A line on a level surface ([`LevelLine`]): `dir . up = 0` (one residual).
+    LevelLine(&'a LevelLine),
+}
+
+/// A piece of evidence with a variance inflation (>= 1) for misfit.
 #[derive(Clone, Copy, Debug)]
 pub struct PlaneObs<'a> {
-    pub fit: &'a PlaneFit,
-    /// Multiplies the fit's normal variance.
+    pub evidence: Evidence<'a>,
+    /// Multiplies the evidence's variance.
     pub inflate: f64,
-    /// True for a floor or ceiling plane taken as level; false for a wall.
-    pub level: bool,
 }
 
 /// One scalar residual `a . up` with its variance.
@@ -33,37 +114,78 @@ impl PlaneObs<'_> {
     /// A wall plane.
     pub fn wall(fit: &PlaneFit, inflate: f64) -> PlaneObs<'_> {
         PlaneObs {
-            fit,
+            evidence: Evidence::Wall(fit),
             inflate,
-            level: false,
         }
     }
 
     /// A floor or ceiling plane taken as level.
     pub fn level(fit: &PlaneFit, inflate: f64) -> PlaneObs<'_> {
         PlaneObs {
-            fit,
+            evidence: Evidence::Level(fit),
             inflate,
-            level: true,
         }
     }
 
-    /// The residual directions of this plane and their variances at the current `up`.
+    /// A line on a floor or ceiling.
+    pub fn level_line(line: &LevelLine, inflate: f64) -> PlaneObs<'_> {
+        PlaneObs {
+            evidence: Evidence::LevelLine(line),
+            inflate,
+        }
+    }
+
+    /// True for level evidence (planes and lines), false for walls.
+    pub fn is_level(&self) -> bool {
+        !matches!(self.evidence, Evidence::Wall(_))
+    }
+
+    /// Scalar residuals this evidence contributes.
+    fn constraints(&self) -> usize {
+        match self.evidence {
+            Evidence::Level(_) => 2,
+            _ => 1,
+        }
+    }
+
+    /// The single constrained direction `a` (with `a . up = 0`) of one-residual evidence.
+    fn single(&self) -> Option<Vector3<f64>> {
+        match self.evidence {
+            Evidence::Wall(f) => Some(f.normal),
+            Evidence::LevelLine(l) => Some(l.dir),
+            Evidence::Level(_) => None,
+        }
+    }
+
+    /// The residual directions of this evidence and their variances at the current `up`.
     fn terms(&self, up: &Vector3<f64>, sigma: f64) -> ([Term; 2], usize) {
-        let var =
-            |u: &Vector3<f64>| (self.inflate * self.fit.normal_variance_along(u, sigma)).max(1e-14);
-        if self.level {
-            let [(_, e1), (_, e2)] = self.fit.in_plane;
-            ([(e1, var(&e1)), (e2, var(&e2))], 2)
-        } else {
-            let n = &self.fit.normal;
-            let in_plane = up - n * n.dot(up);
-            let u = in_plane.try_normalize(1e-12).unwrap_or(*up);
-            ([(*n, var(&u)), (*n, f64::INFINITY)], 1)
+        // The unit direction, perpendicular to `a`, in which an error of `a` moves `a . up`.
+        let across = |a: &Vector3<f64>| {
+            let in_plane = up - a * a.dot(up);
+            in_plane.try_normalize(1e-12).unwrap_or(*up)
+        };
+        match self.evidence {
+            Evidence::Level(fit) => {
+                let var = |u: &Vector3<f64>| {
+                    (self.inflate * fit.normal_variance_along(u, sigma)).max(1e-14)
+                };
+                let [(_, e1), (_, e2)] = fit.in_plane;
+                ([(e1, var(&e1)), (e2, var(&e2))], 2)
+            }
+            Evidence::Wall(fit) => {
+                let n = &fit.normal;
+                let v = (self.inflate * fit.normal_variance_along(&across(n), sigma)).max(1e-14);
+                ([(*n, v), (*n, f64::INFINITY)], 1)
+            }
+            Evidence::LevelLine(l) => {
+                let d = &l.dir;
+                let v = (self.inflate * l.variance_along(&across(d), sigma)).max(1e-14);
+                ([(*d, v), (*d, f64::INFINITY)], 1)
+            }
         }
     }
 
-    /// Squared Mahalanobis distance of `up` from this plane's constraint, per residual.
+    /// Squared Mahalanobis distance of `up` from this evidence's constraint, per residual.
     fn z2(&self, up: &Vector3<f64>, sigma: f64) -> f64 {
         let (terms, k) = self.terms(up, sigma);
         terms[..k]
@@ -73,9 +195,25 @@ impl PlaneObs<'_> {
             / k as f64
     }
 
-    /// The direction this plane proposes for up on its own, if any: a level plane's normal.
+    /// The direction this evidence proposes for up on its own, if any: a level plane's normal.
     fn proposal(&self) -> Option<Vector3<f64>> {
-        self.level.then_some(self.fit.normal)
+        match self.evidence {
+            Evidence::Level(f) => Some(f.normal),
+            _ => None,
+        }
+    }
+
+    /// Its share of the unweighted start matrix: the constrained directions' outer products,
+    /// weighted by the points behind them.
+    fn start_matrix(&self) -> Matrix3<f64> {
+        match self.evidence {
+            Evidence::Level(f) => {
+                let [(_, e1), (_, e2)] = f.in_plane;
+                (e1 * e1.transpose() + e2 * e2.transpose()) * f.n as f64
+            }
+            Evidence::Wall(f) => f.normal * f.normal.transpose() * f.n as f64,
+            Evidence::LevelLine(l) => l.dir * l.dir.transpose() * l.n as f64,
+        }
     }
 }
 
@@ -169,7 +307,7 @@ const MAX_TILT: f64 = 50.0 * std::f64::consts::PI / 180.0;
 /// 50 degrees of the robot's own up are considered. `None` with fewer than two planes or when
 /// no proposal qualifies.
 pub fn up_robust(planes: &[PlaneObs], sigma: f64, iterations: usize) -> Option<UpSolution> {
-    let constraints: usize = planes.iter().map(|p| if p.level { 2 } else { 1 }).sum();
+    let constraints: usize = planes.iter().map(|p| p.constraints()).sum();
     if constraints < 2 {
         return None;
     }
@@ -177,20 +315,16 @@ pub fn up_robust(planes: &[PlaneObs], sigma: f64, iterations: usize) -> Option<U
     let mut candidates: Vec<Vector3<f64>> = planes.iter().filter_map(|p| p.proposal()).collect();
     let mut m = Matrix3::zeros();
     for p in planes {
-        if p.level {
-            let [(_, e1), (_, e2)] = p.fit.in_plane;
-            m += (e1 * e1.transpose() + e2 * e2.transpose()) * p.fit.n as f64;
-        } else {
-            m += p.fit.normal * p.fit.normal.transpose() * p.fit.n as f64;
-        }
+        m += p.start_matrix();
     }
     if let Some(v) = smallest_eigenvector(&m) {
         candidates.push(v);
     }
-    let walls: Vec<&PlaneObs> = planes.iter().filter(|p| !p.level).collect();
-    for (i, a) in walls.iter().enumerate() {
-        for b in &walls[i + 1..] {
-            let c = a.fit.normal.cross(&b.fit.normal);
+    // Walls and level lines: each pair proposes the direction normal to both.
+    let singles: Vec<Vector3<f64>> = planes.iter().filter_map(|p| p.single()).collect();
+    for (i, a) in singles.iter().enumerate() {
+        for b in &singles[i + 1..] {
+            let c = a.cross(b);
             // Nearly parallel normals propose nothing reliable.
             if c.norm() < 0.17 {
                 continue;
@@ -296,5 +430,55 @@ mod tests {
         let n2 = r * Vector3::new(1.0, 1.0, 0.0).normalize();
         let up = up_paper(&[(n1, 1.0), (n2, 2.0)]).unwrap();
         assert!((up - att.up_in_robot()).norm() < 1e-12);
+    }
+
+    /// Noise-free floor points along one scan's line, seen from a tilted robot.
+    fn floor_line(att: &Attitude, y0: f64) -> Vec<(nalgebra::Point3<f64>, Vector3<f64>)> {
+        let robot_from_level = att.level_from_robot().inverse();
+        (0..20)
+            .map(|k| {
+                let q = Vector3::new(0.5 + 0.2 * k as f64, y0 + 0.05 * k as f64, -0.45);
+                let p = robot_from_level * q;
+                (nalgebra::Point3::from(p), p.normalize())
+            })
+            .collect()
+    }
+
+    #[test]
+    fn level_line_fit_on_exact_floor_points_is_level() {
+        let att = Attitude::new(0.15, -0.2);
+        let line = LevelLine::fit(&floor_line(&att, -1.0), 0.0, 0.001).unwrap();
+        assert!(line.dir.dot(&att.up_in_robot()).abs() < 1e-12);
+        // Grazing rays: the slope's sigma is far below the range noise over the line's length.
+        let u = (att.up_in_robot() - line.dir * line.dir.dot(&att.up_in_robot())).normalize();
+        let sd = line.variance_along(&u, 0.05).sqrt();
+        assert!(sd > 0.0 && sd < 0.05 / 4.0, "slope sigma {sd}");
+    }
+
+    #[test]
+    fn one_wall_and_one_floor_line_fix_up_exactly() {
+        let att = Attitude::new(-0.1, 0.25);
+        let r = att.level_from_robot().inverse();
+        let wall = super::super::grid::PlaneAccumulator::default();
+        // A wall x = 3 in the level frame, as an exact plane fit.
+        let mut acc = wall;
+        for i in 0..6 {
+            for j in 0..4 {
+                let q = Vector3::new(3.0, -1.0 + 0.4 * i as f64, -0.3 + 0.3 * j as f64);
+                let p = r * q;
+                acc.add(&super::super::grid::GridPoint {
+                    p: nalgebra::Point3::from(p),
+                    dir: p.normalize(),
+                    range: p.norm(),
+                });
+            }
+        }
+        let fit = acc.fit(0.0).unwrap();
+        let line = LevelLine::fit(&floor_line(&att, -1.0), 0.0, 0.001).unwrap();
+        let obs = [PlaneObs::wall(&fit, 1.0), PlaneObs::level_line(&line, 1.0)];
+        let sol = up_robust(&obs, 0.01, 10).unwrap();
+        assert!((sol.up - att.up_in_robot()).norm() < 1e-9);
+        // The wall alone does not fix up.
+        assert!(up_robust(&obs[..1], 0.01, 10).is_none());
     }
 }

@@ -1,0 +1,106 @@
+//! Floor lines as evidence of up (`LevelParams::level_lines`): at 10 cm range noise, floors
+//! seen by one scan (or by scans that do not overlap) level poses that walls alone cannot.
+
+use levelscan::geometry::Pose;
+use levelscan::level::{LevelParams, level_pose};
+use levelscan::plan::Plan;
+use levelscan::scan::Scan;
+use levelscan::simulate::{
+    RandomPoseParams, ScannerParams, Stream, World, elevations_centred, random_poses,
+    simulate_pose, stream_rng,
+};
+use nalgebra::Point2;
+
+/// An irregular room with an angled wall and a pillar, poses as in the accuracy protocol.
+fn protocol_poses(noise: f64, n: usize, seed: u64) -> Vec<(Pose, Vec<Scan>)> {
+    let p = |x: f64, y: f64| Point2::new(x, y);
+    let plan = Plan {
+        wall_height: 2.6,
+        walls: vec![
+            vec![
+                p(0.0, 0.0),
+                p(7.0, 0.0),
+                p(8.0, 3.0),
+                p(6.0, 6.0),
+                p(0.0, 6.0),
+                p(0.0, 0.0),
+            ],
+            vec![
+                p(3.0, 2.5),
+                p(3.5, 2.5),
+                p(3.5, 3.0),
+                p(3.0, 3.0),
+                p(3.0, 2.5),
+            ],
+        ],
+        ceiling: false,
+        poses: Vec::new(),
+    };
+    let world = World::from_plan(&plan);
+    let pose_params = RandomPoseParams {
+        tilt: 20f64.to_radians(),
+        clearance: 0.6,
+        height: 0.45,
+        ..RandomPoseParams::default()
+    };
+    let scanner = ScannerParams {
+        noise_sigma: noise,
+        ..ScannerParams::default()
+    };
+    let elevations = elevations_centred(3, 5f64.to_radians());
+    random_poses(&world, n, &pose_params, seed)
+        .unwrap()
+        .into_iter()
+        .enumerate()
+        .map(|(k, pose)| {
+            let mut rng = stream_rng(seed, Stream::Scans, k as u64);
+            let scans = simulate_pose(&world, k as u64, &pose, &elevations, &scanner, &mut rng);
+            (pose, scans)
+        })
+        .collect()
+}
+
+/// (leveled, off by more than 5 degrees, within 3 sigma) over the poses.
+fn outcomes(poses: &[(Pose, Vec<Scan>)], params: &LevelParams) -> (usize, usize, usize) {
+    let (mut leveled, mut wrong, mut within) = (0, 0, 0);
+    for (pose, scans) in poses {
+        let e = level_pose(scans, params);
+        let (Some(a), Some(s)) = (e.attitude, e.sigmas) else {
+            continue;
+        };
+        let t = pose.attitude();
+        let (dx, dy) = ((a.theta_x - t.theta_x).abs(), (a.theta_y - t.theta_y).abs());
+        leveled += 1;
+        wrong += usize::from(dx.max(dy).to_degrees() > 5.0);
+        within += usize::from(dx <= 3.0 * s[0] && dy <= 3.0 * s[1]);
+    }
+    (leveled, wrong, within)
+}
+
+#[test]
+fn floor_lines_level_more_poses_at_10cm_and_none_wrong() {
+    for seed in [1, 3] {
+        let poses = protocol_poses(0.10, 150, seed);
+        let on = outcomes(&poses, &LevelParams::default());
+        let off = outcomes(
+            &poses,
+            &LevelParams {
+                level_lines: false,
+                ..LevelParams::default()
+            },
+        );
+        assert!(
+            on.0 > off.0,
+            "seed {seed}: leveled {} vs {} without",
+            on.0,
+            off.0
+        );
+        assert_eq!(on.1, 0, "seed {seed}: poses ok off by more than 5 degrees");
+        assert!(
+            on.2 as f64 >= 0.95 * on.0 as f64,
+            "seed {seed}: {} of {} within 3 sigma",
+            on.2,
+            on.0
+        );
+    }
+}
