@@ -143,6 +143,12 @@ pub struct LevelParams {
     /// degree of freedom [1] (a wall line and a floor line at its foot). Default 4; 0 keeps
     /// every patch.
     pub max_row_bend_sigmas: f64,
+    /// An edge row of a patch over four rows or more goes when its mean residual from the
+    /// plane of the patch's other rows exceeds this many sigmas (its points' noise and that
+    /// plane's uncertainty), as the floor line at a wall's foot does; 0 keeps every row.
+    /// Default 5 (on three-row patches, which it would cut to two, it left wrong planes to
+    /// decide a few poses at 10 cm noise).
+    pub trim_sigmas: f64,
     /// Fewer wall quads than this fails the pose (too_few_polygons / facing_floor /
     /// facing_ceiling). Default 3.
     pub min_polygons: usize,
@@ -295,6 +301,7 @@ impl Default for LevelParams {
             max_misfit_sigmas: 4.0,
             min_stacked_share: 0.75,
             max_row_bend_sigmas: 4.0,
+            trim_sigmas: 5.0,
             min_polygons: 3,
             parallel_ratio: 0.01,
             max_sigma_deg: 1.5,
