@@ -475,7 +475,7 @@ fn level_lines(ctx: &LineContext, kind: SurfaceKind, params: &LevelParams) -> Le
     }
     let found: Vec<(LevelLine, Vec<usize>)> = rows
         .into_iter()
-        .filter_map(|row| fit_line(grid, row, ctx.up, s, params))
+        .filter_map(|row| fit_line(grid, row, ctx.up, Some(ctx.sigma_up), s, params))
         .collect();
     // One floor: with three lines or more, each must lie in the plane of the others. When one
     // does not, which is wrong is not clear (a wall line near its foot sits at the floor's
@@ -555,6 +555,7 @@ fn fit_line(
     grid: &PoseGrid,
     mut idx: Vec<usize>,
     up: &Vector3<f64>,
+    sigma_up: Option<f64>,
     s: f64,
     params: &LevelParams,
 ) -> Option<(LevelLine, Vec<usize>)> {
@@ -604,6 +605,16 @@ fn fit_line(
             let dof = (2 * pts.len()).saturating_sub(4).max(1) as f64;
             if kept.len() < idx.len() || chi2 / dof > params.level_line_misfit {
                 return None;
+            }
+            // A floor line is level in the provisional frame, within that frame's
+            // uncertainty and its own: a wall's line that passes near the floor's height
+            // (a scan meeting a far wall near its foot) slopes, and taken as level it pulled
+            // poses 6-7 degrees off with sigmas under one degree.
+            if let Some(sigma_up) = sigma_up {
+                let slope = line.dir.dot(up);
+                if slope * slope > k2 * (line.variance_along(&v1, s) + sigma_up * sigma_up) {
+                    return None;
+                }
             }
             return Some((line, idx));
         }
@@ -722,7 +733,7 @@ pub fn start_lines(grid: &PoseGrid, params: &LevelParams, sigma: f64) -> Vec<Lev
     for mask in [&floor, &ceiling] {
         for r in 0..grid.rows() {
             let idx: Vec<usize> = (r * cols..(r + 1) * cols).filter(|&i| mask[i]).collect();
-            if let Some((line, _)) = fit_line(grid, idx, &Vector3::z(), s, params) {
+            if let Some((line, _)) = fit_line(grid, idx, &Vector3::z(), None, s, params) {
                 out.push(line);
             }
         }
@@ -1303,14 +1314,50 @@ mod tests {
         assert!(lines[0].dir.z.abs() < 1e-9);
     }
 
+    /// A line on its own that slopes in the provisional frame beyond that frame's uncertainty
+    /// is no floor line, whatever its height: a far wall met near its foot by the level scan
+    /// (a 4.6 degree slope against a frame good to 0.86 degrees) once set a pose 6 degrees off.
+    #[test]
+    fn a_sloping_line_is_no_floor_line() {
+        let line = |slope_deg: f64| {
+            let rise = 2.0 * slope_deg.to_radians().tan();
+            grid_of([
+                Vec::new(),
+                Vec::new(),
+                run(
+                    Vector3::new(2.0, -1.0, -0.45 - rise / 2.0),
+                    Vector3::new(2.0, 1.0, -0.45 + rise / 2.0),
+                    30,
+                ),
+            ])
+        };
+        let frame = 0.86f64.to_radians();
+        let fitted = |grid: &PoseGrid| {
+            let idx: Vec<usize> = (0..grid.points.len())
+                .filter(|&i| grid.points[i].is_some())
+                .collect();
+            fit_line(
+                grid,
+                idx,
+                &Vector3::z(),
+                Some(frame),
+                0.01,
+                &LevelParams::default(),
+            )
+        };
+        assert!(fitted(&line(0.0)).is_some());
+        assert!(fitted(&line(1.0)).is_some());
+        assert!(fitted(&line(4.6)).is_none());
+    }
+
     #[test]
     fn level_lines_refuse_a_wall_line_near_its_foot() {
-        // Two floor lines 0.8 m apart, and a wall's line 3 m ahead running up from 1.5 to
-        // 4.5 cm above the floor: at the floor's height within the tolerance, but not in the
-        // plane of the other two. Which line is wrong is not known, so none is used.
+        // Two floor lines 0.8 m apart, and a wall's line 3 m ahead, 3 cm above the floor: at
+        // the floor's height within the tolerance and level, but not in the plane of the other
+        // two. Which line is wrong is not known, so none is used.
         let wall = run(
-            Vector3::new(3.0, -1.0, -0.435),
-            Vector3::new(3.0, 1.0, -0.405),
+            Vector3::new(3.0, -1.0, -0.42),
+            Vector3::new(3.0, 1.0, -0.42),
             30,
         );
         let near = run(
@@ -1323,17 +1370,27 @@ mod tests {
             Vector3::new(2.0, 1.0, -0.45),
             30,
         );
-        let grid = grid_of([wall.clone(), far.clone(), near.clone()]);
+        let grid = grid_of([wall, far.clone(), near.clone()]);
         assert!(matches!(floor_evidence(&grid), LevelEvidence::None));
-        // Without the wall's line, the two floor lines are one level plane.
-        let grid = grid_of([Vec::new(), far, near]);
-        let LevelEvidence::Plane(fit, members) = floor_evidence(&grid) else {
-            panic!("expected the floor plane");
+        // A wall's line that rises along the wall (from 1.5 to 4.5 cm above the floor) is no
+        // level line at all: the floor lines alone are the floor.
+        let rising = run(
+            Vector3::new(3.0, -1.0, -0.435),
+            Vector3::new(3.0, 1.0, -0.405),
+            30,
+        );
+        let floor_plane = |grid: &PoseGrid| {
+            let LevelEvidence::Plane(fit, members) = floor_evidence(grid) else {
+                panic!("expected the floor plane");
+            };
+            assert_eq!(members.len(), 60);
+            // (The fit removes range noise that these exact points do not have.)
+            assert!(fit.normal.z.abs() > 1.0 - 1e-6);
+            assert!((fit.centroid.z + 0.45).abs() < 1e-9);
         };
-        assert_eq!(members.len(), 60);
-        // (The fit removes range noise that these exact points do not have.)
-        assert!(fit.normal.z.abs() > 1.0 - 1e-6);
-        assert!((fit.centroid.z + 0.45).abs() < 1e-9);
+        floor_plane(&grid_of([rising, far.clone(), near.clone()]));
+        // Without the wall's line, the two floor lines are one level plane.
+        floor_plane(&grid_of([Vec::new(), far, near]));
     }
 
     #[test]
