@@ -266,7 +266,16 @@ impl UpSolution {
             j[(1, k)] = (a.theta_y - b.theta_y) / (2.0 * h);
         }
         let c = j * self.cov * j.transpose();
-        [c[(0, 0)].max(0.0).sqrt(), c[(1, 1)].max(0.0).sqrt()]
+        // An undetermined direction's infinite variance comes out as NaN through the
+        // Jacobian (0 times infinity); `max` would turn that into a sigma of zero.
+        let sd = |v: f64| {
+            if v.is_nan() {
+                f64::INFINITY
+            } else {
+                v.max(0.0).sqrt()
+            }
+        };
+        [sd(c[(0, 0)]), sd(c[(1, 1)])]
     }
 }
 
@@ -421,6 +430,26 @@ pub fn solution_at(up: Vector3<f64>, planes: &[PlaneObs], sigma: f64, robust: bo
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// One wall leaves up free to turn about its normal: that direction's sigma is infinite,
+    /// not zero (an undetermined direction once claimed a sigma of 0 and won the choice of a
+    /// start over a pose's floor lines).
+    #[test]
+    fn one_wall_leaves_an_infinite_sigma() {
+        let fit = PlaneFit {
+            centroid: nalgebra::Point3::new(3.0, 0.0, 0.0),
+            normal: Vector3::x(),
+            in_plane: [(10.0, Vector3::y()), (20.0, Vector3::z())],
+            n: 100,
+            weight: 100.0,
+            dn2: 1.0,
+            residual_ss: 0.01,
+        };
+        let sol = solution_at(Vector3::z(), &[PlaneObs::wall(&fit, 1.0)], 0.01, false);
+        let s = sol.attitude_sigmas();
+        assert!(s[0].is_infinite() || s[1].is_infinite(), "{s:?}");
+        assert!(!s[0].is_nan() && !s[1].is_nan());
+    }
 
     #[test]
     fn paper_estimator_on_two_exact_walls_is_exact() {
