@@ -280,7 +280,7 @@ fn make_patch(
     params: &LevelParams,
     sigma: f64,
 ) -> Option<Patch> {
-    let trimmed = trim_edge_rows(grid, members, sigma, params);
+    let trimmed = trim_edge_rows(grid, members, &acc, sigma, params);
     let (members, acc) = match &trimmed {
         Some(kept) => (&kept[..], accumulate(grid, kept)),
         None => (members, acc),
@@ -318,6 +318,7 @@ fn make_patch(
 fn trim_edge_rows(
     grid: &PoseGrid,
     members: &[usize],
+    all: &PlaneAccumulator,
     sigma: f64,
     params: &LevelParams,
 ) -> Option<Vec<usize>> {
@@ -330,26 +331,38 @@ fn trim_edge_rows(
     if hi < lo + 3 {
         return None;
     }
-    let cols = grid.cols;
     let s = sigma.max(params.min_sigma);
-    let row_of = |i: usize| i / cols;
+    // A plane the noise explains has no row standing off it worth the test: a floor line
+    // taken in at a wall's foot leaves the whole patch's fit about half as scattered again.
+    if all
+        .fit(sigma)
+        .is_none_or(|f| f.misfit_ratio(s) <= params.split_misfit)
+    {
+        return None;
+    }
+    let rc = grid.row_col();
+    // Each row's own sums, so that the other rows' plane is a subtraction away.
+    let mut per_row = vec![PlaneAccumulator::default(); hi + 1];
+    for &i in members {
+        if let Some(g) = &grid.points[i] {
+            per_row[rc.row(i)].add(g);
+        }
+    }
     // Whether `row` stands off the plane of the rows `first..=last` other than it.
     let stands_off = |row: usize, first: usize, last: usize| -> bool {
-        let others: Vec<usize> = members
-            .iter()
-            .copied()
-            .filter(|&i| row_of(i) != row && (first..=last).contains(&row_of(i)))
-            .collect();
-        if others.len() < params.min_patch_points {
+        let others = (lo..=hi)
+            .filter(|&r| r == row || !(first..=last).contains(&r))
+            .fold(*all, |acc, r| acc.minus(&per_row[r]));
+        if others.n < params.min_patch_points {
             return false;
         }
-        let Some(fit) = accumulate(grid, &others).fit(sigma) else {
+        let Some(fit) = others.fit(sigma) else {
             return false;
         };
         let (mut sum, mut var, mut at, mut n) = (0.0, 0.0, Vector3::zeros(), 0.0);
         for g in members
             .iter()
-            .filter(|&&i| row_of(i) == row)
+            .filter(|&&i| rc.row(i) == row)
             .filter_map(|&i| grid.points[i].as_ref())
         {
             sum += fit.distance(&g.p);
@@ -385,7 +398,7 @@ fn trim_edge_rows(
         members
             .iter()
             .copied()
-            .filter(|&i| (first..=last).contains(&row_of(i)))
+            .filter(|&i| (first..=last).contains(&rc.row(i)))
             .collect(),
     )
 }
