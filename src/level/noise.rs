@@ -16,7 +16,7 @@ const MAD_TO_SIGMA: f64 = 1.482_602_218_505_602;
 /// Estimates the range noise sigma [m] from the scans of one or more poses; `None` when
 /// there are too few triples of consecutive valid rays (fewer than 20).
 pub fn estimate_range_sigma(scans: &[Scan]) -> Option<f64> {
-    let mut z = Vec::new();
+    let mut z = Vec::with_capacity(scans.iter().map(Scan::nrays).sum());
     let mut steps = BearingSteps::default();
     let mut trig_of: Option<&[f64]> = None;
     let mut inverse = Vec::new();
@@ -76,10 +76,12 @@ fn standardised_residuals(
 ) {
     let n = s.nrays().min(steps.one.len());
     inverse.clear();
-    inverse.extend((0..n).map(|i| {
-        let u = 1.0 / s.range(i).filter(|&r| r > 0.0)?;
-        Some((u, u.powi(4)))
-    }));
+    for i in 0..n {
+        inverse.push(s.range(i).filter(|&r| r > 0.0).map(|r| {
+            let u = 1.0 / r;
+            (u, u.powi(4))
+        }));
+    }
     for i in 1..n.saturating_sub(1) {
         let (Some((u0, q0)), Some((u1, q1)), Some((u2, q2))) =
             (inverse[i - 1], inverse[i], inverse[i + 1])
