@@ -731,14 +731,39 @@ pub fn start_lines(grid: &PoseGrid, params: &LevelParams, sigma: f64) -> Vec<Lev
     let cols = grid.cols;
     let mut out = Vec::new();
     for mask in [&floor, &ceiling] {
-        for r in 0..grid.rows() {
-            let idx: Vec<usize> = (r * cols..(r + 1) * cols).filter(|&i| mask[i]).collect();
-            if let Some((line, _)) = fit_line(grid, idx, &Vector3::z(), None, s, params) {
-                out.push(line);
-            }
+        let lines: Vec<LevelLine> = (0..grid.rows())
+            .filter_map(|r| {
+                let idx: Vec<usize> = (r * cols..(r + 1) * cols).filter(|&i| mask[i]).collect();
+                fit_line(grid, idx, &Vector3::z(), None, s, params).map(|(line, _)| line)
+            })
+            .collect();
+        // One floor is one plane: lines of two scans that cannot lie in one plane are not
+        // both on it, and which one is not is unknown here. (A far wall met by the level scan
+        // steps to the floor in the next scan as the floor does; taken as a floor line it set
+        // a start 8 degrees off, and re-segmentation kept it.)
+        let coplanar = (0..lines.len())
+            .all(|i| (i + 1..lines.len()).all(|j| coplanar(&lines[i], &lines[j], s, params)));
+        if coplanar {
+            out.extend(lines);
         }
     }
     out
+}
+
+/// Whether two lines can lie in one plane: the offset between them across the plane their
+/// directions span, within `refine_k` sigmas of their centroids' noise and their directions'
+/// uncertainty over the distance between them. Nearly parallel lines always can.
+fn coplanar(a: &LevelLine, b: &LevelLine, s: f64, params: &LevelParams) -> bool {
+    let Some(n) = a.dir.cross(&b.dir).try_normalize(0.05) else {
+        return true;
+    };
+    let gap = b.centroid - a.centroid;
+    let offset = n.dot(&gap);
+    let point = s * s + params.min_sigma * params.min_sigma;
+    let var = point / a.n as f64
+        + point / b.n as f64
+        + gap.norm_squared() * (a.variance_along(&n, s) + b.variance_along(&n, s));
+    offset * offset <= params.refine_k * params.refine_k * var
 }
 
 /// Point triples tried by [`level_start`].
@@ -1312,6 +1337,38 @@ mod tests {
         assert_eq!(lines[0].n, 20);
         assert!((lines[0].centroid.z + 0.45).abs() < 1e-9);
         assert!(lines[0].dir.z.abs() < 1e-9);
+    }
+
+    /// Two floor lines at different azimuths lie in one plane; a far wall's line at the
+    /// scanner's height with a floor line does not (the pose that set a start 8 degrees off:
+    /// 14 cm out of one plane over 4 m).
+    #[test]
+    fn floor_lines_are_coplanar_and_a_far_wall_line_is_not() {
+        let line = |a: Vector3<f64>, b: Vector3<f64>| {
+            let pts: Vec<_> = run(a, b, 30)
+                .into_iter()
+                .map(|p| (nalgebra::Point3::from(p), p.normalize()))
+                .collect();
+            LevelLine::fit(&pts, 0.05, 0.001).unwrap()
+        };
+        let floor_ahead = line(
+            Vector3::new(2.0, -1.0, -0.45),
+            Vector3::new(2.0, 1.0, -0.45),
+        );
+        let floor_side = line(
+            Vector3::new(0.5, -2.5, -0.45),
+            Vector3::new(2.5, -1.5, -0.45),
+        );
+        let far_wall = line(Vector3::new(2.0, 5.0, 0.0), Vector3::new(4.0, 6.0, 0.0));
+        let params = LevelParams::default();
+        assert!(coplanar(&floor_ahead, &floor_side, 0.05, &params));
+        assert!(!coplanar(&floor_ahead, &far_wall, 0.05, &params));
+        // Parallel lines always lie in one plane.
+        let floor_far = line(
+            Vector3::new(3.0, -1.0, -0.45),
+            Vector3::new(3.0, 1.0, -0.45),
+        );
+        assert!(coplanar(&floor_ahead, &floor_far, 0.05, &params));
     }
 
     /// A line on its own that slopes in the provisional frame beyond that frame's uncertainty
