@@ -458,3 +458,36 @@ fn a_loose_start_does_not_settle_on_wrong_planes() {
         }
     }
 }
+
+/// Pitched 18 degrees in the angled example with five scans at 1 cm: a wall line and the
+/// floor line at its foot, coplanar, with the true wall's row on top and a few stray points
+/// below. The edge-row trim took the true wall's row for the odd one out, and the rest,
+/// passing for a wall over four rows, leveled the pose 28 degrees off. A trimmed patch must
+/// keep three adjacent rows that each hold a fair share of its points.
+#[test]
+fn the_edge_row_trim_never_keeps_a_wall_line_over_its_floor_line() {
+    use levelscan::formats::read_plan;
+    use levelscan::simulate::{ScannerParams, World, elevations_centred, simulate_pose};
+    use rand::SeedableRng;
+    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/examples/plans/angled.wall");
+    let world = World::from_plan(&read_plan(std::path::Path::new(path)).unwrap());
+    let pose = Pose::new(6.4854, 1.2815, 0.45, -1.043983, 0.313965, 0.164457);
+    let mut leveled = 0;
+    for seed in 0..40 {
+        let mut rng = rand::rngs::ChaCha8Rng::seed_from_u64(seed);
+        let scans = simulate_pose(
+            &world,
+            0,
+            &pose,
+            &elevations_centred(5, deg(5.0)),
+            &ScannerParams::default(),
+            &mut rng,
+        );
+        if let Some(a) = level_pose(&scans, &LevelParams::default()).attitude {
+            leveled += 1;
+            let err = a.max_abs_error(&pose.attitude()).to_degrees();
+            assert!(err < 5.0, "seed {seed}: leveled {err:.1} deg off");
+        }
+    }
+    assert!(leveled >= 35, "only {leveled} of 40 leveled");
+}
