@@ -53,43 +53,53 @@ fn pose_scans(noise: f64) -> Vec<Scan> {
     )
 }
 
+/// Levels the bench pose's scans at `noise` with `params`.
+fn bench_level(bencher: divan::Bencher, noise: f64, params: LevelParams) {
+    let scans = pose_scans(noise);
+    bencher.bench(|| level_pose(divan::black_box(&scans), &params));
+}
+
 #[divan::bench(args = [0.01, 0.10])]
 fn level_one_pose_robust(bencher: divan::Bencher, noise: f64) {
-    let scans = pose_scans(noise);
-    let params = LevelParams::default();
-    bencher.bench(|| level_pose(divan::black_box(&scans), &params));
+    bench_level(bencher, noise, LevelParams::default());
 }
 
 /// The robust estimator without re-segmentation in the level frame: the cost of `refine`.
 #[divan::bench(args = [0.01, 0.10])]
 fn level_one_pose_robust_without_refine(bencher: divan::Bencher, noise: f64) {
-    let scans = pose_scans(noise);
-    let params = LevelParams {
-        refine_passes: 0,
-        ..LevelParams::default()
-    };
-    bencher.bench(|| level_pose(divan::black_box(&scans), &params));
+    bench_level(
+        bencher,
+        noise,
+        LevelParams {
+            refine_passes: 0,
+            ..LevelParams::default()
+        },
+    );
 }
 
 /// The robust estimator without floor and ceiling lines: the cost of `level_lines`.
 #[divan::bench(args = [0.01, 0.10])]
 fn level_one_pose_robust_without_floor_lines(bencher: divan::Bencher, noise: f64) {
-    let scans = pose_scans(noise);
-    let params = LevelParams {
-        level_lines: false,
-        ..LevelParams::default()
-    };
-    bencher.bench(|| level_pose(divan::black_box(&scans), &params));
+    bench_level(
+        bencher,
+        noise,
+        LevelParams {
+            level_lines: false,
+            ..LevelParams::default()
+        },
+    );
 }
 
 #[divan::bench(args = [0.01, 0.10])]
 fn level_one_pose_paper(bencher: divan::Bencher, noise: f64) {
-    let scans = pose_scans(noise);
-    let params = LevelParams {
-        estimator: Estimator::Paper,
-        ..LevelParams::default()
-    };
-    bencher.bench(|| level_pose(divan::black_box(&scans), &params));
+    bench_level(
+        bencher,
+        noise,
+        LevelParams {
+            estimator: Estimator::Paper,
+            ..LevelParams::default()
+        },
+    );
 }
 
 #[divan::bench]

@@ -4,9 +4,12 @@
 mod common;
 
 use common::{Room, elevations, scans_at};
+use levelscan::formats::read_plan;
 use levelscan::geometry::{Attitude, Pose};
 use levelscan::level::{Estimator, FailReason, LevelParams, level_pose};
 use levelscan::pseudo_level::{PseudoLevelParams, pseudo_level_scan};
+use levelscan::scan::Scan;
+use levelscan::simulate::{ScannerParams, World, elevations_centred, simulate_pose};
 use proptest::prelude::*;
 use rand::{RngExt, SeedableRng};
 
@@ -322,6 +325,32 @@ fn a_wall_line_with_a_floor_line_at_its_foot_never_levels_a_pose_wrongly() {
     assert_eq!(wrong, 0);
 }
 
+/// An example plan (examples/plans/NAME.wall) for the library's own simulator.
+fn example_world(name: &str) -> World {
+    let path = format!("{}/examples/plans/{name}.wall", env!("CARGO_MANIFEST_DIR"));
+    World::from_plan(&read_plan(std::path::Path::new(&path)).unwrap())
+}
+
+/// The library simulator's scans of `pose` at `scans` elevations 5 degrees apart, centred on
+/// level, with the noise stream `seed`.
+fn library_scans(
+    world: &World,
+    pose: &Pose,
+    scans: usize,
+    scanner: &ScannerParams,
+    seed: u64,
+) -> Vec<Scan> {
+    let mut rng = rand::rngs::ChaCha8Rng::seed_from_u64(seed);
+    simulate_pose(
+        world,
+        0,
+        pose,
+        &elevations_centred(scans, deg(5.0)),
+        scanner,
+        &mut rng,
+    )
+}
+
 /// The office example's walls (examples/plans/office.wall), in the twin ray caster.
 fn office_room() -> Room {
     let mut room = Room::polygon(
@@ -372,11 +401,7 @@ fn two_wall_lines_over_a_floor_line_never_level_a_pose_wrongly() {
 /// and the line goes.
 #[test]
 fn the_floor_line_at_a_walls_foot_is_trimmed_from_the_wall() {
-    use levelscan::formats::read_plan;
-    use levelscan::simulate::{ScannerParams, World, elevations_centred, simulate_pose};
-    use rand::SeedableRng;
-    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/examples/plans/ceiling.wall");
-    let world = World::from_plan(&read_plan(std::path::Path::new(path)).unwrap());
+    let world = example_world("ceiling");
     let pose = Pose::new(4.803, 0.7095, 0.45, -0.32333, 0.09450, -0.08848);
     let scanner = ScannerParams {
         noise_sigma: 0.02,
@@ -389,15 +414,7 @@ fn the_floor_line_at_a_walls_foot_is_trimmed_from_the_wall() {
     };
     let (mut wrong, mut wrong_untrimmed, mut leveled) = (0, 0, 0);
     for seed in 0..30 {
-        let mut rng = rand::rngs::ChaCha8Rng::seed_from_u64(seed);
-        let scans = simulate_pose(
-            &world,
-            0,
-            &pose,
-            &elevations_centred(4, deg(5.0)),
-            &scanner,
-            &mut rng,
-        );
+        let scans = library_scans(&world, &pose, 4, &scanner, seed);
         let off = |p: &LevelParams| {
             level_pose(&scans, p)
                 .attitude
@@ -426,11 +443,7 @@ fn the_floor_line_at_a_walls_foot_is_trimmed_from_the_wall() {
 /// only within 2.9 degrees from floor lines found without a level frame.
 #[test]
 fn a_loose_start_does_not_settle_on_wrong_planes() {
-    use levelscan::formats::read_plan;
-    use levelscan::simulate::{ScannerParams, World, elevations_centred, simulate_pose};
-    use rand::SeedableRng;
-    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/examples/plans/two_rooms.wall");
-    let world = World::from_plan(&read_plan(std::path::Path::new(path)).unwrap());
+    let world = example_world("two_rooms");
     let pose = Pose::new(1.1253, 1.1178, 0.45, 1.47801, 0.071695, -0.009343);
     for noise in [0.02, 0.03] {
         let scanner = ScannerParams {
@@ -439,15 +452,7 @@ fn a_loose_start_does_not_settle_on_wrong_planes() {
             ..ScannerParams::default()
         };
         for seed in 0..30 {
-            let mut rng = rand::rngs::ChaCha8Rng::seed_from_u64(seed);
-            let scans = simulate_pose(
-                &world,
-                0,
-                &pose,
-                &elevations_centred(3, deg(5.0)),
-                &scanner,
-                &mut rng,
-            );
+            let scans = library_scans(&world, &pose, 3, &scanner, seed);
             if let Some(a) = level_pose(&scans, &LevelParams::default()).attitude {
                 let err = a.max_abs_error(&pose.attitude()).to_degrees();
                 assert!(
@@ -466,23 +471,11 @@ fn a_loose_start_does_not_settle_on_wrong_planes() {
 /// keep three adjacent rows that each hold a fair share of its points.
 #[test]
 fn the_edge_row_trim_never_keeps_a_wall_line_over_its_floor_line() {
-    use levelscan::formats::read_plan;
-    use levelscan::simulate::{ScannerParams, World, elevations_centred, simulate_pose};
-    use rand::SeedableRng;
-    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/examples/plans/angled.wall");
-    let world = World::from_plan(&read_plan(std::path::Path::new(path)).unwrap());
+    let world = example_world("angled");
     let pose = Pose::new(6.4854, 1.2815, 0.45, -1.043983, 0.313965, 0.164457);
     let mut leveled = 0;
     for seed in 0..40 {
-        let mut rng = rand::rngs::ChaCha8Rng::seed_from_u64(seed);
-        let scans = simulate_pose(
-            &world,
-            0,
-            &pose,
-            &elevations_centred(5, deg(5.0)),
-            &ScannerParams::default(),
-            &mut rng,
-        );
+        let scans = library_scans(&world, &pose, 5, &ScannerParams::default(), seed);
         if let Some(a) = level_pose(&scans, &LevelParams::default()).attitude {
             leveled += 1;
             let err = a.max_abs_error(&pose.attitude()).to_degrees();

@@ -94,6 +94,15 @@ impl PoseGrid {
         self.scan_index.len()
     }
 
+    /// The plane sums of the valid points among `members` (grid indices), in their order.
+    pub fn accumulate(&self, members: &[usize]) -> PlaneAccumulator {
+        let mut acc = PlaneAccumulator::default();
+        for g in members.iter().filter_map(|&i| self.points[i].as_ref()) {
+            acc.add(g);
+        }
+        acc
+    }
+
     pub fn at(&self, row: usize, col: usize) -> Option<&GridPoint> {
         self.points[row * self.cols + col].as_ref()
     }

@@ -588,6 +588,7 @@ pub fn refine_estimate(
     let grid = est.grid.as_ref()?;
     let sigma = est.range_sigma;
     let sigma_eff = sigma.max(params.min_sigma);
+    let width = |s: &UpSolution| s.attitude_sigmas().iter().fold(0f64, |a, &b| a.max(b));
     let start = match first {
         Ok(sol) => *sol,
         Err(_) => {
@@ -608,7 +609,6 @@ pub fn refine_estimate(
                     );
                     up::up_robust(&obs, sigma_eff, params.iterations)
                 });
-            let width = |s: &UpSolution| s.attitude_sigmas().iter().fold(0f64, |a, &b| a.max(b));
             let with_lines = with_lines.filter(|s| width(s) <= START_LINES_MAX_SIGMA);
             match (walls, with_lines) {
                 (Some(a), Some(b)) => {
@@ -627,11 +627,7 @@ pub fn refine_estimate(
     // From a start this loose, re-segmentation can settle on a wrong but self-consistent set
     // of planes (a pose 16 degrees off at the start, 23 degrees of sigma, ended 7 degrees off
     // with sigmas near one degree); it rescues almost nothing from there.
-    if start
-        .attitude_sigmas()
-        .iter()
-        .any(|s| !s.is_finite() || *s > START_MAX_SIGMA)
-    {
+    if width(&start) > START_MAX_SIGMA {
         return None;
     }
     let walls: Vec<&Patch> = est

@@ -280,19 +280,28 @@ fn make_patch(
     params: &LevelParams,
     sigma: f64,
 ) -> Option<Patch> {
-    let trimmed = trim_edge_rows(grid, members, &acc, sigma, params);
-    let (members, acc) = match &trimmed {
-        Some(kept) => (&kept[..], accumulate(grid, kept)),
-        None => (members, acc),
+    // Too small or one row: nothing to fit (trimming only takes points away).
+    let too_small = |members: &[usize]| {
+        let (lo, hi) = rows_span(members, grid.cols);
+        members.len() < params.min_patch_points || hi <= lo
     };
-    let (lo, hi) = rows_span(members, grid.cols);
-    if members.len() < params.min_patch_points || hi <= lo {
+    if too_small(members) {
         return None;
     }
+    let first = acc.fit(sigma)?;
+    let trimmed = trim_edge_rows(grid, members, &acc, &first, sigma, params);
+    let (members, first) = match &trimmed {
+        Some(kept) => (&kept[..], grid.accumulate(kept).fit(sigma)?),
+        None => (members, first),
+    };
+    if too_small(members) {
+        return None;
+    }
+    let (lo, hi) = rows_span(members, grid.cols);
     if !stacked(members, grid, params) {
         return None;
     }
-    let fit = robust_fit(grid, members, acc, params, sigma)?;
+    let fit = robust_fit(grid, members, first, params, sigma)?;
     if too_bent_to_split(&fit, members.len(), params, sigma)
         || bent_across_rows(grid, members, &fit, params, sigma)
     {
@@ -319,6 +328,7 @@ fn trim_edge_rows(
     grid: &PoseGrid,
     members: &[usize],
     all: &PlaneAccumulator,
+    all_fit: &PlaneFit,
     sigma: f64,
     params: &LevelParams,
 ) -> Option<Vec<usize>> {
@@ -334,10 +344,7 @@ fn trim_edge_rows(
     let s = sigma.max(params.min_sigma);
     // A plane the noise explains has no row standing off it worth the test: a floor line
     // taken in at a wall's foot leaves the whole patch's fit about half as scattered again.
-    if all
-        .fit(sigma)
-        .is_none_or(|f| f.misfit_ratio(s) <= params.split_misfit)
-    {
+    if all_fit.misfit_ratio(s) <= params.split_misfit {
         return None;
     }
     let rc = grid.row_col();
@@ -505,7 +512,7 @@ fn release_and_make(
     sigma: f64,
     tol: f64,
 ) -> Option<Patch> {
-    let fit = accumulate(grid, members).fit(sigma)?;
+    let fit = grid.accumulate(members).fit(sigma)?;
     let mut acc = PlaneAccumulator::default();
     let kept: Vec<usize> = members
         .iter()
@@ -529,7 +536,7 @@ fn release_and_make(
 fn robust_fit(
     grid: &PoseGrid,
     members: &[usize],
-    acc: PlaneAccumulator,
+    mut fit: PlaneFit,
     params: &LevelParams,
     sigma: f64,
 ) -> Option<PlaneFit> {
@@ -537,7 +544,6 @@ fn robust_fit(
         .iter()
         .filter_map(|&i| grid.points[i].as_ref())
         .collect();
-    let mut fit = acc.fit(sigma)?;
     let s = sigma.max(params.min_sigma);
     let mut weights = vec![1.0; points.len()];
     if params.ray_weights {
@@ -670,14 +676,6 @@ fn ascending(members: &[usize]) -> Vec<usize> {
         .collect()
 }
 
-fn accumulate(grid: &PoseGrid, members: &[usize]) -> PlaneAccumulator {
-    let mut acc = PlaneAccumulator::default();
-    for g in members.iter().filter_map(|&i| grid.points[i].as_ref()) {
-        acc.add(g);
-    }
-    acc
-}
-
 /// Splits a patch's members into planes while two planes explain them significantly better
 /// than one: the best split by column (walls meet at corners, which are column ranges) or by
 /// row (contiguous splits only: freely reassigning points would split one noisy plane into two
@@ -696,7 +694,7 @@ pub fn split_members(
     }
     let cols = grid.cols;
     let rc = grid.row_col();
-    let Some(fit_all) = accumulate(grid, members).fit(sigma) else {
+    let Some(fit_all) = grid.accumulate(members).fit(sigma) else {
         return whole;
     };
     let rss1 = fit_all.residual_ss;
@@ -782,8 +780,8 @@ pub fn split_members(
         return whole;
     }
     let (Some(fa), Some(fb)) = (
-        accumulate(grid, &a).fit(sigma),
-        accumulate(grid, &b).fit(sigma),
+        grid.accumulate(&a).fit(sigma),
+        grid.accumulate(&b).fit(sigma),
     ) else {
         return whole;
     };
@@ -892,7 +890,7 @@ mod tests {
             let grid = oblique_wall_grid(&n, sigma, seed);
             let points: Vec<&GridPoint> = grid.points.iter().flatten().collect();
             let members: Vec<usize> = (0..grid.points.len()).collect();
-            let plain = accumulate(&grid, &members).fit(sigma).unwrap();
+            let plain = grid.accumulate(&members).fit(sigma).unwrap();
             let mut w = vec![1.0; points.len()];
             let weighted = ray_weighted_fit(&points, &params, sigma, plain, &mut w).unwrap();
             sq_plain += plain.normal.dot(&up).powi(2);
@@ -955,7 +953,7 @@ mod tests {
         for seed in 0..20 {
             // The floor line 10 cm in front of the wall's foot, at 1 cm noise.
             let (grid, members) = wall_over_floor_line(2.2, 0.01, seed);
-            let fit = accumulate(&grid, &members).fit(0.01).unwrap();
+            let fit = grid.accumulate(&members).fit(0.01).unwrap();
             assert!(
                 bent_across_rows(&grid, &members, &fit, &params, 0.01),
                 "seed {seed}"
@@ -971,7 +969,7 @@ mod tests {
         for seed in 0..200 {
             let grid = oblique_wall_grid(&n, 0.1, seed);
             let members: Vec<usize> = (0..grid.points.len()).collect();
-            let fit = accumulate(&grid, &members).fit(0.1).unwrap();
+            let fit = grid.accumulate(&members).fit(0.1).unwrap();
             bent += usize::from(bent_across_rows(&grid, &members, &fit, &params, 0.1));
         }
         // A 4-sigma threshold on one degree of freedom rejects about 1% of true planes.
@@ -984,7 +982,7 @@ mod tests {
         let grid = oblique_wall_grid(&n, 1e-300, 1);
         let points: Vec<&GridPoint> = grid.points.iter().flatten().collect();
         let members: Vec<usize> = (0..grid.points.len()).collect();
-        let plain = accumulate(&grid, &members).fit(0.0).unwrap();
+        let plain = grid.accumulate(&members).fit(0.0).unwrap();
         let params = LevelParams::default();
         let mut w = vec![1.0; points.len()];
         let fit = ray_weighted_fit(&points, &params, 0.0, plain, &mut w).unwrap();

@@ -19,7 +19,7 @@
 //! measurably help). The walls' planes are refitted free (not forced vertical): their tilt
 //! is the evidence of up; verticality only steers which points they get.
 
-use super::grid::{GridPoint, PlaneAccumulator, PlaneFit, PoseGrid};
+use super::grid::{GridPoint, PlaneFit, PoseGrid};
 use super::patches::Patch;
 use super::up::{self, LevelLine, PlaneObs, UpSolution};
 use super::{LevelParams, SurfaceKind};
@@ -1201,11 +1201,7 @@ const LEVEL_ROUNDS: usize = 3;
 const MIN_LEVEL_DISTANCE: f64 = 0.1;
 
 fn fit_members(grid: &PoseGrid, members: &[usize], sigma: f64) -> Option<PlaneFit> {
-    let mut acc = PlaneAccumulator::default();
-    for g in members.iter().filter_map(|&i| grid.points[i].as_ref()) {
-        acc.add(g);
-    }
-    acc.fit(sigma)
+    grid.accumulate(members).fit(sigma)
 }
 
 /// Rows holding at least `share` of the members each.
@@ -1299,6 +1295,12 @@ mod tests {
             .collect()
     }
 
+    /// `n` points across the robot's path, `x` ahead, from 1 m right to 1 m left, at
+    /// height `z`.
+    fn across(x: f64, z: f64, n: usize) -> Vec<Vector3<f64>> {
+        run(Vector3::new(x, -1.0, z), Vector3::new(x, 1.0, z), n)
+    }
+
     fn floor_evidence(grid: &PoseGrid) -> LevelEvidence {
         let lv = Leveled::new(grid, &Rotation3::identity());
         let all = vec![true; grid.points.len()];
@@ -1324,11 +1326,7 @@ mod tests {
             Vector3::new(1.5, 0.4, -0.2),
             40,
         );
-        let floor = run(
-            Vector3::new(1.2, -1.0, -0.45),
-            Vector3::new(1.2, 1.0, -0.45),
-            20,
-        );
+        let floor = across(1.2, -0.45, 20);
         let grid = grid_of([Vec::new(), box_top, floor]);
         let LevelEvidence::Lines(lines) = floor_evidence(&grid) else {
             panic!("expected one floor line");
@@ -1412,21 +1410,9 @@ mod tests {
         // Two floor lines 0.8 m apart, and a wall's line 3 m ahead, 3 cm above the floor: at
         // the floor's height within the tolerance and level, but not in the plane of the other
         // two. Which line is wrong is not known, so none is used.
-        let wall = run(
-            Vector3::new(3.0, -1.0, -0.42),
-            Vector3::new(3.0, 1.0, -0.42),
-            30,
-        );
-        let near = run(
-            Vector3::new(1.2, -1.0, -0.45),
-            Vector3::new(1.2, 1.0, -0.45),
-            30,
-        );
-        let far = run(
-            Vector3::new(2.0, -1.0, -0.45),
-            Vector3::new(2.0, 1.0, -0.45),
-            30,
-        );
+        let wall = across(3.0, -0.42, 30);
+        let near = across(1.2, -0.45, 30);
+        let far = across(2.0, -0.45, 30);
         let grid = grid_of([wall, far.clone(), near.clone()]);
         assert!(matches!(floor_evidence(&grid), LevelEvidence::None));
         // A wall's line that rises along the wall (from 1.5 to 4.5 cm above the floor) is no
