@@ -15,38 +15,45 @@ pub struct Eigen3 {
 
 /// Decomposes a symmetric matrix (only its upper triangle is read).
 pub fn sym_eigen3(a: &Matrix3<f64>) -> Eigen3 {
-    let scale = a.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    let upper = [
+        a[(0, 0)],
+        a[(0, 1)],
+        a[(0, 2)],
+        a[(1, 1)],
+        a[(1, 2)],
+        a[(2, 2)],
+    ];
+    let scale = upper.iter().fold(0.0f64, |m, v| m.max(v.abs()));
     if scale == 0.0 || !scale.is_finite() {
         return fallback(a);
     }
-    let m = a / scale;
-    let (a00, a01, a02, a11, a12, a22) = (
-        m[(0, 0)],
-        m[(0, 1)],
-        m[(0, 2)],
-        m[(1, 1)],
-        m[(1, 2)],
-        m[(2, 2)],
-    );
+    // Scaled to unit size so that the cubic's terms stay well inside the float range.
+    let [a00, a01, a02, a11, a12, a22] = upper.map(|v| v / scale);
     let p1 = a01 * a01 + a02 * a02 + a12 * a12;
     let q = (a00 + a11 + a22) / 3.0;
-    let p2 = (a00 - q).powi(2) + (a11 - q).powi(2) + (a22 - q).powi(2) + 2.0 * p1;
+    let (d0, d1, d2) = (a00 - q, a11 - q, a22 - q);
+    let p2 = d0 * d0 + d1 * d1 + d2 * d2 + 2.0 * p1;
     let p = (p2 / 6.0).sqrt();
     if p < 1e-9 {
         return fallback(a);
     }
-    let b = (m - Matrix3::identity() * q) / p;
-    let r = (b.determinant() / 2.0).clamp(-1.0, 1.0);
+    // det((A - q I) / p) / 2 = cos(3 phi).
+    let det =
+        d0 * (d1 * d2 - a12 * a12) - a01 * (a01 * d2 - a12 * a02) + a02 * (a01 * a12 - d1 * a02);
+    let r = (det / (2.0 * p * p * p)).clamp(-1.0, 1.0);
     let phi = r.acos() / 3.0;
-    let two_pi_3 = 2.0 * std::f64::consts::PI / 3.0;
-    let l_max = q + 2.0 * p * phi.cos();
-    let l_min = q + 2.0 * p * (phi + two_pi_3).cos();
+    // cos(phi + 2 pi / 3) by the angle sum, with sin(phi) >= 0 for phi in [0, pi / 3].
+    let c = phi.cos();
+    let s = (1.0 - c * c).max(0.0).sqrt();
+    let l_max = q + 2.0 * p * c;
+    let l_min = q + 2.0 * p * (-0.5 * c - 0.5 * 3f64.sqrt() * s);
     let l_mid = 3.0 * q - l_max - l_min;
     // Well separated eigenvalues give accurate cross products; otherwise iterate.
     let gap = (l_mid - l_min).min(l_max - l_mid);
     if gap < 1e-6 * p {
         return fallback(a);
     }
+    let m = [a00, a01, a02, a11, a12, a22];
     let (Some(v_min), Some(v_max)) = (null_vector(&m, l_min), null_vector(&m, l_max)) else {
         return fallback(a);
     };
@@ -57,19 +64,22 @@ pub fn sym_eigen3(a: &Matrix3<f64>) -> Eigen3 {
     }
 }
 
-/// A unit vector spanning the null space of `m - l I` (the largest cross product of its rows).
-fn null_vector(m: &Matrix3<f64>, l: f64) -> Option<Vector3<f64>> {
-    let s = m - Matrix3::identity() * l;
-    let (r0, r1, r2) = (
-        s.row(0).transpose(),
-        s.row(1).transpose(),
-        s.row(2).transpose(),
-    );
+/// A unit vector spanning the null space of `M - l I` (the largest cross product of its
+/// rows), for `M`'s upper triangle `m` (xx, xy, xz, yy, yz, zz).
+fn null_vector(m: &[f64; 6], l: f64) -> Option<Vector3<f64>> {
+    let r0 = Vector3::new(m[0] - l, m[1], m[2]);
+    let r1 = Vector3::new(m[1], m[3] - l, m[4]);
+    let r2 = Vector3::new(m[2], m[4], m[5] - l);
     let c = [r0.cross(&r1), r0.cross(&r2), r1.cross(&r2)];
-    let best = c
-        .iter()
-        .max_by(|a, b| a.norm_squared().total_cmp(&b.norm_squared()))?;
-    best.try_normalize(1e-150)
+    let norms = c.map(|v| v.norm_squared());
+    let best = if norms[0] >= norms[1] && norms[0] >= norms[2] {
+        0
+    } else if norms[1] >= norms[2] {
+        1
+    } else {
+        2
+    };
+    c[best].try_normalize(1e-150)
 }
 
 fn fallback(a: &Matrix3<f64>) -> Eigen3 {

@@ -14,6 +14,19 @@ pub struct GridPoint {
     pub dir: Vector3<f64>,
     /// The measured range [m].
     pub range: f64,
+    /// What it adds to a plane's sums.
+    pub moments: Moments,
+}
+
+impl GridPoint {
+    pub fn new(p: Point3<f64>, dir: Vector3<f64>, range: f64) -> Self {
+        GridPoint {
+            p,
+            dir,
+            range,
+            moments: moments(&p.coords, &dir),
+        }
+    }
 }
 
 /// The pose's scans as rows of points, sorted by ascending elevation.
@@ -78,7 +91,7 @@ impl PoseGrid {
                 points.push(s.range(c).filter(|&r| r > 0.0).map(|range| {
                     let dir = robot_from_scanner * Vector3::new(cp, sp, 0.0);
                     let p = origin + dir * range;
-                    GridPoint { p, dir, range }
+                    GridPoint::new(p, dir, range)
                 }));
             }
         }
@@ -171,42 +184,77 @@ pub struct PlaneAccumulator {
     pub n: usize,
     /// Sum of their weights (= n when unweighted).
     pub weight: f64,
-    sum: Vector3<f64>,
-    /// Sum of p p^T, upper triangle: xx, xy, xz, yy, yz, zz.
-    sum_pp: [f64; 6],
-    /// Sum of d d^T over ray directions, same layout.
-    sum_dd: [f64; 6],
+    /// Weighted sums in the layout of [`Moments`]: p, p p^T and d d^T over the ray directions.
+    sums: Moments,
+}
+
+/// What one point adds to a plane's sums, computed once per grid point since every point joins
+/// many sums (quads, growth, refits): `p` (3), `p p^T` (6, upper triangle xx, xy, xz, yy, yz,
+/// zz), then `d d^T` over its ray direction (6, same layout).
+pub type Moments = [f64; 15];
+
+const SUM: usize = 0;
+const PP: usize = 3;
+const DD: usize = 9;
+
+/// A point's [`Moments`].
+pub fn moments(p: &Vector3<f64>, d: &Vector3<f64>) -> Moments {
+    [
+        p.x,
+        p.y,
+        p.z,
+        p.x * p.x,
+        p.x * p.y,
+        p.x * p.z,
+        p.y * p.y,
+        p.y * p.z,
+        p.z * p.z,
+        d.x * d.x,
+        d.x * d.y,
+        d.x * d.z,
+        d.y * d.y,
+        d.y * d.z,
+        d.z * d.z,
+    ]
 }
 
 impl PlaneAccumulator {
     pub fn add(&mut self, gp: &GridPoint) {
-        self.add_weighted(gp, 1.0);
+        self.n += 1;
+        self.weight += 1.0;
+        for (s, m) in self.sums.iter_mut().zip(&gp.moments) {
+            *s += m;
+        }
     }
 
     /// Adds a point with weight `w` in [0, 1] (robust refits).
     pub fn add_weighted(&mut self, gp: &GridPoint, w: f64) {
-        let p = gp.p.coords;
-        let d = gp.dir;
         self.n += 1;
         self.weight += w;
-        self.sum += p * w;
-        add_outer_weighted(&mut self.sum_pp, &p, w);
-        add_outer_weighted(&mut self.sum_dd, &d, w);
+        for (s, m) in self.sums.iter_mut().zip(&gp.moments) {
+            *s += w * m;
+        }
     }
 
     pub fn merge(&mut self, o: &PlaneAccumulator) {
         self.n += o.n;
         self.weight += o.weight;
-        self.sum += o.sum;
-        for k in 0..6 {
-            self.sum_pp[k] += o.sum_pp[k];
-            self.sum_dd[k] += o.sum_dd[k];
+        for (s, m) in self.sums.iter_mut().zip(&o.sums) {
+            *s += m;
         }
+    }
+
+    fn sum(&self) -> Vector3<f64> {
+        Vector3::new(self.sums[SUM], self.sums[SUM + 1], self.sums[SUM + 2])
+    }
+
+    fn sum_pp(&self, k: usize) -> f64 {
+        self.sums[PP + k]
     }
 
     /// The weighted mean of the points added.
     pub fn centroid(&self) -> Point3<f64> {
-        Point3::from(self.sum / self.weight.max(1e-300))
+        Point3::from(self.sum() / self.weight.max(1e-300))
     }
 
     /// The accumulator of the points in `self` but not in `part` (a subset of them).
@@ -214,10 +262,8 @@ impl PlaneAccumulator {
         let mut out = *self;
         out.n -= part.n;
         out.weight -= part.weight;
-        out.sum -= part.sum;
-        for k in 0..6 {
-            out.sum_pp[k] -= part.sum_pp[k];
-            out.sum_dd[k] -= part.sum_dd[k];
+        for (s, m) in out.sums.iter_mut().zip(&part.sums) {
+            *s -= m;
         }
         out
     }
@@ -228,8 +274,8 @@ impl PlaneAccumulator {
             return None;
         }
         let nf = self.weight;
-        let c = self.sum / nf;
-        let s = |k: usize| self.sum_pp[k];
+        let c = self.sum() / nf;
+        let s = |k: usize| self.sum_pp(k);
         let raw = nalgebra::Matrix3::new(
             s(0) - nf * c.x * c.x,
             s(1) - nf * c.x * c.y,
@@ -241,7 +287,7 @@ impl PlaneAccumulator {
             s(4) - nf * c.y * c.z,
             s(5) - nf * c.z * c.z,
         );
-        let dd = sym(&self.sum_dd);
+        let dd = sym(&self.sums[DD..DD + 6]);
         let noise = dd * (sigma * sigma * (nf - 1.0) / nf);
         let corrected = raw - noise;
         let eig = super::eigen3::sym_eigen3(&corrected);
@@ -276,10 +322,10 @@ impl PlaneAccumulator {
             return 0.0;
         }
         let nf = self.weight;
-        let c = self.sum / nf;
+        let c = self.sum() / nf;
         let cv = [c.x, c.y, c.z];
         let (ii, jj) = ([0, 0, 0, 1, 1, 2], [0, 1, 2, 1, 2, 2]);
-        let m: [f64; 6] = std::array::from_fn(|t| self.sum_pp[t] - nf * cv[ii[t]] * cv[jj[t]]);
+        let m: [f64; 6] = std::array::from_fn(|t| self.sum_pp(t) - nf * cv[ii[t]] * cv[jj[t]]);
         let trace = m[0] + m[3] + m[5];
         let minor01 = m[0] * m[3] - m[1] * m[1];
         let minor02 = m[0] * m[5] - m[2] * m[2];
@@ -301,17 +347,8 @@ impl PlaneAccumulator {
     }
 }
 
-fn add_outer_weighted(a: &mut [f64; 6], v: &Vector3<f64>, w: f64) {
-    let wv = v * w;
-    a[0] += wv.x * v.x;
-    a[1] += wv.x * v.y;
-    a[2] += wv.x * v.z;
-    a[3] += wv.y * v.y;
-    a[4] += wv.y * v.z;
-    a[5] += wv.z * v.z;
-}
-
-fn sym(a: &[f64; 6]) -> nalgebra::Matrix3<f64> {
+/// The symmetric matrix of an upper triangle laid out as in [`Moments`].
+fn sym(a: &[f64]) -> nalgebra::Matrix3<f64> {
     nalgebra::Matrix3::new(a[0], a[1], a[2], a[1], a[3], a[4], a[2], a[4], a[5])
 }
 
@@ -367,11 +404,7 @@ mod tests {
 
     fn gp(x: f64, y: f64, z: f64) -> GridPoint {
         let p = Point3::new(x, y, z);
-        GridPoint {
-            p,
-            dir: p.coords.normalize(),
-            range: p.coords.norm(),
-        }
+        GridPoint::new(p, p.coords.normalize(), p.coords.norm())
     }
 
     #[test]

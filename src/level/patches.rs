@@ -860,11 +860,7 @@ mod tests {
                 let dir = Vector3::new(bearing.cos() * e.cos(), bearing.sin(), -e.sin());
                 // Range to the plane n . (p - (3, 0, 0)) = 0 along dir.
                 let range = 3.0 * n.x / n.dot(&dir) + noise.sample(&mut rng);
-                points.push(Some(GridPoint {
-                    p: Point3::from(dir * range),
-                    dir,
-                    range,
-                }));
+                points.push(Some(GridPoint::new(Point3::from(dir * range), dir, range)));
             }
         }
         PoseGrid {
@@ -930,11 +926,11 @@ mod tests {
                     foot / (dir.x * dir.x + dir.y * dir.y).sqrt()
                 };
                 let range = exact + noise.sample(&mut rng);
-                points.push(Some(GridPoint {
-                    p: Point3::new(0.0, 0.0, 0.45) + dir * range,
+                points.push(Some(GridPoint::new(
+                    Point3::new(0.0, 0.0, 0.45) + dir * range,
                     dir,
                     range,
-                }));
+                )));
             }
         }
         let members = (0..points.len()).collect();

@@ -1273,11 +1273,11 @@ mod tests {
         let mut points = Vec::new();
         for row in &rows {
             for c in 0..cols {
-                points.push(row.get(c).map(|p| GridPoint {
-                    p: nalgebra::Point3::from(*p),
-                    dir: p.normalize(),
-                    range: p.norm(),
-                }));
+                points.push(
+                    row.get(c).map(|p| {
+                        GridPoint::new(nalgebra::Point3::from(*p), p.normalize(), p.norm())
+                    }),
+                );
             }
         }
         PoseGrid {
