@@ -236,6 +236,14 @@ impl PlaneAccumulator {
         }
     }
 
+    /// Scales every weight by `k` (the point count stays).
+    pub fn scale(&mut self, k: f64) {
+        self.weight *= k;
+        for s in &mut self.sums {
+            *s *= k;
+        }
+    }
+
     pub fn merge(&mut self, o: &PlaneAccumulator) {
         self.n += o.n;
         self.weight += o.weight;

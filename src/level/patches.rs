@@ -540,21 +540,16 @@ fn robust_fit(
     params: &LevelParams,
     sigma: f64,
 ) -> Option<PlaneFit> {
-    let points: Vec<&GridPoint> = members
-        .iter()
-        .filter_map(|&i| grid.points[i].as_ref())
-        .collect();
+    let points = || members.iter().filter_map(|&i| grid.points[i].as_ref());
     let s = sigma.max(params.min_sigma);
-    let mut weights = vec![1.0; points.len()];
     if params.ray_weights {
-        fit = ray_weighted_fit(&points, params, sigma, fit, &mut weights)?;
+        fit = ray_weighted_fit(points, params, sigma, fit)?;
     } else if fit.misfit_ratio(s) > params.split_misfit {
         // A plane its noise already explains has no outliers worth reweighting.
         for _ in 0..params.plane_iterations {
             let mut acc = PlaneAccumulator::default();
-            for (g, w) in points.iter().zip(weights.iter_mut()) {
-                *w = cauchy_weight(&fit, g, s, params);
-                acc.add_weighted(g, *w);
+            for g in points() {
+                acc.add_weighted(g, cauchy_weight(&fit, g, s, params));
             }
             fit = acc.fit(sigma)?;
         }
@@ -591,35 +586,34 @@ fn ray_tolerance(fit: &PlaneFit, g: &GridPoint, tol: f64, sigma: f64, params: &L
 /// variance; plus the Cauchy weights of [`robust_fit`] when the plane misfits. Points met at
 /// an oblique incidence are the precise ones along the normal; an unweighted fit lets the
 /// head-on points' noise dominate. Two passes, since the weights follow the normal.
-fn ray_weighted_fit(
-    points: &[&GridPoint],
+fn ray_weighted_fit<'a, I: Iterator<Item = &'a GridPoint>>(
+    points: impl Fn() -> I,
     params: &LevelParams,
     sigma: f64,
     mut fit: PlaneFit,
-    weights: &mut [f64],
 ) -> Option<PlaneFit> {
     let s = sigma.max(params.min_sigma);
     let robust = fit.misfit_ratio(s) > params.split_misfit;
     for _ in 0..2 {
-        for (g, w) in points.iter().zip(weights.iter_mut()) {
-            *w = 1.0
+        let (mut acc, mut ray_weights, mut n) = (PlaneAccumulator::default(), 0.0, 0.0);
+        for g in points() {
+            let w = 1.0
                 / g.dir
                     .dot(&fit.normal)
                     .abs()
                     .max(params.ray_weight_floor)
                     .powi(2);
-        }
-        let k = points.len() as f64 / weights.iter().sum::<f64>().max(1e-300);
-        let mut acc = PlaneAccumulator::default();
-        for (g, w) in points.iter().zip(weights.iter_mut()) {
             let cauchy = if robust {
                 cauchy_weight(&fit, g, s, params)
             } else {
                 1.0
             };
-            *w *= cauchy * k;
-            acc.add_weighted(g, *w);
+            acc.add_weighted(g, w * cauchy);
+            ray_weights += w;
+            n += 1.0;
         }
+        // The ray weights' mean scaled to one, after the sums (they are linear in the weights).
+        acc.scale(n / ray_weights.max(1e-300));
         fit = acc.fit(sigma)?;
     }
     Some(fit)
@@ -884,11 +878,10 @@ mod tests {
         let trials = 300;
         for seed in 0..trials {
             let grid = oblique_wall_grid(&n, sigma, seed);
-            let points: Vec<&GridPoint> = grid.points.iter().flatten().collect();
             let members: Vec<usize> = (0..grid.points.len()).collect();
             let plain = grid.accumulate(&members).fit(sigma).unwrap();
-            let mut w = vec![1.0; points.len()];
-            let weighted = ray_weighted_fit(&points, &params, sigma, plain, &mut w).unwrap();
+            let points = || grid.points.iter().flatten();
+            let weighted = ray_weighted_fit(points, &params, sigma, plain).unwrap();
             sq_plain += plain.normal.dot(&up).powi(2);
             sq_w += weighted.normal.dot(&up).powi(2);
             predicted += weighted.normal_variance_along(&up, sigma);
@@ -976,12 +969,10 @@ mod tests {
     fn ray_weighted_fit_is_exact_without_noise() {
         let n = Vector3::new(1.0, -1.2, 0.3).normalize();
         let grid = oblique_wall_grid(&n, 1e-300, 1);
-        let points: Vec<&GridPoint> = grid.points.iter().flatten().collect();
         let members: Vec<usize> = (0..grid.points.len()).collect();
         let plain = grid.accumulate(&members).fit(0.0).unwrap();
         let params = LevelParams::default();
-        let mut w = vec![1.0; points.len()];
-        let fit = ray_weighted_fit(&points, &params, 0.0, plain, &mut w).unwrap();
+        let fit = ray_weighted_fit(|| grid.points.iter().flatten(), &params, 0.0, plain).unwrap();
         assert!(1.0 - fit.normal.dot(&n).abs() < 1e-12, "{:?}", fit.normal);
     }
 }
