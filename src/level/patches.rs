@@ -645,29 +645,31 @@ fn in_order(grid: &PoseGrid, members: &[usize], by_row: bool) -> Vec<usize> {
     out
 }
 
-/// Distinct grid indices in ascending order: marked in a bitmap over their range and read
-/// back, cheaper than a comparison sort for a patch's members (dense in their range).
+/// Distinct grid indices in ascending order: marked in a bitset over their range and read
+/// back word by word, cheaper than a comparison sort for a patch's members (dense in their
+/// range).
 fn ascending(members: &[usize]) -> Vec<usize> {
     let (Some(&lo), Some(&hi)) = (members.iter().min(), members.iter().max()) else {
         return Vec::new();
     };
-    if members.is_sorted() {
-        return members.to_vec();
-    }
     if hi - lo > 16 * members.len() {
         let mut v = members.to_vec();
         v.sort_unstable();
         return v;
     }
-    let mut seen = vec![false; hi - lo + 1];
+    let mut bits = vec![0u64; (hi - lo) / 64 + 1];
     for &i in members {
-        seen[i - lo] = true;
+        bits[(i - lo) / 64] |= 1 << ((i - lo) % 64);
     }
-    seen.iter()
-        .enumerate()
-        .filter(|&(_, &s)| s)
-        .map(|(k, _)| lo + k)
-        .collect()
+    let mut out = Vec::with_capacity(members.len());
+    for (k, &word) in bits.iter().enumerate() {
+        let mut w = word;
+        while w != 0 {
+            out.push(lo + 64 * k + w.trailing_zeros() as usize);
+            w &= w - 1;
+        }
+    }
+    out
 }
 
 /// Splits a patch's members into planes while two planes explain them significantly better
