@@ -7,7 +7,6 @@ use super::grid::{GridPoint, PlaneAccumulator, PlaneFit, PoseGrid};
 use super::polygons::{Polygon, classify, extract_quads_sized};
 use super::{LevelParams, SurfaceKind};
 use nalgebra::{Matrix3, Vector3};
-use std::collections::VecDeque;
 
 /// One grown planar patch.
 #[derive(Clone, Debug)]
@@ -154,7 +153,6 @@ pub fn grow_patches(
     // Keys are unique (the index breaks ties): an unstable sort gives the stable order.
     seeds.sort_unstable_by(|a, b| a.0.cmp(&b.0).then(a.1.total_cmp(&b.1)).then(a.2.cmp(&b.2)));
     let seeds: Vec<&Polygon> = seeds.into_iter().map(|s| s.3).collect();
-    let mut queue = VecDeque::new();
     let mut members = Vec::new();
     // Column of every grid point, without a division per visit.
     let col_of: Vec<usize> = (0..grid.rows()).flat_map(|_| 0..cols).collect();
@@ -165,11 +163,9 @@ pub fn grow_patches(
         let id = patches.len() as u32;
         let mut acc = PlaneAccumulator::default();
         members.clear();
-        queue.clear();
         for i in q.span(cols) {
             labels[i] = id;
             members.push(i);
-            queue.push_back(i);
             if let Some(g) = &grid.points[i] {
                 acc.add(g);
             }
@@ -180,7 +176,10 @@ pub fn grow_patches(
         let s_eff = sigma.max(params.min_sigma);
         let tol_at = |fit: &PlaneFit, g: &GridPoint| ray_tolerance(fit, g, tol, s_eff, params);
         let mut refit_at = acc.n + acc.n / 3 + 1;
-        while let Some(i) = queue.pop_front() {
+        // Breadth first: the members not yet visited are the queue.
+        let mut next = 0;
+        while let Some(&i) = members.get(next) {
+            next += 1;
             let c = col_of[i];
             let mut neighbours = [usize::MAX; 4];
             if c > 0 {
@@ -203,7 +202,6 @@ pub fn grow_patches(
                 if fit.distance(&g.p).abs() <= tol_at(&fit, g) {
                     labels[j] = id;
                     members.push(j);
-                    queue.push_back(j);
                     acc.add(g);
                     if acc.n >= refit_at {
                         if let Some(f) = acc.fit(sigma) {
