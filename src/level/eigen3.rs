@@ -15,17 +15,21 @@ pub struct Eigen3 {
 
 /// Decomposes a symmetric matrix (only its upper triangle is read).
 pub fn sym_eigen3(a: &Matrix3<f64>) -> Eigen3 {
-    let upper = [
+    sym_eigen3_upper(&[
         a[(0, 0)],
         a[(0, 1)],
         a[(0, 2)],
         a[(1, 1)],
         a[(1, 2)],
         a[(2, 2)],
-    ];
+    ])
+}
+
+/// [`sym_eigen3`] of the symmetric matrix with upper triangle `upper` (xx, xy, xz, yy, yz, zz).
+pub fn sym_eigen3_upper(upper: &[f64; 6]) -> Eigen3 {
     let scale = upper.iter().fold(0.0f64, |m, v| m.max(v.abs()));
     if scale == 0.0 || !scale.is_finite() {
-        return fallback(a);
+        return fallback(upper);
     }
     // Scaled to unit size so that the cubic's terms stay well inside the float range.
     let [a00, a01, a02, a11, a12, a22] = upper.map(|v| v / scale);
@@ -35,7 +39,7 @@ pub fn sym_eigen3(a: &Matrix3<f64>) -> Eigen3 {
     let p2 = d0 * d0 + d1 * d1 + d2 * d2 + 2.0 * p1;
     let p = (p2 / 6.0).sqrt();
     if p < 1e-9 {
-        return fallback(a);
+        return fallback(upper);
     }
     // det((A - q I) / p) / 2 = cos(3 phi).
     let det =
@@ -51,11 +55,11 @@ pub fn sym_eigen3(a: &Matrix3<f64>) -> Eigen3 {
     // Well separated eigenvalues give accurate cross products; otherwise iterate.
     let gap = (l_mid - l_min).min(l_max - l_mid);
     if gap < 1e-6 * p {
-        return fallback(a);
+        return fallback(upper);
     }
     let m = [a00, a01, a02, a11, a12, a22];
     let (Some(v_min), Some(v_max)) = (null_vector(&m, l_min), null_vector(&m, l_max)) else {
-        return fallback(a);
+        return fallback(upper);
     };
     let v_mid = v_max.cross(&v_min);
     Eigen3 {
@@ -82,8 +86,9 @@ fn null_vector(m: &[f64; 6], l: f64) -> Option<Vector3<f64>> {
     c[best].try_normalize(1e-150)
 }
 
-fn fallback(a: &Matrix3<f64>) -> Eigen3 {
-    let e = SymmetricEigen::new(*a);
+fn fallback(u: &[f64; 6]) -> Eigen3 {
+    let a = Matrix3::new(u[0], u[1], u[2], u[1], u[3], u[4], u[2], u[4], u[5]);
+    let e = SymmetricEigen::new(a);
     let mut idx = [0usize, 1, 2];
     idx.sort_by(|&x, &y| e.eigenvalues[x].total_cmp(&e.eigenvalues[y]));
     Eigen3 {
@@ -99,7 +104,14 @@ mod tests {
 
     fn check(a: &Matrix3<f64>) {
         let e = sym_eigen3(a);
-        let twin = fallback(a);
+        let twin = fallback(&[
+            a[(0, 0)],
+            a[(0, 1)],
+            a[(0, 2)],
+            a[(1, 1)],
+            a[(1, 2)],
+            a[(2, 2)],
+        ]);
         let scale = a.norm().max(1e-300);
         for k in 0..3 {
             assert!(

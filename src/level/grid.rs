@@ -283,27 +283,19 @@ impl PlaneAccumulator {
         }
         let nf = self.weight;
         let c = self.sum() / nf;
-        let s = |k: usize| self.sum_pp(k);
-        let raw = nalgebra::Matrix3::new(
-            s(0) - nf * c.x * c.x,
-            s(1) - nf * c.x * c.y,
-            s(2) - nf * c.x * c.z,
-            s(1) - nf * c.x * c.y,
-            s(3) - nf * c.y * c.y,
-            s(4) - nf * c.y * c.z,
-            s(2) - nf * c.x * c.z,
-            s(4) - nf * c.y * c.z,
-            s(5) - nf * c.z * c.z,
-        );
-        let dd = sym(&self.sums[DD..DD + 6]);
-        let noise = dd * (sigma * sigma * (nf - 1.0) / nf);
-        let corrected = raw - noise;
-        let eig = super::eigen3::sym_eigen3(&corrected);
-        let normal = eig.vectors[0];
-        let normal = normal.try_normalize(1e-300)?;
+        let cv = [c.x, c.y, c.z];
+        // Upper triangles (xx, xy, xz, yy, yz, zz): the raw scatter about the centroid, and
+        // that minus the expected noise along the rays.
+        let raw: [f64; 6] =
+            std::array::from_fn(|t| self.sum_pp(t) - nf * cv[UPPER_I[t]] * cv[UPPER_J[t]]);
+        let dd = &self.sums[DD..DD + 6];
+        let k = sigma * sigma * (nf - 1.0) / nf;
+        let corrected: [f64; 6] = std::array::from_fn(|t| raw[t] - dd[t] * k);
+        let eig = super::eigen3::sym_eigen3_upper(&corrected);
+        let normal = eig.vectors[0].try_normalize(1e-300)?;
         // Noise along the normal: sigma^2 * mean (d . n)^2.
-        let dn2 = (normal.transpose() * dd * normal)[0] / nf;
-        let residual_ss = (normal.transpose() * raw * normal)[0].max(0.0);
+        let dn2 = quadratic_form(dd, &normal) / nf;
+        let residual_ss = quadratic_form(&raw, &normal).max(0.0);
         Some(PlaneFit {
             centroid: Point3::from(c),
             normal,
@@ -332,8 +324,8 @@ impl PlaneAccumulator {
         let nf = self.weight;
         let c = self.sum() / nf;
         let cv = [c.x, c.y, c.z];
-        let (ii, jj) = ([0, 0, 0, 1, 1, 2], [0, 1, 2, 1, 2, 2]);
-        let m: [f64; 6] = std::array::from_fn(|t| self.sum_pp(t) - nf * cv[ii[t]] * cv[jj[t]]);
+        let m: [f64; 6] =
+            std::array::from_fn(|t| self.sum_pp(t) - nf * cv[UPPER_I[t]] * cv[UPPER_J[t]]);
         let trace = m[0] + m[3] + m[5];
         let minor01 = m[0] * m[3] - m[1] * m[1];
         let minor02 = m[0] * m[5] - m[2] * m[2];
@@ -355,9 +347,16 @@ impl PlaneAccumulator {
     }
 }
 
-/// The symmetric matrix of an upper triangle laid out as in [`Moments`].
-fn sym(a: &[f64]) -> nalgebra::Matrix3<f64> {
-    nalgebra::Matrix3::new(a[0], a[1], a[2], a[1], a[3], a[4], a[2], a[4], a[5])
+/// Row and column of each entry of an upper triangle laid out as in [`Moments`].
+const UPPER_I: [usize; 6] = [0, 0, 0, 1, 1, 2];
+const UPPER_J: [usize; 6] = [0, 1, 2, 1, 2, 2];
+
+/// `v^T A v` for the symmetric `A` of upper triangle `a` (layout of [`Moments`]).
+fn quadratic_form(a: &[f64], v: &Vector3<f64>) -> f64 {
+    a[0] * v.x * v.x
+        + a[3] * v.y * v.y
+        + a[5] * v.z * v.z
+        + 2.0 * (a[1] * v.x * v.y + a[2] * v.x * v.z + a[4] * v.y * v.z)
 }
 
 /// A fitted plane with what its normal's uncertainty needs.
