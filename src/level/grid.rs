@@ -14,18 +14,11 @@ pub struct GridPoint {
     pub dir: Vector3<f64>,
     /// The measured range [m].
     pub range: f64,
-    /// What it adds to a plane's sums.
-    pub moments: Moments,
 }
 
 impl GridPoint {
     pub fn new(p: Point3<f64>, dir: Vector3<f64>, range: f64) -> Self {
-        GridPoint {
-            p,
-            dir,
-            range,
-            moments: moments(&p.coords, &dir),
-        }
+        GridPoint { p, dir, range }
     }
 }
 
@@ -188,17 +181,16 @@ pub struct PlaneAccumulator {
     sums: Moments,
 }
 
-/// What one point adds to a plane's sums, computed once per grid point since every point joins
-/// many sums (quads, growth, refits): `p` (3), `p p^T` (6, upper triangle xx, xy, xz, yy, yz,
-/// zz), then `d d^T` over its ray direction (6, same layout).
-pub type Moments = [f64; 15];
+/// What one point adds to a plane's sums: `p` (3), `p p^T` (6, upper triangle xx, xy, xz, yy,
+/// yz, zz), then `d d^T` over its ray direction (6, same layout).
+type Moments = [f64; 15];
 
 const SUM: usize = 0;
 const PP: usize = 3;
 const DD: usize = 9;
 
 /// A point's [`Moments`].
-pub fn moments(p: &Vector3<f64>, d: &Vector3<f64>) -> Moments {
+fn moments(p: &Vector3<f64>, d: &Vector3<f64>) -> Moments {
     [
         p.x,
         p.y,
@@ -222,7 +214,9 @@ impl PlaneAccumulator {
     pub fn add(&mut self, gp: &GridPoint) {
         self.n += 1;
         self.weight += 1.0;
-        for (s, m) in self.sums.iter_mut().zip(&gp.moments) {
+        // Computed on the fly: stored with every point they would triple the grid's size, and
+        // the passes over it would cost more in memory traffic than they save.
+        for (s, m) in self.sums.iter_mut().zip(&moments(&gp.p.coords, &gp.dir)) {
             *s += m;
         }
     }
@@ -231,7 +225,7 @@ impl PlaneAccumulator {
     pub fn add_weighted(&mut self, gp: &GridPoint, w: f64) {
         self.n += 1;
         self.weight += w;
-        for (s, m) in self.sums.iter_mut().zip(&gp.moments) {
+        for (s, m) in self.sums.iter_mut().zip(&moments(&gp.p.coords, &gp.dir)) {
             *s += w * m;
         }
     }
