@@ -1,8 +1,9 @@
 //! Closed-form eigen decomposition of symmetric 3x3 matrices: every plane fit and every up
-//! estimate needs one, thousands of times per second. Eigenvalues by the trigonometric
-//! solution of the characteristic cubic (Smith 1961), eigenvectors as the best-conditioned
-//! cross product of two rows of `A - lambda I`. Falls back to nalgebra's iterative solver when
-//! two eigenvalues (nearly) coincide, where the cross products lose their accuracy.
+//! estimate needs one, thousands of times per second. Eigenvalues by Newton's method on the
+//! characteristic cubic for the positive semi-definite scatters of planes, else by its
+//! trigonometric solution (Smith 1961); eigenvectors as the best-conditioned cross product of
+//! two rows of `A - lambda I`. Falls back to nalgebra's iterative solver when two eigenvalues
+//! (nearly) coincide, where the cross products lose their accuracy.
 
 use nalgebra::{Matrix3, SymmetricEigen, Vector3};
 
@@ -32,14 +33,73 @@ pub fn sym_eigen3_upper(upper: &[f64; 6]) -> Eigen3 {
         return fallback(upper);
     }
     // Scaled to unit size so that the cubic's terms stay well inside the float range.
-    let [a00, a01, a02, a11, a12, a22] = upper.map(|v| v / scale);
+    let inv = 1.0 / scale;
+    let m = upper.map(|v| v * inv);
+    let Some([l_min, l_mid, l_max]) = eigenvalues_above_zero(&m).or_else(|| eigenvalues_trig(&m))
+    else {
+        return fallback(upper);
+    };
+    // Well separated eigenvalues give accurate cross products; otherwise iterate.
+    let gap = (l_mid - l_min).min(l_max - l_mid);
+    if !(gap >= 1e-6 * (l_max - l_min)) || l_max - l_min < 1e-9 {
+        return fallback(upper);
+    }
+    let (Some(v_min), Some(v_max)) = (null_vector(&m, l_min), null_vector(&m, l_max)) else {
+        return fallback(upper);
+    };
+    let v_mid = v_max.cross(&v_min);
+    Eigen3 {
+        values: [l_min * scale, l_mid * scale, l_max * scale],
+        vectors: [v_min, v_mid, v_max],
+    }
+}
+
+/// Ascending eigenvalues of a positive semi-definite matrix (upper triangle `m`), as nearly
+/// every plane's scatter is: Newton's method on the characteristic polynomial
+/// `p(l) = l^3 - c1 l^2 + c2 l - c0` from 0, then the other two from the quadratic left.
+/// With `c0, c1, c2 >= 0`, `p` has no root below 0 and is increasing and concave between 0
+/// and its smallest root, so the iterates rise to that root without passing it, within a few
+/// steps when the smallest eigenvalue stands apart (a plane). `None` when the matrix is not
+/// clearly so or the iteration does not settle; no transcendental function is needed.
+fn eigenvalues_above_zero(m: &[f64; 6]) -> Option<[f64; 3]> {
+    let [a00, a01, a02, a11, a12, a22] = *m;
+    let c1 = a00 + a11 + a22;
+    let c2 = a00 * a11 + a00 * a22 + a11 * a22 - a01 * a01 - a02 * a02 - a12 * a12;
+    let c0 = a00 * (a11 * a22 - a12 * a12) - a01 * (a01 * a22 - a12 * a02)
+        + a02 * (a01 * a12 - a11 * a02);
+    if !(c0 >= 0.0 && c2 > 1e-12 * c1 * c1 && c1 > 0.0) {
+        return None;
+    }
+    let mut l = 0.0;
+    for _ in 0..8 {
+        let p = ((l - c1) * l + c2) * l - c0;
+        let dp = (3.0 * l - 2.0 * c1) * l + c2;
+        let step = p / dp;
+        l -= step;
+        if step.abs() <= 4.0 * f64::EPSILON * l.abs().max(1e-300) {
+            // The other two: sum c1 - l, product c2 - l (c1 - l).
+            let sum = c1 - l;
+            let product = c2 - l * sum;
+            let half = 0.5 * sum;
+            let l_max = half + (half * half - product).max(0.0).sqrt();
+            let l_mid = if l_max > 0.0 { product / l_max } else { 0.0 };
+            return Some([l, l_mid, l_max]);
+        }
+    }
+    None
+}
+
+/// Ascending eigenvalues by the trigonometric solution of the characteristic cubic (Smith
+/// 1961), for any symmetric matrix; `None` when it is (nearly) a multiple of the identity.
+fn eigenvalues_trig(m: &[f64; 6]) -> Option<[f64; 3]> {
+    let [a00, a01, a02, a11, a12, a22] = *m;
     let p1 = a01 * a01 + a02 * a02 + a12 * a12;
     let q = (a00 + a11 + a22) / 3.0;
     let (d0, d1, d2) = (a00 - q, a11 - q, a22 - q);
     let p2 = d0 * d0 + d1 * d1 + d2 * d2 + 2.0 * p1;
     let p = (p2 / 6.0).sqrt();
     if p < 1e-9 {
-        return fallback(upper);
+        return None;
     }
     // det((A - q I) / p) / 2 = cos(3 phi).
     let det =
@@ -51,21 +111,7 @@ pub fn sym_eigen3_upper(upper: &[f64; 6]) -> Eigen3 {
     let s = (1.0 - c * c).max(0.0).sqrt();
     let l_max = q + 2.0 * p * c;
     let l_min = q + 2.0 * p * (-0.5 * c - 0.5 * 3f64.sqrt() * s);
-    let l_mid = 3.0 * q - l_max - l_min;
-    // Well separated eigenvalues give accurate cross products; otherwise iterate.
-    let gap = (l_mid - l_min).min(l_max - l_mid);
-    if gap < 1e-6 * p {
-        return fallback(upper);
-    }
-    let m = [a00, a01, a02, a11, a12, a22];
-    let (Some(v_min), Some(v_max)) = (null_vector(&m, l_min), null_vector(&m, l_max)) else {
-        return fallback(upper);
-    };
-    let v_mid = v_max.cross(&v_min);
-    Eigen3 {
-        values: [l_min * scale, l_mid * scale, l_max * scale],
-        vectors: [v_min, v_mid, v_max],
-    }
+    Some([l_min, 3.0 * q - l_max - l_min, l_max])
 }
 
 /// A unit vector spanning the null space of `M - l I` (the largest cross product of its
