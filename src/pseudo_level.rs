@@ -188,22 +188,21 @@ fn ground_crowd(
     level_from_robot: &Matrix3<f64>,
     margin: f64,
 ) -> (Option<f64>, Option<f64>) {
-    let heights: Vec<(f64, usize)> = grid
-        .points
-        .iter()
-        .enumerate()
-        .filter_map(|(i, g)| {
-            g.as_ref()
-                .map(|g| ((level_from_robot * g.p.coords).z, i / grid.cols))
-        })
-        .collect();
+    // Leveled heights of the valid points, and each one's row.
+    let mut heights = Vec::with_capacity(grid.points.len());
+    let mut rows = Vec::with_capacity(grid.points.len());
+    for (row, points) in grid.points.chunks(grid.cols.max(1)).enumerate() {
+        for g in points.iter().flatten() {
+            heights.push((level_from_robot * g.p.coords).z);
+            rows.push(row);
+        }
+    }
     let min_count = (heights.len() / 20).max(MIN_GROUND_POINTS);
-    let Some(z0) = lowest_crowded_height(heights.iter().map(|h| h.0).collect(), margin, min_count)
-    else {
+    let Some(z0) = lowest_crowded_height(heights.clone(), margin, min_count) else {
         return (None, None);
     };
     let mut per_row = vec![0usize; grid.rows()];
-    for &(z, row) in &heights {
+    for (&z, &row) in heights.iter().zip(&rows) {
         if z >= z0 - margin && z <= z0 + margin {
             per_row[row] += 1;
         }

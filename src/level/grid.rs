@@ -74,13 +74,18 @@ impl PoseGrid {
             let robot_from_scanner = rot_y(e);
             let offset = s.hinge_offset_vector();
             let origin = beam_origin(e, &offset);
-            points.extend(trig.iter().zip(s.ranges()).take(cols).map(|(&(sp, cp), r)| {
-                r.map(|range| {
-                    let dir = robot_from_scanner * Vector3::new(cp, sp, 0.0);
-                    let p = origin + dir * range;
-                    GridPoint { p, dir, range }
-                })
-            }));
+            points.extend(
+                trig.iter()
+                    .zip(s.ranges())
+                    .take(cols)
+                    .map(|(&(sp, cp), r)| {
+                        r.map(|range| {
+                            let dir = robot_from_scanner * Vector3::new(cp, sp, 0.0);
+                            let p = origin + dir * range;
+                            GridPoint { p, dir, range }
+                        })
+                    }),
+            );
         }
         Ok(PoseGrid {
             scan_index: order.iter().map(|o| o.0).collect(),

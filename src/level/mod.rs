@@ -894,13 +894,19 @@ fn clean_level_fit(
         let scale = 0.5 * (a.range + b.range) * de;
         (scale.abs() > 1e-9).then(|| (b.range - a.range) / scale)
     };
-    let mut steps: Vec<f64> = p.members.iter().filter_map(|&i| step(i)).collect();
+    // Each member's step once: `kept` below asks for it up to three times per member (and
+    // only for members).
+    let mut step_at = vec![None; grid.points.len()];
+    for &i in &p.members {
+        step_at[i] = step(i);
+    }
+    let mut steps: Vec<f64> = p.members.iter().filter_map(|&i| step_at[i]).collect();
     if steps.len() < 10 {
         return None;
     }
     let mid = steps.len() / 2;
     let sign = steps.select_nth_unstable_by(mid, f64::total_cmp).1.signum();
-    let levelish = |i: usize| step(i).is_some_and(|x| x * sign > 1.0);
+    let levelish = |i: usize| step_at[i].is_some_and(|x| x * sign > 1.0);
     // A point whose range hardly changes to a neighbouring scan's, member or not, lies on a
     // steep surface with it: a wall line at the foot of a wall joins a floor patch through the
     // floor line below it (their step is a floor's), but the wall above it gives it away.
