@@ -15,7 +15,8 @@ pub struct Eigen3 {
 
 /// Decomposes a symmetric matrix (only its upper triangle is read).
 pub fn sym_eigen3(a: &Matrix3<f64>) -> Eigen3 {
-    let scale = a.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    // Over the storage slice (column-major, the order `a.iter()` visits): no iterator adaptor.
+    let scale = a.as_slice().iter().fold(0.0f64, |m, v| m.max(v.abs()));
     if scale == 0.0 || !scale.is_finite() {
         return fallback(a);
     }
@@ -66,10 +67,10 @@ fn null_vector(m: &Matrix3<f64>, l: f64) -> Option<Vector3<f64>> {
         s.row(2).transpose(),
     );
     let c = [r0.cross(&r1), r0.cross(&r2), r1.cross(&r2)];
-    let best = c
-        .iter()
-        .max_by(|a, b| a.norm_squared().total_cmp(&b.norm_squared()))?;
-    best.try_normalize(1e-150)
+    // Each length once; `max_by` keeps the last of equal lengths.
+    let len2 = c.map(|v| v.norm_squared());
+    let best = (0..3).max_by(|&i, &j| len2[i].total_cmp(&len2[j]))?;
+    c[best].try_normalize(1e-150)
 }
 
 fn fallback(a: &Matrix3<f64>) -> Eigen3 {
