@@ -444,6 +444,11 @@ impl LevelEstimate {
 /// The range noise for a pose: `params.sigma`, else the median of the scans' `readings_sigma`,
 /// else estimated from the data ([`noise::estimate_range_sigma`]), else `params.min_sigma`.
 pub fn range_sigma_for(scans: &[Scan], params: &LevelParams) -> f64 {
+    range_sigma_with(scans, params, None)
+}
+
+/// [`range_sigma_for`], given the `(sin, cos)` of the bearings when every scan shares them.
+fn range_sigma_with(scans: &[Scan], params: &LevelParams, trig: Option<&[(f64, f64)]>) -> f64 {
     if let Some(s) = params.sigma {
         return s;
     }
@@ -458,14 +463,15 @@ pub fn range_sigma_for(scans: &[Scan], params: &LevelParams) -> f64 {
         let (_, m, _) = given.select_nth_unstable_by(mid, f64::total_cmp);
         return *m;
     }
-    noise::estimate_range_sigma(scans).unwrap_or(params.min_sigma)
+    noise::estimate_range_sigma_with(scans, trig).unwrap_or(params.min_sigma)
 }
 
 /// Levels one pose: its scans (any order, at least three distinct elevations) in, attitude,
 /// uncertainty, wall geometry and failure reason out (paper sect. 5).
 pub fn level_pose(scans: &[Scan], params: &LevelParams) -> LevelEstimate {
-    let sigma = range_sigma_for(scans, params);
-    let grid = match PoseGrid::from_scans(scans) {
+    let trig = grid::shared_bearing_trig(scans);
+    let sigma = range_sigma_with(scans, params, trig.as_deref());
+    let grid = match PoseGrid::from_scans_with(scans, trig.as_deref()) {
         Ok(g) => g,
         Err(GridError::TooFewScans) => {
             return LevelEstimate::failed(FailReason::TooFewScans, sigma);

@@ -16,14 +16,24 @@ const MAD_TO_SIGMA: f64 = 1.482_602_218_505_602;
 /// Estimates the range noise sigma [m] from the scans of one or more poses; `None` when
 /// there are too few triples of consecutive valid rays (fewer than 20).
 pub fn estimate_range_sigma(scans: &[Scan]) -> Option<f64> {
+    estimate_range_sigma_with(scans, None)
+}
+
+/// [`estimate_range_sigma`], given the `(sin, cos)` of the bearings when every scan shares
+/// them ([`super::grid::shared_bearing_trig`]).
+pub fn estimate_range_sigma_with(
+    scans: &[Scan],
+    shared_trig: Option<&[(f64, f64)]>,
+) -> Option<f64> {
     let mut z = Vec::with_capacity(scans.iter().map(Scan::nrays).sum());
-    let mut steps = BearingSteps::default();
+    let mut steps = shared_trig.map(BearingSteps::new).unwrap_or_default();
     let mut trig_of: Option<&[f64]> = None;
     let mut inverse = Vec::new();
     for s in scans {
         // Scans of one pose nearly always share their bearings: their sines once per pose.
-        if trig_of != Some(&s.theta[..]) {
-            steps = BearingSteps::new(&s.theta);
+        if shared_trig.is_none() && trig_of != Some(&s.theta[..]) {
+            let sin_cos: Vec<(f64, f64)> = s.theta.iter().map(|t| t.sin_cos()).collect();
+            steps = BearingSteps::new(&sin_cos);
             trig_of = Some(&s.theta[..]);
         }
         standardised_residuals(s, &steps, &mut inverse, &mut z);
@@ -51,8 +61,8 @@ struct BearingSteps {
 }
 
 impl BearingSteps {
-    fn new(theta: &[f64]) -> Self {
-        let sc: Vec<(f64, f64)> = theta.iter().map(|t| t.sin_cos()).collect();
+    /// From the `(sin, cos)` of each bearing.
+    fn new(sc: &[(f64, f64)]) -> Self {
         let sin_diff = |i: usize, j: usize| sc[j].0 * sc[i].1 - sc[j].1 * sc[i].0;
         let n = sc.len();
         Self {
@@ -221,6 +231,14 @@ mod tests {
             let fast = estimate_range_sigma(&scans).map(f64::to_bits);
             let slow = estimate_by_triples(&scans).map(f64::to_bits);
             assert_eq!(fast, slow, "case {case}");
+            let trig = crate::level::grid::shared_bearing_trig(&scans);
+            let shared = estimate_range_sigma_with(&scans, trig.as_deref()).map(f64::to_bits);
+            assert_eq!(
+                shared,
+                slow,
+                "case {case}, shared bearings {}",
+                trig.is_some()
+            );
         }
     }
 }
