@@ -539,15 +539,21 @@ pub fn level_pose(scans: &[Scan], params: &LevelParams) -> LevelEstimate {
         return est;
     };
     let mut wall_mask = vec![false; grid.points.len()];
+    // A quad's span row by row (`Polygon::span`'s indices): overlapping quads mark most
+    // points several times, cheaply as slices.
     for q in est.quads.iter().filter(|q| q.kind == SurfaceKind::Wall) {
-        for i in q.span(grid.cols) {
-            wall_mask[i] = true;
+        for r in q.row..q.row + q.rows {
+            let start = r * grid.cols + q.col;
+            wall_mask[start..start + q.cols].fill(true);
         }
     }
-    for (i, &l) in est.labels.iter().enumerate() {
-        if l != UNLABELLED && est.patches[l as usize].kind == SurfaceKind::Wall {
-            wall_mask[i] = true;
-        }
+    let wall_patch: Vec<bool> = est
+        .patches
+        .iter()
+        .map(|p| p.kind == SurfaceKind::Wall)
+        .collect();
+    for (mask, &l) in wall_mask.iter_mut().zip(&est.labels) {
+        *mask |= l != UNLABELLED && wall_patch[l as usize];
     }
     let base_row = (0..grid.rows())
         .max_by_key(|&r| {
