@@ -90,8 +90,10 @@ pub fn pseudo_level_scan(scans: &[Scan], est: &LevelEstimate, params: &PseudoLev
     // and one sincos per ray shared with the direction.
     let robot_from_scanner = rot_y(elevation);
     let offset = base.hinge_offset_vector();
+    // The estimate's sines and cosines are those of every scan's bearings, the base's too.
+    let trig = est.bearing_trig.as_deref().filter(|t| t.len() == n);
     for (i, &kept) in keep.iter().enumerate() {
-        let (sp, cp) = base.theta[i].sin_cos();
+        let (sp, cp) = trig.map_or_else(|| base.theta[i].sin_cos(), |t| t[i]);
         let ray = Vector3::new(cp, sp, 0.0);
         let dir = level_from_scanner * ray;
         let point = base

@@ -390,6 +390,9 @@ pub struct LevelEstimate {
     pub wall_mask: Vec<bool>,
     /// Index into the pose's scans of the base scan for the pseudo-level scan (sect. 6).
     pub base_scan: Option<usize>,
+    /// `(sin, cos)` of the bearings, when every scan of the pose has the same bearings to the
+    /// bit ([`grid::shared_bearing_trig`]): the pseudo-level scan's rays need them again.
+    pub bearing_trig: Option<Vec<(f64, f64)>>,
 }
 
 impl LevelEstimate {
@@ -437,6 +440,7 @@ impl LevelEstimate {
             labels: Vec::new(),
             wall_mask: Vec::new(),
             base_scan: None,
+            bearing_trig: None,
         }
     }
 }
@@ -497,6 +501,7 @@ pub fn level_pose(scans: &[Scan], params: &LevelParams) -> LevelEstimate {
         labels,
         wall_mask: Vec::new(),
         grid: Some(grid),
+        bearing_trig: trig,
     };
     let mut levels = level_fits(&est, params);
     let mut result = solve(&est, &levels, params, sigma);
