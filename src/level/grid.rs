@@ -33,12 +33,13 @@ pub struct PoseGrid {
 /// always, for the scans of one pose): computed once for the noise estimate and the grid.
 pub fn shared_bearing_trig(scans: &[Scan]) -> Option<Vec<(f64, f64)>> {
     let first = &scans.first()?.theta;
+    // A fold without an early exit, which the compiler vectorizes: they nearly always match.
     let same = |theta: &[f64]| {
         theta.len() == first.len()
             && theta
                 .iter()
                 .zip(first)
-                .all(|(a, b)| a.to_bits() == b.to_bits())
+                .fold(true, |same, (a, b)| same & (a.to_bits() == b.to_bits()))
     };
     scans
         .iter()
