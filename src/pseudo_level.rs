@@ -90,8 +90,10 @@ pub fn pseudo_level_scan(scans: &[Scan], est: &LevelEstimate, params: &PseudoLev
     // and one sincos per ray shared with the direction.
     let robot_from_scanner = rot_y(elevation);
     let offset = base.hinge_offset_vector();
+    // The estimate's sines and cosines are those of every scan's bearings, the base's too.
+    let trig = est.bearing_trig.as_deref().filter(|t| t.len() == n);
     for (i, &kept) in keep.iter().enumerate() {
-        let (sp, cp) = base.theta[i].sin_cos();
+        let (sp, cp) = trig.map_or_else(|| base.theta[i].sin_cos(), |t| t[i]);
         let ray = Vector3::new(cp, sp, 0.0);
         let dir = level_from_scanner * ray;
         let point = base
@@ -140,25 +142,43 @@ const MIN_ROW_CROWD: usize = 5;
 
 /// The lowest height with at least `min_count` of `heights` within `window` above it: the
 /// median of that crowd. `None` when no window holds that many.
-fn lowest_crowded_height(mut heights: Vec<f64>, window: f64, min_count: usize) -> Option<f64> {
+fn lowest_crowded_height(heights: &[f64], window: f64, min_count: usize) -> Option<f64> {
     if min_count == 0 || heights.len() < min_count {
         return None;
     }
+    // Sorted as `total_cmp` sorts them, by the integer key it compares (computed once per
+    // height rather than twice per comparison); equal keys are equal bits, so an unstable
+    // sort gives the stable one's order.
+    let mut keys: Vec<i64> = heights.iter().map(|&z| total_order_key(z)).collect();
+    let heights_of =
+        |keys: &[i64]| -> Vec<f64> { keys.iter().map(|&k| height_of_key(k)).collect() };
     // The crowd is nearly always among the lowest few crowds' worth of points: sort only
     // those (the same values in the same order as the full sort's start), and sort the rest
     // only when the answer could depend on them.
     let lowest = 4 * min_count;
-    if lowest < heights.len() {
-        heights.select_nth_unstable_by(lowest, f64::total_cmp);
-        let prefix = &mut heights[..lowest];
-        // Values equal under total_cmp are the same bits: unstable is as good as stable.
-        prefix.sort_unstable_by(f64::total_cmp);
-        if let Some(answer) = crowd_in_sorted(prefix, window, min_count, false) {
+    if lowest < keys.len() {
+        keys.select_nth_unstable(lowest);
+        keys[..lowest].sort_unstable();
+        if let Some(answer) =
+            crowd_in_sorted(&heights_of(&keys[..lowest]), window, min_count, false)
+        {
             return answer;
         }
     }
-    heights.sort_unstable_by(f64::total_cmp);
-    crowd_in_sorted(&heights, window, min_count, true).flatten()
+    keys.sort_unstable();
+    crowd_in_sorted(&heights_of(&keys), window, min_count, true).flatten()
+}
+
+/// The key `f64::total_cmp` orders by: the bits as a signed integer, with the magnitude bits
+/// of negative numbers flipped.
+fn total_order_key(z: f64) -> i64 {
+    let bits = z.to_bits() as i64;
+    bits ^ (((bits >> 63) as u64) >> 1) as i64
+}
+
+/// The inverse of [`total_order_key`] (which is its own inverse: the flip keeps the sign).
+fn height_of_key(key: i64) -> f64 {
+    f64::from_bits((key ^ (((key >> 63) as u64) >> 1) as i64) as u64)
 }
 
 /// [`lowest_crowded_height`] on sorted heights, all of them (`complete`) or only the lowest
@@ -188,22 +208,21 @@ fn ground_crowd(
     level_from_robot: &Matrix3<f64>,
     margin: f64,
 ) -> (Option<f64>, Option<f64>) {
-    let heights: Vec<(f64, usize)> = grid
-        .points
-        .iter()
-        .enumerate()
-        .filter_map(|(i, g)| {
-            g.as_ref()
-                .map(|g| ((level_from_robot * g.p.coords).z, i / grid.cols))
-        })
-        .collect();
+    // Leveled heights of the valid points, and each one's row.
+    let mut heights = Vec::with_capacity(grid.points.len());
+    let mut rows = Vec::with_capacity(grid.points.len());
+    for (row, points) in grid.points.chunks(grid.cols.max(1)).enumerate() {
+        for g in points.iter().flatten() {
+            heights.push((level_from_robot * g.p.coords).z);
+            rows.push(row);
+        }
+    }
     let min_count = (heights.len() / 20).max(MIN_GROUND_POINTS);
-    let Some(z0) = lowest_crowded_height(heights.iter().map(|h| h.0).collect(), margin, min_count)
-    else {
+    let Some(z0) = lowest_crowded_height(&heights, margin, min_count) else {
         return (None, None);
     };
     let mut per_row = vec![0usize; grid.rows()];
-    for &(z, row) in &heights {
+    for (&z, &row) in heights.iter().zip(&rows) {
         if z >= z0 - margin && z <= z0 + margin {
             per_row[row] += 1;
         }
@@ -342,15 +361,42 @@ mod tests {
         let walls = (0..60).map(|k| -0.3 + 0.02 * k as f64);
         let strays = [-1.2, -0.9, -0.7];
         let heights: Vec<f64> = floor.chain(walls).chain(strays).collect();
-        let z = lowest_crowded_height(heights, 0.05, 20).unwrap();
+        let z = lowest_crowded_height(&heights, 0.05, 20).unwrap();
         assert!((z + 0.447).abs() < 0.004, "{z}");
     }
 
     #[test]
     fn no_crowd_no_floor() {
         let spread: Vec<f64> = (0..50).map(|k| 0.1 * k as f64).collect();
-        assert_eq!(lowest_crowded_height(spread, 0.05, 20), None);
-        assert_eq!(lowest_crowded_height(vec![0.0; 5], 0.05, 20), None);
+        assert_eq!(lowest_crowded_height(&spread, 0.05, 20), None);
+        assert_eq!(lowest_crowded_height(&[0.0; 5], 0.05, 20), None);
+    }
+
+    /// The integer keys order as `total_cmp` does and give back the same bits.
+    #[test]
+    fn total_order_keys_sort_as_total_cmp() {
+        let mut z = vec![
+            1.5,
+            -0.0,
+            0.0,
+            -2.25,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::NAN,
+            -f64::NAN,
+            1e-310,
+            -1e-310,
+            f64::MAX,
+            -0.5,
+        ];
+        for &x in &z {
+            assert_eq!(height_of_key(total_order_key(x)).to_bits(), x.to_bits());
+        }
+        let mut keys: Vec<i64> = z.iter().map(|&x| total_order_key(x)).collect();
+        keys.sort_unstable();
+        z.sort_by(f64::total_cmp);
+        let back: Vec<u64> = keys.iter().map(|&k| height_of_key(k).to_bits()).collect();
+        assert_eq!(back, z.iter().map(|x| x.to_bits()).collect::<Vec<_>>());
     }
 
     /// Sorting only the lowest heights gives what sorting all of them gives.
@@ -379,7 +425,7 @@ mod tests {
             let min_count = rng.random_range(1..20);
             let window = rng.random_range(0.001..0.1);
             assert_eq!(
-                lowest_crowded_height(heights.clone(), window, min_count),
+                lowest_crowded_height(&heights, window, min_count),
                 full(heights, window, min_count),
                 "case {case}"
             );

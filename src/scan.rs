@@ -91,6 +91,14 @@ impl Scan {
         self.readings[i].filter(|r| r.is_finite() && *r > 0.0)
     }
 
+    /// [`Scan::range`] of every ray in order, without per-ray bounds checks (hot loops).
+    pub fn ranges(&self) -> impl ExactSizeIterator<Item = Option<f64>> + '_ {
+        self.readings
+            .iter()
+            .zip(&self.valid)
+            .map(|(r, &v)| r.filter(|r| v && r.is_finite() && *r > 0.0))
+    }
+
     pub fn valid_count(&self) -> usize {
         (0..self.nrays())
             .filter(|&i| self.range(i).is_some())
@@ -159,6 +167,30 @@ pub fn even_bearings(n: usize, min: f64, max: f64) -> Vec<f64> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// `ranges` is `range` of every ray: invalid, missing, zero, negative, non-finite.
+    #[test]
+    fn ranges_are_range_of_each_ray() {
+        let readings = [
+            Some(1.5),
+            Some(2.0),
+            None,
+            Some(0.0),
+            Some(-1.0),
+            Some(f64::INFINITY),
+            Some(f64::NAN),
+            Some(1e-300),
+        ];
+        let s = Scan {
+            theta: vec![0.0; readings.len()],
+            readings: readings.to_vec(),
+            valid: vec![true, false, true, true, true, true, true, true],
+            ..Scan::default()
+        };
+        let each: Vec<Option<f64>> = (0..s.nrays()).map(|i| s.range(i)).collect();
+        assert_eq!(s.ranges().collect::<Vec<_>>(), each);
+        assert_eq!(each.iter().flatten().count(), 2);
+    }
 
     #[test]
     fn even_bearings_include_both_ends() {

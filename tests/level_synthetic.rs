@@ -205,6 +205,36 @@ fn reported_sigmas_are_honest_within_three_sigma_for_95_percent() {
     }
 }
 
+/// The estimate's shared bearing sines and cosines give the pseudo-level scan, to the bit,
+/// that one sincos per ray gives.
+#[test]
+fn pseudo_level_scan_is_the_same_with_the_shared_bearing_trig() {
+    let room = Room::box_room(6.0, 5.0);
+    let pose = Pose::new(2.0, 2.5, 0.45, deg(20.0), deg(4.0), deg(5.0));
+    let scans = scans_at(&room, &pose, &elevations(5, 5.0), 0.01, 9, 7);
+    let shared = level_pose(&scans, &LevelParams::default());
+    assert!(shared.bearing_trig.is_some());
+    let own = levelscan::level::LevelEstimate {
+        bearing_trig: None,
+        ..shared.clone()
+    };
+    let bits = |s: &Scan| -> Vec<u64> {
+        let readings = s.readings.iter().map(|r| r.map_or(u64::MAX, f64::to_bits));
+        s.theta
+            .iter()
+            .map(|t| t.to_bits())
+            .chain(readings)
+            .collect()
+    };
+    let params = PseudoLevelParams::default();
+    let (a, b) = (
+        pseudo_level_scan(&scans, &shared, &params),
+        pseudo_level_scan(&scans, &own, &params),
+    );
+    assert_eq!(bits(&a), bits(&b));
+    assert_eq!(a, b);
+}
+
 #[test]
 fn pseudo_level_scan_keeps_walls_and_drops_floor_hits() {
     let room = Room::box_room(6.0, 5.0);

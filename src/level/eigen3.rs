@@ -41,7 +41,7 @@ pub fn sym_eigen3_upper(upper: &[f64; 6]) -> Eigen3 {
     };
     // Well separated eigenvalues give accurate cross products; otherwise iterate.
     let gap = (l_mid - l_min).min(l_max - l_mid);
-    if !(gap >= 1e-6 * (l_max - l_min)) || l_max - l_min < 1e-9 {
+    if gap.is_nan() || gap < 1e-6 * (l_max - l_min) || l_max - l_min < 1e-9 {
         return fallback(upper);
     }
     let (Some(v_min), Some(v_max)) = (null_vector(&m, l_min), null_vector(&m, l_max)) else {

@@ -35,6 +35,24 @@ pub struct PoseGrid {
     pub points: Vec<Option<GridPoint>>,
 }
 
+/// `(sin, cos)` of the bearings when every scan has the same bearings, to the bit (nearly
+/// always, for the scans of one pose): computed once for the noise estimate and the grid.
+pub fn shared_bearing_trig(scans: &[Scan]) -> Option<Vec<(f64, f64)>> {
+    let first = &scans.first()?.theta;
+    // A fold without an early exit, which the compiler vectorizes: they nearly always match.
+    let same = |theta: &[f64]| {
+        theta.len() == first.len()
+            && theta
+                .iter()
+                .zip(first)
+                .fold(true, |same, (a, b)| same & (a.to_bits() == b.to_bits()))
+    };
+    scans
+        .iter()
+        .all(|s| same(&s.theta))
+        .then(|| first.iter().map(|t| t.sin_cos()).collect())
+}
+
 /// Why a pose's scans cannot form a grid (the contract's failure reasons).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum GridError {
@@ -49,6 +67,15 @@ impl PoseGrid {
     /// `level`); of several scans at the same elevation only the first is used, since two rows in
     /// one plane add nothing to a plane's tilt and would make quads degenerate.
     pub fn from_scans(scans: &[Scan]) -> Result<PoseGrid, GridError> {
+        Self::from_scans_with(scans, None)
+    }
+
+    /// [`PoseGrid::from_scans`], given the `(sin, cos)` of the bearings when every scan shares
+    /// them ([`shared_bearing_trig`]).
+    pub fn from_scans_with(
+        scans: &[Scan],
+        shared_trig: Option<&[(f64, f64)]>,
+    ) -> Result<PoseGrid, GridError> {
         let mut order: Vec<(usize, f64)> = scans
             .iter()
             .enumerate()
@@ -71,22 +98,28 @@ impl PoseGrid {
         let mut trig_of: Option<&[f64]> = None;
         for &(i, e) in &order {
             let s = &scans[i];
-            if trig_of != Some(&s.theta[..]) {
+            if shared_trig.is_none() && trig_of != Some(&s.theta[..]) {
                 trig = s.theta.iter().map(|t| t.sin_cos()).collect();
                 trig_of = Some(&s.theta[..]);
             }
+            let trig = shared_trig.unwrap_or(&trig);
             // Same geometry as `Scan::point_in_robot` (contract: `Ry(e) (o + r (cos phi, sin
             // phi, 0))`), with the rotation built once per scan rather than once per ray.
             let robot_from_scanner = rot_y(e);
             let offset = s.hinge_offset_vector();
             let origin = beam_origin(e, &offset);
-            for (c, &(sp, cp)) in trig.iter().enumerate().take(cols) {
-                points.push(s.range(c).filter(|&r| r > 0.0).map(|range| {
-                    let dir = robot_from_scanner * Vector3::new(cp, sp, 0.0);
-                    let p = origin + dir * range;
-                    GridPoint::new(p, dir, range)
-                }));
-            }
+            points.extend(
+                trig.iter()
+                    .zip(s.ranges())
+                    .take(cols)
+                    .map(|(&(sp, cp), r)| {
+                        r.map(|range| {
+                            let dir = robot_from_scanner * Vector3::new(cp, sp, 0.0);
+                            let p = origin + dir * range;
+                            GridPoint { p, dir, range }
+                        })
+                    }),
+            );
         }
         Ok(PoseGrid {
             scan_index: order.iter().map(|o| o.0).collect(),
@@ -402,6 +435,35 @@ impl PlaneFit {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The shared sines and cosines are taken only when every scan has the same bearings to the
+    /// bit, and give the grid that computing them per scan gives.
+    #[test]
+    fn shared_bearing_trig_gives_the_same_grid() {
+        let scan = |e: f64, flip_zero: bool| {
+            let mut s = Scan::with_even_bearings(9, -1.0, 1.0);
+            if flip_zero {
+                s.theta[4] = -0.0;
+            }
+            s.elevation = Some(e);
+            s.hinge_offset = Some([0.05, 0.0, 0.02]);
+            for i in 0..9 {
+                s.readings[i] = Some(1.0 + 0.1 * i as f64 + e);
+                s.valid[i] = i != 3;
+            }
+            s
+        };
+        let same: Vec<Scan> = [0.1, -0.2, 0.0, 0.3].map(|e| scan(e, false)).to_vec();
+        let trig = shared_bearing_trig(&same).expect("same bearings");
+        let shared = PoseGrid::from_scans_with(&same, Some(&trig)).unwrap();
+        let own = PoseGrid::from_scans(&same).unwrap();
+        assert_eq!(shared.points, own.points);
+        assert_eq!(shared.scan_index, own.scan_index);
+        // +0 and -0 compare equal but are different bearings.
+        let mixed = vec![scan(0.1, false), scan(-0.2, true), scan(0.0, false)];
+        assert!(shared_bearing_trig(&mixed).is_none());
+        assert!(shared_bearing_trig(&[]).is_none());
+    }
 
     fn gp(x: f64, y: f64, z: f64) -> GridPoint {
         let p = Point3::new(x, y, z);

@@ -390,6 +390,9 @@ pub struct LevelEstimate {
     pub wall_mask: Vec<bool>,
     /// Index into the pose's scans of the base scan for the pseudo-level scan (sect. 6).
     pub base_scan: Option<usize>,
+    /// `(sin, cos)` of the bearings, when every scan of the pose has the same bearings to the
+    /// bit ([`grid::shared_bearing_trig`]): the pseudo-level scan's rays need them again.
+    pub bearing_trig: Option<Vec<(f64, f64)>>,
 }
 
 impl LevelEstimate {
@@ -437,6 +440,7 @@ impl LevelEstimate {
             labels: Vec::new(),
             wall_mask: Vec::new(),
             base_scan: None,
+            bearing_trig: None,
         }
     }
 }
@@ -444,6 +448,11 @@ impl LevelEstimate {
 /// The range noise for a pose: `params.sigma`, else the median of the scans' `readings_sigma`,
 /// else estimated from the data ([`noise::estimate_range_sigma`]), else `params.min_sigma`.
 pub fn range_sigma_for(scans: &[Scan], params: &LevelParams) -> f64 {
+    range_sigma_with(scans, params, None)
+}
+
+/// [`range_sigma_for`], given the `(sin, cos)` of the bearings when every scan shares them.
+fn range_sigma_with(scans: &[Scan], params: &LevelParams, trig: Option<&[(f64, f64)]>) -> f64 {
     if let Some(s) = params.sigma {
         return s;
     }
@@ -458,14 +467,15 @@ pub fn range_sigma_for(scans: &[Scan], params: &LevelParams) -> f64 {
         let (_, m, _) = given.select_nth_unstable_by(mid, f64::total_cmp);
         return *m;
     }
-    noise::estimate_range_sigma(scans).unwrap_or(params.min_sigma)
+    noise::estimate_range_sigma_with(scans, trig).unwrap_or(params.min_sigma)
 }
 
 /// Levels one pose: its scans (any order, at least three distinct elevations) in, attitude,
 /// uncertainty, wall geometry and failure reason out (paper sect. 5).
 pub fn level_pose(scans: &[Scan], params: &LevelParams) -> LevelEstimate {
-    let sigma = range_sigma_for(scans, params);
-    let grid = match PoseGrid::from_scans(scans) {
+    let trig = grid::shared_bearing_trig(scans);
+    let sigma = range_sigma_with(scans, params, trig.as_deref());
+    let grid = match PoseGrid::from_scans_with(scans, trig.as_deref()) {
         Ok(g) => g,
         Err(GridError::TooFewScans) => {
             return LevelEstimate::failed(FailReason::TooFewScans, sigma);
@@ -491,6 +501,7 @@ pub fn level_pose(scans: &[Scan], params: &LevelParams) -> LevelEstimate {
         labels,
         wall_mask: Vec::new(),
         grid: Some(grid),
+        bearing_trig: trig,
     };
     let mut levels = level_fits(&est, params);
     let mut result = solve(&est, &levels, params, sigma);
@@ -533,15 +544,21 @@ pub fn level_pose(scans: &[Scan], params: &LevelParams) -> LevelEstimate {
         return est;
     };
     let mut wall_mask = vec![false; grid.points.len()];
+    // A quad's span row by row (`Polygon::span`'s indices): overlapping quads mark most
+    // points several times, cheaply as slices.
     for q in est.quads.iter().filter(|q| q.kind == SurfaceKind::Wall) {
-        for i in q.span(grid.cols) {
-            wall_mask[i] = true;
+        for r in q.row..q.row + q.rows {
+            let start = r * grid.cols + q.col;
+            wall_mask[start..start + q.cols].fill(true);
         }
     }
-    for (i, &l) in est.labels.iter().enumerate() {
-        if l != UNLABELLED && est.patches[l as usize].kind == SurfaceKind::Wall {
-            wall_mask[i] = true;
-        }
+    let wall_patch: Vec<bool> = est
+        .patches
+        .iter()
+        .map(|p| p.kind == SurfaceKind::Wall)
+        .collect();
+    for (mask, &l) in wall_mask.iter_mut().zip(&est.labels) {
+        *mask |= l != UNLABELLED && wall_patch[l as usize];
     }
     let base_row = (0..grid.rows())
         .max_by_key(|&r| {
@@ -894,13 +911,19 @@ fn clean_level_fit(
         let scale = 0.5 * (a.range + b.range) * de;
         (scale.abs() > 1e-9).then(|| (b.range - a.range) / scale)
     };
-    let mut steps: Vec<f64> = p.members.iter().filter_map(|&i| step(i)).collect();
+    // Each member's step once: `kept` below asks for it up to three times per member (and
+    // only for members).
+    let mut step_at = vec![None; grid.points.len()];
+    for &i in &p.members {
+        step_at[i] = step(i);
+    }
+    let mut steps: Vec<f64> = p.members.iter().filter_map(|&i| step_at[i]).collect();
     if steps.len() < 10 {
         return None;
     }
     let mid = steps.len() / 2;
     let sign = steps.select_nth_unstable_by(mid, f64::total_cmp).1.signum();
-    let levelish = |i: usize| step(i).is_some_and(|x| x * sign > 1.0);
+    let levelish = |i: usize| step_at[i].is_some_and(|x| x * sign > 1.0);
     // A point whose range hardly changes to a neighbouring scan's, member or not, lies on a
     // steep surface with it: a wall line at the foot of a wall joins a floor patch through the
     // floor line below it (their step is a floor's), but the wall above it gives it away.

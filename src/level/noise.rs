@@ -16,14 +16,24 @@ const MAD_TO_SIGMA: f64 = 1.482_602_218_505_602;
 /// Estimates the range noise sigma [m] from the scans of one or more poses; `None` when
 /// there are too few triples of consecutive valid rays (fewer than 20).
 pub fn estimate_range_sigma(scans: &[Scan]) -> Option<f64> {
+    estimate_range_sigma_with(scans, None)
+}
+
+/// [`estimate_range_sigma`], given the `(sin, cos)` of the bearings when every scan shares
+/// them ([`super::grid::shared_bearing_trig`]).
+pub fn estimate_range_sigma_with(
+    scans: &[Scan],
+    shared_trig: Option<&[(f64, f64)]>,
+) -> Option<f64> {
     let mut z = Vec::with_capacity(scans.iter().map(Scan::nrays).sum());
-    let mut steps = BearingSteps::default();
+    let mut steps = shared_trig.map(BearingSteps::new).unwrap_or_default();
     let mut trig_of: Option<&[f64]> = None;
     let mut inverse = Vec::new();
     for s in scans {
         // Scans of one pose nearly always share their bearings: their sines once per pose.
-        if trig_of != Some(&s.theta[..]) {
-            steps = BearingSteps::new(&s.theta);
+        if shared_trig.is_none() && trig_of != Some(&s.theta[..]) {
+            let sin_cos: Vec<(f64, f64)> = s.theta.iter().map(|t| t.sin_cos()).collect();
+            steps = BearingSteps::new(&sin_cos);
             trig_of = Some(&s.theta[..]);
         }
         standardised_residuals(s, &steps, &mut inverse, &mut z);
@@ -31,9 +41,15 @@ pub fn estimate_range_sigma(scans: &[Scan]) -> Option<f64> {
     if z.len() < 20 {
         return None;
     }
+    Some(f64::from_bits(median_bits(&mut z)) * MAD_TO_SIGMA)
+}
+
+/// The upper median (element `len / 2` in sorted order) of non-negative, non-NaN residuals, as
+/// bits. For such numbers the order of the bit patterns as integers is their numeric order (and
+/// `total_cmp`'s), and integer comparisons are cheaper.
+fn median_bits(z: &mut [u64]) -> u64 {
     let mid = z.len() / 2;
-    let (_, m, _) = z.select_nth_unstable_by(mid, f64::total_cmp);
-    Some(*m * MAD_TO_SIGMA)
+    *z.select_nth_unstable(mid).1
 }
 
 /// Sines of the bearing differences of a scan: `one[i] = sin(phi_i - phi_{i-1})` and
@@ -45,8 +61,8 @@ struct BearingSteps {
 }
 
 impl BearingSteps {
-    fn new(theta: &[f64]) -> Self {
-        let sc: Vec<(f64, f64)> = theta.iter().map(|t| t.sin_cos()).collect();
+    /// From the `(sin, cos)` of each bearing.
+    fn new(sc: &[(f64, f64)]) -> Self {
         let sin_diff = |i: usize, j: usize| sc[j].0 * sc[i].1 - sc[j].1 * sc[i].0;
         let n = sc.len();
         Self {
@@ -66,33 +82,38 @@ impl BearingSteps {
     }
 }
 
-/// Appends |e| / (sd of e at sigma = 1) for every triple of consecutive valid rays.
-/// `inverse` is scratch space for the rays' `(1 / r, 1 / r^4)`.
+/// Appends |e| / (sd of e at sigma = 1), as bits (all are non-negative), for every triple of
+/// consecutive valid rays. `inverse` is scratch space for the rays' `(1 / r, 1 / r^4)`.
 fn standardised_residuals(
     s: &Scan,
     steps: &BearingSteps,
-    inverse: &mut Vec<Option<(f64, f64)>>,
-    out: &mut Vec<f64>,
+    inverse: &mut Vec<(f64, f64)>,
+    out: &mut Vec<u64>,
 ) {
     let n = s.nrays().min(steps.one.len());
     inverse.clear();
-    for i in 0..n {
-        inverse.push(s.range(i).filter(|&r| r > 0.0).map(|r| {
+    // A ray without a return is NaN: every triple holding it gets a NaN `e`, which the
+    // finiteness test below drops, as skipping the triple would.
+    inverse.extend(s.ranges().take(n).map(|r| match r {
+        Some(r) => {
             let u = 1.0 / r;
             (u, u.powi(4))
-        }));
+        }
+        None => (f64::NAN, f64::NAN),
+    }));
+    if inverse.len() < 3 {
+        return;
     }
-    for i in 1..n.saturating_sub(1) {
-        let (Some((u0, q0)), Some((u1, q1)), Some((u2, q2))) =
-            (inverse[i - 1], inverse[i], inverse[i + 1])
-        else {
-            continue;
-        };
-        let (sa, sb, sab) = (steps.one[i], steps.one[i + 1], steps.two[i]);
+    // Triple i (rays i - 1, i, i + 1, for i in 1..n - 1) uses one[i], one[i + 1] and two[i].
+    let steps = steps.one[1..].windows(2).zip(&steps.two[1..]);
+    for (w, (one, &sab)) in inverse.windows(3).zip(steps) {
+        let ((u0, q0), (u1, q1), (u2, q2)) = (w[0], w[1], w[2]);
+        let (sa, sb) = (one[0], one[1]);
         let e = sb * u0 + sa * u2 - sab * u1;
         let var = sb * sb * q0 + sa * sa * q2 + sab * sab * q1;
+        // |e| / sd is then non-negative and not NaN (`median_bits`).
         if var > 0.0 && e.is_finite() {
-            out.push(e.abs() / var.sqrt());
+            out.push((e.abs() / var.sqrt()).to_bits());
         }
     }
 }
@@ -143,5 +164,81 @@ mod tests {
     fn noise_estimate_is_zero_without_noise() {
         let est = estimate_range_sigma(&[wall_scan(2.0, 0.0, 1)]).unwrap();
         assert!(est < 1e-9, "{est}");
+    }
+
+    /// The estimate as first written: each triple checked for three valid rays, sines per
+    /// triple from the bearings, a median by `total_cmp`.
+    fn estimate_by_triples(scans: &[Scan]) -> Option<f64> {
+        let mut z = Vec::new();
+        for s in scans {
+            let sc: Vec<(f64, f64)> = s.theta.iter().map(|t| t.sin_cos()).collect();
+            let sin_diff = |i: usize, j: usize| sc[j].0 * sc[i].1 - sc[j].1 * sc[i].0;
+            let inv = |i: usize| s.range(i).map(|r| (1.0 / r, (1.0 / r).powi(4)));
+            for i in 1..s.nrays().saturating_sub(1) {
+                let (Some((u0, q0)), Some((u1, q1)), Some((u2, q2))) =
+                    (inv(i - 1), inv(i), inv(i + 1))
+                else {
+                    continue;
+                };
+                let (sa, sb, sab) = (
+                    sin_diff(i - 1, i),
+                    sin_diff(i, i + 1),
+                    sin_diff(i - 1, i + 1),
+                );
+                let e = sb * u0 + sa * u2 - sab * u1;
+                let var = sb * sb * q0 + sa * sa * q2 + sab * sab * q1;
+                if var > 0.0 && e.is_finite() {
+                    z.push(e.abs() / var.sqrt());
+                }
+            }
+        }
+        if z.len() < 20 {
+            return None;
+        }
+        let mid = z.len() / 2;
+        let (_, m, _) = z.select_nth_unstable_by(mid, f64::total_cmp);
+        Some(*m * MAD_TO_SIGMA)
+    }
+
+    /// Scans with invalid rays, exact zeros (noise-free walls), bearing sets shared or not and
+    /// too few rays: the same bits as checking every triple.
+    #[test]
+    fn noise_estimate_matches_checking_every_triple() {
+        let mut rng = rand::rngs::ChaCha8Rng::seed_from_u64(3);
+        for case in 0..200 {
+            let nscans = rng.random_range(1..6);
+            let scans: Vec<Scan> = (0..nscans)
+                .map(|k| {
+                    let mut s =
+                        wall_scan(rng.random_range(0.5..5.0), [0.0, 0.01, 0.1][case % 3], k);
+                    let drop = rng.random::<f64>() * 0.5;
+                    for i in 0..s.nrays() {
+                        if rng.random::<f64>() < drop {
+                            s.valid[i] = false;
+                        }
+                    }
+                    if case % 7 == 0 && k % 2 == 1 {
+                        s.theta.iter_mut().for_each(|t| *t *= 0.9);
+                    }
+                    if case % 11 == 0 {
+                        s.theta.truncate(2 + k as usize);
+                        s.readings.truncate(2 + k as usize);
+                        s.valid.truncate(2 + k as usize);
+                    }
+                    s
+                })
+                .collect();
+            let fast = estimate_range_sigma(&scans).map(f64::to_bits);
+            let slow = estimate_by_triples(&scans).map(f64::to_bits);
+            assert_eq!(fast, slow, "case {case}");
+            let trig = crate::level::grid::shared_bearing_trig(&scans);
+            let shared = estimate_range_sigma_with(&scans, trig.as_deref()).map(f64::to_bits);
+            assert_eq!(
+                shared,
+                slow,
+                "case {case}, shared bearings {}",
+                trig.is_some()
+            );
+        }
     }
 }
