@@ -286,6 +286,9 @@ fn make_patch(
     if too_small(members) {
         return None;
     }
+    // In grid order from here: the passes below then walk the grid forwards.
+    let sorted = ascending(members);
+    let members = &sorted[..];
     let first = acc.fit(sigma)?;
     let trimmed = trim_edge_rows(grid, members, &acc, &first, sigma, params);
     let (members, first) = match &trimmed {
@@ -308,7 +311,7 @@ fn make_patch(
     Some(Patch {
         kind: classify(&fit.normal, &fit.centroid, params),
         fit,
-        members: in_order(grid, members, true),
+        members: members.to_vec(),
         row_range: (lo, hi),
     })
 }
