@@ -84,7 +84,7 @@ fn eigenvalues_above(m: &[f64; 6], floor: f64) -> Option<[f64; 3]> {
     let mut l = floor;
     for _ in 0..8 {
         let dp = (3.0 * l - 2.0 * c1) * l + c2;
-        if !(dp > 0.0) {
+        if dp.is_nan() || dp <= 0.0 {
             return None;
         }
         let step = p(l) / dp;
