@@ -35,7 +35,11 @@ fn corner_grid(cols: usize, far: f64, sigma: f64, seed: u64) -> PoseGrid {
             };
             let range = to_x.min(to_y) + noise.sample(&mut rng);
             let missing = rng.random::<f64>() < 0.03;
-            points.push((!missing).then(|| GridPoint::new(Point3::from(dir * range), dir, range)));
+            points.push((!missing).then(|| GridPoint {
+                p: Point3::from(dir * range),
+                dir,
+                range,
+            }));
         }
     }
     PoseGrid {

@@ -16,17 +16,19 @@ pub struct Eigen3 {
 
 /// Decomposes a symmetric matrix (only its upper triangle is read).
 pub fn sym_eigen3(a: &Matrix3<f64>) -> Eigen3 {
-    sym_eigen3_upper(
-        &[
-            a[(0, 0)],
-            a[(0, 1)],
-            a[(0, 2)],
-            a[(1, 1)],
-            a[(1, 2)],
-            a[(2, 2)],
-        ],
-        0.0,
-    )
+    sym_eigen3_upper(&upper_triangle(a), 0.0)
+}
+
+/// A matrix's upper triangle (xx, xy, xz, yy, yz, zz).
+fn upper_triangle(a: &Matrix3<f64>) -> [f64; 6] {
+    [
+        a[(0, 0)],
+        a[(0, 1)],
+        a[(0, 2)],
+        a[(1, 1)],
+        a[(1, 2)],
+        a[(2, 2)],
+    ]
 }
 
 /// [`sym_eigen3`] of the symmetric matrix with upper triangle `upper` (xx, xy, xz, yy, yz, zz)
@@ -167,23 +169,9 @@ mod tests {
 
     /// The decomposition with smallest eigenvalue expected above `floor`, against nalgebra's.
     fn check_above(a: &Matrix3<f64>, floor: f64) {
-        let upper = [
-            a[(0, 0)],
-            a[(0, 1)],
-            a[(0, 2)],
-            a[(1, 1)],
-            a[(1, 2)],
-            a[(2, 2)],
-        ];
+        let upper = upper_triangle(a);
         let e = sym_eigen3_upper(&upper, floor);
-        let twin = fallback(&[
-            a[(0, 0)],
-            a[(0, 1)],
-            a[(0, 2)],
-            a[(1, 1)],
-            a[(1, 2)],
-            a[(2, 2)],
-        ]);
+        let twin = fallback(&upper);
         let scale = a.norm().max(1e-300);
         for k in 0..3 {
             assert!(

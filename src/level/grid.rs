@@ -16,12 +16,6 @@ pub struct GridPoint {
     pub range: f64,
 }
 
-impl GridPoint {
-    pub fn new(p: Point3<f64>, dir: Vector3<f64>, range: f64) -> Self {
-        GridPoint { p, dir, range }
-    }
-}
-
 /// The pose's scans as rows of points, sorted by ascending elevation.
 #[derive(Clone, Debug)]
 pub struct PoseGrid {
@@ -222,33 +216,33 @@ const SUM: usize = 0;
 const PP: usize = 3;
 const DD: usize = 9;
 
-/// A point's [`Moments`].
+/// A point's [`Moments`], computed when it is added: stored with every point they would triple
+/// the grid's size, and the passes over it would cost more in memory traffic than they save.
 fn moments(p: &Vector3<f64>, d: &Vector3<f64>) -> Moments {
+    let ([p0, p1, p2, p3, p4, p5], [d0, d1, d2, d3, d4, d5]) = (outer_upper(p), outer_upper(d));
     [
-        p.x,
-        p.y,
-        p.z,
-        p.x * p.x,
-        p.x * p.y,
-        p.x * p.z,
-        p.y * p.y,
-        p.y * p.z,
-        p.z * p.z,
-        d.x * d.x,
-        d.x * d.y,
-        d.x * d.z,
-        d.y * d.y,
-        d.y * d.z,
-        d.z * d.z,
+        p.x, p.y, p.z, p0, p1, p2, p3, p4, p5, d0, d1, d2, d3, d4, d5,
+    ]
+}
+
+/// `v v^T`'s upper triangle, laid out as in [`Moments`].
+fn outer_upper(v: &Vector3<f64>) -> [f64; 6] {
+    [
+        v.x * v.x,
+        v.x * v.y,
+        v.x * v.z,
+        v.y * v.y,
+        v.y * v.z,
+        v.z * v.z,
     ]
 }
 
 impl PlaneAccumulator {
     pub fn add(&mut self, gp: &GridPoint) {
+        // `add_weighted(gp, 1.0)` without its 15 multiplications: the hottest loop of leveling
+        // (3% more instructions through the weighted one).
         self.n += 1;
         self.weight += 1.0;
-        // Computed on the fly: stored with every point they would triple the grid's size, and
-        // the passes over it would cost more in memory traffic than they save.
         for (s, m) in self.sums.iter_mut().zip(&moments(&gp.p.coords, &gp.dir)) {
             *s += m;
         }
@@ -470,7 +464,11 @@ mod tests {
 
     fn gp(x: f64, y: f64, z: f64) -> GridPoint {
         let p = Point3::new(x, y, z);
-        GridPoint::new(p, p.coords.normalize(), p.coords.norm())
+        GridPoint {
+            p,
+            dir: p.coords.normalize(),
+            range: p.coords.norm(),
+        }
     }
 
     #[test]

@@ -278,14 +278,13 @@ fn make_patch(
     params: &LevelParams,
     sigma: f64,
 ) -> Option<Patch> {
-    // Too small or one row: nothing to fit (trimming only takes points away).
-    let too_small = |members: &[usize]| {
+    // The rows spanned, unless too small or one row: nothing to fit (trimming only takes
+    // points away).
+    let span = |members: &[usize]| {
         let (lo, hi) = rows_span(members, grid.cols);
-        members.len() < params.min_patch_points || hi <= lo
+        (members.len() >= params.min_patch_points && hi > lo).then_some((lo, hi))
     };
-    if too_small(members) {
-        return None;
-    }
+    span(members)?;
     // In grid order from here: the passes below then walk the grid forwards.
     let sorted = ascending(members);
     let members = &sorted[..];
@@ -295,10 +294,7 @@ fn make_patch(
         Some(kept) => (&kept[..], grid.accumulate(kept).fit(sigma)?),
         None => (members, first),
     };
-    if too_small(members) {
-        return None;
-    }
-    let (lo, hi) = rows_span(members, grid.cols);
+    let (lo, hi) = span(members)?;
     if !stacked(members, grid, params) {
         return None;
     }
@@ -857,7 +853,11 @@ mod tests {
                 let dir = Vector3::new(bearing.cos() * e.cos(), bearing.sin(), -e.sin());
                 // Range to the plane n . (p - (3, 0, 0)) = 0 along dir.
                 let range = 3.0 * n.x / n.dot(&dir) + noise.sample(&mut rng);
-                points.push(Some(GridPoint::new(Point3::from(dir * range), dir, range)));
+                points.push(Some(GridPoint {
+                    p: Point3::from(dir * range),
+                    dir,
+                    range,
+                }));
             }
         }
         PoseGrid {
@@ -922,11 +922,11 @@ mod tests {
                     foot / (dir.x * dir.x + dir.y * dir.y).sqrt()
                 };
                 let range = exact + noise.sample(&mut rng);
-                points.push(Some(GridPoint::new(
-                    Point3::new(0.0, 0.0, 0.45) + dir * range,
+                points.push(Some(GridPoint {
+                    p: Point3::new(0.0, 0.0, 0.45) + dir * range,
                     dir,
                     range,
-                )));
+                }));
             }
         }
         let members = (0..points.len()).collect();

@@ -890,29 +890,54 @@ fn find_levels(
 /// point: at high noise a wall's foot lies within a floor's tolerance, and a band of wall points
 /// at one height could pass for a floor.
 pub fn levelish_points(grid: &PoseGrid, margin: f64) -> Vec<bool> {
-    let cols = grid.cols;
-    let rows = grid.rows();
-    // Some(level step?) for a valid neighbour, None without one.
     let rc = grid.row_col();
-    let step = |i: usize, j: usize| -> Option<bool> {
-        let (a, b) = (grid.points[i].as_ref()?, grid.points[j].as_ref()?);
+    // Whether the step is a level surface's.
+    let pairs = row_pairs(grid, |a, b, i, j| {
         let de = (grid.elevation[rc.row(j)] - grid.elevation[rc.row(i)]).abs();
-        Some((b.range - a.range).abs() > 0.5 * (a.range + b.range) * de + margin)
-    };
-    // Each column pair of adjacent rows once: pair `i` joins point `i` to the one above.
-    let pairs: Vec<Option<bool>> = (0..cols * rows.saturating_sub(1))
-        .map(|i| step(i, i + cols))
-        .collect();
+        (b.range - a.range).abs() > 0.5 * (a.range + b.range) * de + margin
+    });
+    // A wall point above or below a floor point steps far to it, but not to its other
+    // neighbour on the wall: every neighbour must agree.
+    every_row_neighbour(grid, &pairs, |level| level)
+}
+
+/// `step(a, b, i, j)` for each point `a` (index `i`) and the point `b` (index `j`) above it in
+/// the next row, `None` where either is missing: each column pair of adjacent rows once,
+/// pair `i` joining point `i` to the one above.
+fn row_pairs<T>(
+    grid: &PoseGrid,
+    step: impl Fn(&GridPoint, &GridPoint, usize, usize) -> T,
+) -> Vec<Option<T>> {
+    let cols = grid.cols;
+    (0..cols * grid.rows().saturating_sub(1))
+        .map(|i| {
+            let j = i + cols;
+            Some(step(
+                grid.points[i].as_ref()?,
+                grid.points[j].as_ref()?,
+                i,
+                j,
+            ))
+        })
+        .collect()
+}
+
+/// Per point, whether it has a neighbour in an adjacent row and `accept` holds for the step to
+/// every such neighbour ([`row_pairs`]).
+fn every_row_neighbour<T: Copy>(
+    grid: &PoseGrid,
+    pairs: &[Option<T>],
+    accept: impl Fn(T) -> bool,
+) -> Vec<bool> {
+    let (cols, rows, rc) = (grid.cols, grid.rows(), grid.row_col());
     (0..grid.points.len())
         .map(|i| {
             let r = rc.row(i);
             let below = if r > 0 { pairs[i - cols] } else { None };
             let above = if r + 1 < rows { pairs[i] } else { None };
-            // A wall point above or below a floor point steps far to it, but not to its other
-            // neighbour on the wall: every neighbour must agree.
             match (below, above) {
                 (None, None) => false,
-                (a, b) => a.unwrap_or(true) && b.unwrap_or(true),
+                (a, b) => a.is_none_or(&accept) && b.is_none_or(&accept),
             }
         })
         .collect()
@@ -925,39 +950,21 @@ pub fn levelish_points(grid: &PoseGrid, margin: f64) -> Vec<bool> {
 /// and size. A point past an occluding edge steps far too, but its sign needs no luck to
 /// contradict a ceiling.
 pub fn level_sides(grid: &PoseGrid, margin: f64) -> (Vec<bool>, Vec<bool>) {
-    let cols = grid.cols;
-    let rows = grid.rows();
     let rc = grid.row_col();
-    // Some(+1) a floor's step, Some(-1) a ceiling's, Some(0) neither, None no neighbour.
-    let step = |i: usize, j: usize| -> Option<i8> {
-        let (a, b) = (grid.points[i].as_ref()?, grid.points[j].as_ref()?);
+    // +1 a floor's step, -1 a ceiling's, 0 neither.
+    let pairs = row_pairs(grid, |a, b, i, j| {
         let de = grid.elevation[rc.row(j)] - grid.elevation[rc.row(i)];
         let change = (b.range - a.range) * de.signum() * a.dir.x.signum();
         let bound = 0.5 * (a.range + b.range) * de.abs() + margin;
-        Some(if change < -bound {
-            1
+        if change < -bound {
+            1i8
         } else if change > bound {
             -1
         } else {
             0
-        })
-    };
-    let pairs: Vec<Option<i8>> = (0..cols * rows.saturating_sub(1))
-        .map(|i| step(i, i + cols))
-        .collect();
-    let side = |want: i8| -> Vec<bool> {
-        (0..grid.points.len())
-            .map(|i| {
-                let r = rc.row(i);
-                let below = if r > 0 { pairs[i - cols] } else { None };
-                let above = if r + 1 < rows { pairs[i] } else { None };
-                match (below, above) {
-                    (None, None) => false,
-                    (a, b) => a.is_none_or(|x| x == want) && b.is_none_or(|x| x == want),
-                }
-            })
-            .collect()
-    };
+        }
+    });
+    let side = |want: i8| every_row_neighbour(grid, &pairs, |x| x == want);
     (side(1), side(-1))
 }
 
@@ -1273,11 +1280,11 @@ mod tests {
         let mut points = Vec::new();
         for row in &rows {
             for c in 0..cols {
-                points.push(
-                    row.get(c).map(|p| {
-                        GridPoint::new(nalgebra::Point3::from(*p), p.normalize(), p.norm())
-                    }),
-                );
+                points.push(row.get(c).map(|p| GridPoint {
+                    p: nalgebra::Point3::from(*p),
+                    dir: p.normalize(),
+                    range: p.norm(),
+                }));
             }
         }
         PoseGrid {

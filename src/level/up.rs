@@ -495,11 +495,11 @@ mod tests {
             for j in 0..4 {
                 let q = Vector3::new(3.0, -1.0 + 0.4 * i as f64, -0.3 + 0.3 * j as f64);
                 let p = r * q;
-                acc.add(&super::super::grid::GridPoint::new(
-                    nalgebra::Point3::from(p),
-                    p.normalize(),
-                    p.norm(),
-                ));
+                acc.add(&super::super::grid::GridPoint {
+                    p: nalgebra::Point3::from(p),
+                    dir: p.normalize(),
+                    range: p.norm(),
+                });
             }
         }
         let fit = acc.fit(0.0).unwrap();
