@@ -281,13 +281,7 @@ impl UpSolution {
 
 /// Unit vector along the smallest eigenvalue of a symmetric matrix, rectified to `z >= 0`.
 fn smallest_eigenvector(m: &Matrix3<f64>) -> Option<Vector3<f64>> {
-    let eig = nalgebra::SymmetricEigen::new(*m);
-    let k = eig.eigenvalues.imin();
-    let v = eig
-        .eigenvectors
-        .column(k)
-        .into_owned()
-        .try_normalize(1e-300)?;
+    let v = super::eigen3::sym_eigen3(m).vectors[0].try_normalize(1e-300)?;
     Some(if v.z < 0.0 { -v } else { v })
 }
 
