@@ -91,7 +91,9 @@ fn eigenvalues_above(m: &[f64; 6], floor: f64) -> Option<[f64; 3]> {
         }
         let step = p(l) / dp;
         l -= step;
-        if step.abs() <= 1e-15 * c1.abs().max(1.0) {
+        // Newton's error after this step is about `step^2 p'' / (2 p')`: stop once that is
+        // below rounding rather than take one more step to see it.
+        if step * step * (3.0 * l - c1).abs() <= 1e-16 * dp * c1.abs().max(1.0) {
             // The other two: sum c1 - l, product c2 - l (c1 - l).
             let sum = c1 - l;
             let product = c2 - l * sum;
