@@ -139,20 +139,25 @@ pub fn grow_patches(
     } else {
         Vec::new()
     };
-    let mut seeds: Vec<(u8, f64, usize, &Polygon)> = three_row
+    let candidates: Vec<(u8, &Polygon)> = three_row
         .iter()
         .map(|q| (0u8, q))
         .chain(two_row.iter().map(|q| (1u8, q)))
         .chain(narrow_level.iter().map(|q| (2u8, *q)))
+        .collect();
+    // Ordered by rank, then mean squared residual, then position, packed in one integer key
+    // (unique, so an unstable sort gives the stable order).
+    let mut keys: Vec<u128> = candidates
+        .iter()
         .enumerate()
-        .map(|(i, (band, q))| {
+        .map(|(i, &(band, q))| {
             let rank = band + if q.kind == SurfaceKind::Wall { 0 } else { 2 };
-            (rank, q.fit.residual_ss / q.fit.n as f64, i, q)
+            let residual = total_order_bits(q.fit.residual_ss / q.fit.n as f64);
+            (u128::from(rank) << 96) | (u128::from(residual) << 32) | i as u128
         })
         .collect();
-    // Keys are unique (the index breaks ties): an unstable sort gives the stable order.
-    seeds.sort_unstable_by(|a, b| a.0.cmp(&b.0).then(a.1.total_cmp(&b.1)).then(a.2.cmp(&b.2)));
-    let seeds: Vec<&Polygon> = seeds.into_iter().map(|s| s.3).collect();
+    keys.sort_unstable();
+    let seeds = keys.iter().map(|&k| candidates[(k as u32) as usize].1);
     let mut members = Vec::new();
     // Column of every grid point, without a division per visit.
     let col_of: Vec<usize> = (0..grid.rows()).flat_map(|_| 0..cols).collect();
@@ -216,19 +221,26 @@ pub fn grow_patches(
         if let Some(f) = acc.fit(sigma) {
             fit = f;
         }
-        let mut kept = PlaneAccumulator::default();
+        // Few are released: their sums come off the accumulator, rather than the kept ones'
+        // being summed again.
+        let mut released = PlaneAccumulator::default();
         members.retain(|&i| {
             let Some(g) = grid.points[i].as_ref() else {
                 return false;
             };
             if fit.distance(&g.p).abs() <= tol_at(&fit, g) {
-                kept.add(g);
                 true
             } else {
+                released.add(g);
                 labels[i] = UNLABELLED;
                 false
             }
         });
+        let kept = if released.n == 0 {
+            acc
+        } else {
+            acc.minus(&released)
+        };
         let made = make_patch(grid, &members, kept, params, sigma);
         match made {
             Some(p) => patches.push(p),
@@ -260,6 +272,16 @@ pub fn grow_patches(
     (split, labels)
 }
 
+/// A float's bits as an unsigned integer in `f64::total_cmp`'s order.
+fn total_order_bits(x: f64) -> u64 {
+    let bits = x.to_bits();
+    if bits >> 63 == 1 {
+        !bits
+    } else {
+        bits | 1 << 63
+    }
+}
+
 fn rows_span(members: &[usize], cols: usize) -> (usize, usize) {
     // Rows grow with the grid index: the lowest and highest rows are those of the lowest and
     // highest index.
@@ -269,8 +291,8 @@ fn rows_span(members: &[usize], cols: usize) -> (usize, usize) {
 }
 
 /// A patch from members when it is big enough and spans at least two rows (one row is a
-/// line, which leaves its plane free to turn about it). `acc` holds the members' points,
-/// added in the members' order (the callers have just visited them).
+/// line, which leaves its plane free to turn about it). `acc` holds the sums of the members'
+/// points (the callers have just visited them).
 fn make_patch(
     grid: &PoseGrid,
     members: &[usize],
@@ -825,6 +847,15 @@ mod tests {
     }
 
     proptest! {
+        /// The seed keys' float order is `total_cmp`'s, signed zeros and infinities included.
+        #[test]
+        fn total_order_bits_sort_as_total_cmp(
+            a in prop_oneof![any::<f64>(), Just(0.0), Just(-0.0), Just(f64::INFINITY)],
+            b in prop_oneof![any::<f64>(), Just(0.0), Just(-0.0), Just(f64::NEG_INFINITY)],
+        ) {
+            prop_assert_eq!(total_order_bits(a).cmp(&total_order_bits(b)), a.total_cmp(&b));
+        }
+
         /// The bitmap ordering gives what a sort gives, dense or sparse, sorted or not.
         #[test]
         fn ascending_is_a_sort_of_distinct_indices(
