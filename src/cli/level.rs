@@ -4,7 +4,9 @@
 use super::{open_input, open_output};
 use anyhow::Context;
 use levelscan::formats::{InputError, ParallelScanReader, write_scan};
-use levelscan::level::{Estimator, LevelEstimate, LevelParams, SurfaceKind, level_pose};
+use levelscan::level::{
+    BearingTrigCache, Estimator, LevelEstimate, LevelParams, SurfaceKind, level_pose_with,
+};
 use levelscan::pseudo_level::{PseudoLevelParams, base_scan_index, pseudo_level_scan};
 use levelscan::scan::Scan;
 use nalgebra::Point3;
@@ -155,8 +157,8 @@ fn write_batch(
 ) -> anyhow::Result<()> {
     let lines: Vec<Vec<u8>> = batch
         .par_iter()
-        .map(|scans| {
-            let est = level_pose(scans, params);
+        .map_init(BearingTrigCache::default, |cache, scans| {
+            let est = level_pose_with(scans, params, cache);
             let record = level_record(scans, &est, pseudo, polygons);
             let mut buf = Vec::with_capacity(8192);
             // Writing to a Vec cannot fail.

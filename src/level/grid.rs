@@ -4,6 +4,7 @@
 use crate::geometry::{beam_origin, rot_y};
 use crate::scan::Scan;
 use nalgebra::{Point3, Vector3};
+use std::sync::Arc;
 
 /// One valid reading placed in the robot frame.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -31,20 +32,40 @@ pub struct PoseGrid {
 
 /// `(sin, cos)` of the bearings when every scan has the same bearings, to the bit (nearly
 /// always, for the scans of one pose): computed once for the noise estimate and the grid.
-pub fn shared_bearing_trig(scans: &[Scan]) -> Option<Vec<(f64, f64)>> {
-    let first = &scans.first()?.theta;
-    // A fold without an early exit, which the compiler vectorizes: they nearly always match.
-    let same = |theta: &[f64]| {
-        theta.len() == first.len()
-            && theta
-                .iter()
-                .zip(first)
-                .fold(true, |same, (a, b)| same & (a.to_bits() == b.to_bits()))
-    };
-    scans
-        .iter()
-        .all(|s| same(&s.theta))
-        .then(|| first.iter().map(|t| t.sin_cos()).collect())
+pub fn shared_bearing_trig(scans: &[Scan]) -> Option<Arc<[(f64, f64)]>> {
+    BearingTrigCache::default().shared(scans)
+}
+
+/// [`shared_bearing_trig`] that keeps its last answer, for as long as the bearings stay the
+/// same to the bit: a scanner's bearings rarely change from pose to pose, and their sines
+/// and cosines cost as much as a pass over the grid. One per thread of a run.
+#[derive(Clone, Debug, Default)]
+pub struct BearingTrigCache {
+    theta: Vec<f64>,
+    trig: Option<Arc<[(f64, f64)]>>,
+}
+
+impl BearingTrigCache {
+    pub fn shared(&mut self, scans: &[Scan]) -> Option<Arc<[(f64, f64)]>> {
+        let first = &scans.first()?.theta;
+        if !scans.iter().all(|s| same_bits(&s.theta, first)) {
+            return None;
+        }
+        if self.trig.is_none() || !same_bits(&self.theta, first) {
+            self.theta.clone_from(first);
+            self.trig = Some(first.iter().map(|t| t.sin_cos()).collect());
+        }
+        self.trig.clone()
+    }
+}
+
+/// Equal lengths and bits. A fold without an early exit, which the compiler vectorizes: they
+/// nearly always match.
+fn same_bits(a: &[f64], b: &[f64]) -> bool {
+    a.len() == b.len()
+        && a.iter()
+            .zip(b)
+            .fold(true, |same, (x, y)| same & (x.to_bits() == y.to_bits()))
 }
 
 /// Why a pose's scans cannot form a grid (the contract's failure reasons).
@@ -432,6 +453,33 @@ impl PlaneFit {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The cache answers as a fresh computation would, whether the bearings repeat, change,
+    /// or differ between the scans of a pose.
+    #[test]
+    fn bearing_trig_cache_follows_the_bearings() {
+        let pose = |n: usize, lo: f64| vec![Scan::with_even_bearings(n, lo, 1.0); 3];
+        let mut cache = BearingTrigCache::default();
+        let mixed = vec![
+            Scan::with_even_bearings(9, -1.0, 1.0),
+            Scan::with_even_bearings(9, -0.5, 1.0),
+        ];
+        for scans in [
+            pose(9, -1.0),
+            pose(9, -1.0),
+            pose(9, -0.5),
+            mixed,
+            pose(11, -0.5),
+            pose(9, -1.0),
+        ] {
+            let fresh = shared_bearing_trig(&scans);
+            assert_eq!(cache.shared(&scans).as_deref(), fresh.as_deref());
+            if let Some(t) = fresh {
+                assert_eq!(t[0], scans[0].theta[0].sin_cos());
+            }
+        }
+        assert!(cache.shared(&[]).is_none());
+    }
 
     /// The shared sines and cosines are taken only when every scan has the same bearings to the
     /// bit, and give the grid that computing them per scan gives.

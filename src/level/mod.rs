@@ -20,6 +20,7 @@ pub mod up;
 
 use crate::geometry::Attitude;
 use crate::scan::Scan;
+pub use grid::BearingTrigCache;
 use grid::{GridError, PlaneFit, PoseGrid};
 use nalgebra::Vector3;
 use patches::{Patch, UNLABELLED};
@@ -392,7 +393,7 @@ pub struct LevelEstimate {
     pub base_scan: Option<usize>,
     /// `(sin, cos)` of the bearings, when every scan of the pose has the same bearings to the
     /// bit ([`grid::shared_bearing_trig`]): the pseudo-level scan's rays need them again.
-    pub bearing_trig: Option<Vec<(f64, f64)>>,
+    pub bearing_trig: Option<std::sync::Arc<[(f64, f64)]>>,
 }
 
 impl LevelEstimate {
@@ -473,7 +474,17 @@ fn range_sigma_with(scans: &[Scan], params: &LevelParams, trig: Option<&[(f64, f
 /// Levels one pose: its scans (any order, at least three distinct elevations) in, attitude,
 /// uncertainty, wall geometry and failure reason out (paper sect. 5).
 pub fn level_pose(scans: &[Scan], params: &LevelParams) -> LevelEstimate {
-    let trig = grid::shared_bearing_trig(scans);
+    level_pose_with(scans, params, &mut BearingTrigCache::default())
+}
+
+/// [`level_pose`] with the bearings' sines and cosines kept from the last pose in `cache`
+/// (identical results).
+pub fn level_pose_with(
+    scans: &[Scan],
+    params: &LevelParams,
+    cache: &mut BearingTrigCache,
+) -> LevelEstimate {
+    let trig = cache.shared(scans);
     let sigma = range_sigma_with(scans, params, trig.as_deref());
     let grid = match PoseGrid::from_scans_with(scans, trig.as_deref()) {
         Ok(g) => g,
