@@ -19,7 +19,7 @@
 use crate::geometry::{Pose, rot_y};
 use crate::level::grid::PoseGrid;
 use crate::level::patches::{UNLABELLED, level_height};
-use crate::level::{LevelEstimate, SurfaceKind};
+use crate::level::{LevelEstimate, SurfaceKind, from_total_order_key, total_order_key};
 use crate::scan::Scan;
 use nalgebra::{Matrix3, Point3, Vector2, Vector3};
 
@@ -151,7 +151,7 @@ fn lowest_crowded_height(heights: &[f64], window: f64, min_count: usize) -> Opti
     // sort gives the stable one's order.
     let mut keys: Vec<i64> = heights.iter().map(|&z| total_order_key(z)).collect();
     let heights_of =
-        |keys: &[i64]| -> Vec<f64> { keys.iter().map(|&k| height_of_key(k)).collect() };
+        |keys: &[i64]| -> Vec<f64> { keys.iter().map(|&k| from_total_order_key(k)).collect() };
     // The crowd is nearly always among the lowest few crowds' worth of points: sort only
     // those (the same values in the same order as the full sort's start), and sort the rest
     // only when the answer could depend on them.
@@ -167,18 +167,6 @@ fn lowest_crowded_height(heights: &[f64], window: f64, min_count: usize) -> Opti
     }
     keys.sort_unstable();
     crowd_in_sorted(&heights_of(&keys), window, min_count, true).flatten()
-}
-
-/// The key `f64::total_cmp` orders by: the bits as a signed integer, with the magnitude bits
-/// of negative numbers flipped.
-fn total_order_key(z: f64) -> i64 {
-    let bits = z.to_bits() as i64;
-    bits ^ (((bits >> 63) as u64) >> 1) as i64
-}
-
-/// The inverse of [`total_order_key`] (which is its own inverse: the flip keeps the sign).
-fn height_of_key(key: i64) -> f64 {
-    f64::from_bits((key ^ (((key >> 63) as u64) >> 1) as i64) as u64)
 }
 
 /// [`lowest_crowded_height`] on sorted heights, all of them (`complete`) or only the lowest
@@ -370,33 +358,6 @@ mod tests {
         let spread: Vec<f64> = (0..50).map(|k| 0.1 * k as f64).collect();
         assert_eq!(lowest_crowded_height(&spread, 0.05, 20), None);
         assert_eq!(lowest_crowded_height(&[0.0; 5], 0.05, 20), None);
-    }
-
-    /// The integer keys order as `total_cmp` does and give back the same bits.
-    #[test]
-    fn total_order_keys_sort_as_total_cmp() {
-        let mut z = vec![
-            1.5,
-            -0.0,
-            0.0,
-            -2.25,
-            f64::INFINITY,
-            f64::NEG_INFINITY,
-            f64::NAN,
-            -f64::NAN,
-            1e-310,
-            -1e-310,
-            f64::MAX,
-            -0.5,
-        ];
-        for &x in &z {
-            assert_eq!(height_of_key(total_order_key(x)).to_bits(), x.to_bits());
-        }
-        let mut keys: Vec<i64> = z.iter().map(|&x| total_order_key(x)).collect();
-        keys.sort_unstable();
-        z.sort_by(f64::total_cmp);
-        let back: Vec<u64> = keys.iter().map(|&k| height_of_key(k).to_bits()).collect();
-        assert_eq!(back, z.iter().map(|x| x.to_bits()).collect::<Vec<_>>());
     }
 
     /// Sorting only the lowest heights gives what sorting all of them gives.

@@ -1059,3 +1059,58 @@ fn acceptable(sol: &UpSolution, params: &LevelParams, with_level: bool) -> Resul
     }
     Ok(())
 }
+
+/// The key `f64::total_cmp` orders by: the bits as a signed integer, with the magnitude bits
+/// of negative numbers flipped.
+pub(crate) fn total_order_key(z: f64) -> i64 {
+    let bits = z.to_bits() as i64;
+    bits ^ (((bits >> 63) as u64) >> 1) as i64
+}
+
+/// The inverse of [`total_order_key`] (which is its own inverse: the flip keeps the sign).
+pub(crate) fn from_total_order_key(key: i64) -> f64 {
+    f64::from_bits((key ^ (((key >> 63) as u64) >> 1) as i64) as u64)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The integer keys order as `total_cmp` does and give back the same bits.
+    #[test]
+    fn total_order_keys_sort_as_total_cmp() {
+        let mut z = vec![
+            1.5,
+            -0.0,
+            0.0,
+            -2.25,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::NAN,
+            -f64::NAN,
+            1e-310,
+            -1e-310,
+            f64::MAX,
+            -0.5,
+        ];
+        for &x in &z {
+            assert_eq!(
+                from_total_order_key(total_order_key(x)).to_bits(),
+                x.to_bits()
+            );
+        }
+        let mut keys: Vec<i64> = z.iter().map(|&x| total_order_key(x)).collect();
+        keys.sort_unstable();
+        z.sort_by(f64::total_cmp);
+        let back: Vec<u64> = keys
+            .iter()
+            .map(|&k| from_total_order_key(k).to_bits())
+            .collect();
+        assert_eq!(back, z.iter().map(|x| x.to_bits()).collect::<Vec<_>>());
+        // As unsigned with the sign bit flipped (the seeds' packed keys), in the same order.
+        assert!(
+            keys.windows(2)
+                .all(|w| (w[0] as u64 ^ 1 << 63) <= (w[1] as u64 ^ 1 << 63))
+        );
+    }
+}
