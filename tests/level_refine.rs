@@ -163,8 +163,10 @@ fn level_start_finds_the_floor_without_any_up() {
     let scans = scans_at(&room, &pose, &elevations(3, 5.0), 0.10, 9, 0);
     let est = level_pose(&scans, &without_refine());
     let grid = est.grid.as_ref().unwrap();
-    let start = levelscan::level::refine::level_start(grid, &LevelParams::default(), 0.10)
-        .expect("a level start");
+    let params = LevelParams::default();
+    let steps = levelscan::level::refine::level_steps(grid, &params, 0.10);
+    let start =
+        levelscan::level::refine::level_start(grid, &steps, &params, 0.10).expect("a level start");
     let err = start.attitude().max_abs_error(&pose.attitude());
     assert!(err.to_degrees() < 1.0, "error {} deg", err.to_degrees());
 }

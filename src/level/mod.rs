@@ -617,6 +617,7 @@ pub fn refine_estimate(
     let sigma = est.range_sigma;
     let sigma_eff = sigma.max(params.min_sigma);
     let width = |s: &UpSolution| s.attitude_sigmas().iter().fold(0f64, |a, &b| a.max(b));
+    let steps = refine::level_steps(grid, params, sigma);
     let start = match first {
         Ok(sol) => *sol,
         Err(_) => {
@@ -626,7 +627,7 @@ pub fn refine_estimate(
             // turn about its normal), with the floor's or ceiling's lines: the start that
             // claims the smaller uncertainty.
             let with_lines = (params.level_lines && params.level_surfaces)
-                .then(|| refine::start_lines(grid, params, sigma))
+                .then(|| refine::start_lines(grid, &steps, params, sigma))
                 .filter(|lines| !lines.is_empty())
                 .and_then(|lines| {
                     let mut obs = obs.clone();
@@ -648,7 +649,7 @@ pub fn refine_estimate(
                 }
                 (a, b) => a
                     .or(b)
-                    .or_else(|| refine::level_start(grid, params, sigma))?,
+                    .or_else(|| refine::level_start(grid, &steps, params, sigma))?,
             }
         }
     };
@@ -663,7 +664,7 @@ pub fn refine_estimate(
         .iter()
         .filter(|p| p.kind == SurfaceKind::Wall)
         .collect();
-    let refined = refine::refine(grid, &start, &walls, params, sigma)?;
+    let refined = refine::refine(grid, &start, &walls, &steps, params, sigma)?;
     Some((start, refined))
 }
 

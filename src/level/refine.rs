@@ -128,6 +128,7 @@ pub fn refine(
     grid: &PoseGrid,
     start: &UpSolution,
     walls: &[&Patch],
+    steps: &LevelSteps,
     params: &LevelParams,
     sigma: f64,
 ) -> Option<Refined> {
@@ -138,8 +139,7 @@ pub fn refine(
     // Wall planes to assign from, robot frame.
     let mut wall_fits: Vec<PlaneFit> = walls.iter().map(|p| p.fit).collect();
     let mut level_fits: Vec<PlaneFit> = Vec::new();
-    // The step's noise is that of two ranges.
-    let levelish = levelish_points(grid, params.refine_step_k * std::f64::consts::SQRT_2 * s);
+    let levelish = &steps.levelish;
     let mut result: Option<Refined> = None;
     let seed_width = if params.refine_discover {
         super::patches::seed_cols(grid, params, s).max(3)
@@ -220,6 +220,8 @@ pub fn refine(
         merge_lines(&mut lines, params, s);
         let cos_similar = SIMILAR_LINES_DEG.to_radians().cos();
         let mut wall_members: Vec<Vec<usize>> = vec![Vec::new(); lines.len()];
+        // Candidates within reach of a line (the floor and ceiling lines below keep off them).
+        let mut in_reach = vec![false; grid.points.len()];
         for (i, q) in lv.q.iter().enumerate() {
             let Some((q, d)) = q else { continue };
             if !candidate[i] {
@@ -240,6 +242,7 @@ pub fn refine(
                 }
             }
             let Some((_, m)) = best else { continue };
+            in_reach[i] = true;
             // In reach of two walls that meet (a corner): no one's point. Two nearly parallel
             // lines in reach are one wall's pieces left unmerged: the nearer takes it.
             if second
@@ -302,15 +305,18 @@ pub fn refine(
             }
             for (i, q) in lv.q.iter().enumerate() {
                 let Some((q, d)) = q else { continue };
-                if !taken[i]
-                    && lines
+                if taken[i] {
+                    continue;
+                }
+                // Candidates were tried against every line above.
+                taken[i] = if candidate[i] {
+                    in_reach[i]
+                } else {
+                    lines
                         .iter()
                         .any(|l| line_z2(l, q, d, s, params.min_sigma, sigma_up, k * k).is_some())
-                {
-                    taken[i] = true;
-                }
+                };
             }
-            let toward = level_sides(grid, params.refine_step_k * std::f64::consts::SQRT_2 * s);
             for kind in [SurfaceKind::Floor, SurfaceKind::Ceiling] {
                 if models.iter().any(|m| m.kind == kind) {
                     continue;
@@ -319,9 +325,9 @@ pub fn refine(
                     grid,
                     lv: &lv,
                     levelish: if kind == SurfaceKind::Floor {
-                        &toward.0
+                        &steps.floor
                     } else {
-                        &toward.1
+                        &steps.ceiling
                     },
                     taken: &taken,
                     up: &up,
@@ -415,7 +421,7 @@ enum LevelEvidence {
 /// next scan, which that search needs.
 ///
 /// Candidates are the points whose range steps to the adjacent scans like a level surface's
-/// ([`levelish_points`]: a wall's foot does not). The floor is the LOWEST level surface (a box
+/// ([`LevelSteps`]: a wall's foot does not). The floor is the LOWEST level surface (a box
 /// top is not the floor) and lies at one height for all scans: the lowest height window that
 /// holds a third as many candidates as the densest one gives that height, and each candidate
 /// within its own vertical tolerance of it (range noise along the vertical, and an error of up
@@ -656,13 +662,18 @@ impl<'a> LevelModel<'a> {
 
 /// A start for poses where no first solution exists (the walls and region-grown floor could not
 /// fix up): the plane through most of the points whose range steps like a level surface's
-/// ([`levelish_points`], which needs no up), found by a deterministic sample of point triples
+/// ([`LevelSteps::levelish`], which needs no up), found by a deterministic sample of point triples
 /// (RANSAC, Fischler and Bolles 1981), taken as level. `None` when no such plane holds
 /// `min_level_points` points in at least two scans with a normal within 50 degrees of the
 /// robot's own up.
-pub fn level_start(grid: &PoseGrid, params: &LevelParams, sigma: f64) -> Option<UpSolution> {
+pub fn level_start(
+    grid: &PoseGrid,
+    steps: &LevelSteps,
+    params: &LevelParams,
+    sigma: f64,
+) -> Option<UpSolution> {
     let s = sigma.max(params.min_sigma);
-    let levelish = levelish_points(grid, params.refine_step_k * std::f64::consts::SQRT_2 * s);
+    let levelish = &steps.levelish;
     let idx: Vec<usize> = (0..grid.points.len())
         .filter(|&i| levelish[i] && grid.points[i].is_some())
         .collect();
@@ -722,15 +733,19 @@ pub fn level_start(grid: &PoseGrid, params: &LevelParams, sigma: f64) -> Option<
 
 /// Floor and ceiling lines found without a level frame, for a start where neither the walls
 /// nor a level plane fix up ([`level_start`]): in each scan, the points whose range steps to
-/// the adjacent scans like the floor's ([`level_sides`]) as one line, and likewise the
+/// the adjacent scans like the floor's ([`LevelSteps::floor`]) as one line, and likewise the
 /// ceiling's. Their height is not checked (no frame to check it in); the lines only start
 /// re-segmentation, which finds them again in its provisional level frame.
-pub fn start_lines(grid: &PoseGrid, params: &LevelParams, sigma: f64) -> Vec<LevelLine> {
+pub fn start_lines(
+    grid: &PoseGrid,
+    steps: &LevelSteps,
+    params: &LevelParams,
+    sigma: f64,
+) -> Vec<LevelLine> {
     let s = sigma.max(params.min_sigma);
-    let (floor, ceiling) = level_sides(grid, params.refine_step_k * std::f64::consts::SQRT_2 * s);
     let cols = grid.cols;
     let mut out = Vec::new();
-    for mask in [&floor, &ceiling] {
+    for mask in [&steps.floor, &steps.ceiling] {
         let lines: Vec<LevelLine> = (0..grid.rows())
             .filter_map(|r| {
                 let idx: Vec<usize> = (r * cols..(r + 1) * cols).filter(|&i| mask[i]).collect();
@@ -886,19 +901,48 @@ fn find_levels(
 /// Points whose range changes from scan to scan like a level surface's: in their column, the
 /// range to a neighbouring row's point differs by more than `r de` for the elevation step `de`
 /// (`r cot(a) de` on a surface seen `a` < 45 degrees off the beams' plane, `r tan(b) de` on a
-/// wall met at vertical incidence `b`, see [`super::steep`]), plus `margin` for the noise. A floor or ceiling takes no other
-/// point: at high noise a wall's foot lies within a floor's tolerance, and a band of wall points
-/// at one height could pass for a floor.
-pub fn levelish_points(grid: &PoseGrid, margin: f64) -> Vec<bool> {
+/// wall met at vertical incidence `b`, see [`super::steep`]), plus a margin for the noise of
+/// two ranges. A floor or ceiling takes no other point: at high noise a wall's foot lies within
+/// a floor's tolerance, and a band of wall points at one height could pass for a floor.
+///
+/// Split by side too. On a floor, a scan tilted further down (the next row, larger elevation)
+/// meets the surface closer for rays ahead of the hinge axis (`dir.x > 0`) and farther for
+/// rays behind it; on a ceiling the other way round. A point past an occluding edge steps far
+/// too, but its sign needs no luck to contradict a ceiling.
+pub struct LevelSteps {
+    /// Every neighbouring row's step is a level surface's.
+    pub levelish: Vec<bool>,
+    /// Every neighbouring row's step has the floor's sign and size.
+    pub floor: Vec<bool>,
+    /// Every neighbouring row's step has the ceiling's sign and size.
+    pub ceiling: Vec<bool>,
+}
+
+/// [`LevelSteps`] of a grid at range noise `sigma`, each adjacent-row step judged once.
+pub fn level_steps(grid: &PoseGrid, params: &LevelParams, sigma: f64) -> LevelSteps {
+    let margin = params.refine_step_k * std::f64::consts::SQRT_2 * sigma.max(params.min_sigma);
     let rc = grid.row_col();
-    // Whether the step is a level surface's.
+    // +1 a floor's step, -1 a ceiling's, 0 neither.
     let pairs = row_pairs(grid, |a, b, i, j| {
-        let de = (grid.elevation[rc.row(j)] - grid.elevation[rc.row(i)]).abs();
-        (b.range - a.range).abs() > 0.5 * (a.range + b.range) * de + margin
+        let de = grid.elevation[rc.row(j)] - grid.elevation[rc.row(i)];
+        let change = (b.range - a.range) * de.signum() * a.dir.x.signum();
+        let bound = 0.5 * (a.range + b.range) * de.abs() + margin;
+        if change < -bound {
+            1i8
+        } else if change > bound {
+            -1
+        } else {
+            0
+        }
     });
     // A wall point above or below a floor point steps far to it, but not to its other
     // neighbour on the wall: every neighbour must agree.
-    every_row_neighbour(grid, &pairs, |level| level)
+    let every = |accept: fn(i8) -> bool| every_row_neighbour(grid, &pairs, accept);
+    LevelSteps {
+        levelish: every(|x| x != 0),
+        floor: every(|x| x == 1),
+        ceiling: every(|x| x == -1),
+    }
 }
 
 /// `step(a, b, i, j)` for each point `a` (index `i`) and the point `b` (index `j`) above it in
@@ -941,31 +985,6 @@ fn every_row_neighbour<T: Copy>(
             }
         })
         .collect()
-}
-
-/// [`levelish_points`] split by side: (floor, ceiling). On a floor, a scan tilted further
-/// down (the next row, larger elevation) meets the surface closer for rays ahead of the
-/// hinge axis (`dir.x > 0`) and farther for rays behind it; on a ceiling the other way round.
-/// A point counts when every neighbouring row's step has the floor's (or the ceiling's) sign
-/// and size. A point past an occluding edge steps far too, but its sign needs no luck to
-/// contradict a ceiling.
-pub fn level_sides(grid: &PoseGrid, margin: f64) -> (Vec<bool>, Vec<bool>) {
-    let rc = grid.row_col();
-    // +1 a floor's step, -1 a ceiling's, 0 neither.
-    let pairs = row_pairs(grid, |a, b, i, j| {
-        let de = grid.elevation[rc.row(j)] - grid.elevation[rc.row(i)];
-        let change = (b.range - a.range) * de.signum() * a.dir.x.signum();
-        let bound = 0.5 * (a.range + b.range) * de.abs() + margin;
-        if change < -bound {
-            1i8
-        } else if change > bound {
-            -1
-        } else {
-            0
-        }
-    });
-    let side = |want: i8| every_row_neighbour(grid, &pairs, |x| x == want);
-    (side(1), side(-1))
 }
 
 /// Points that can belong to a floor or ceiling, judged against their neighbours in the same
