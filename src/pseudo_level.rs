@@ -95,13 +95,15 @@ pub fn pseudo_level_scan(scans: &[Scan], est: &LevelEstimate, params: &PseudoLev
     for (i, &kept) in keep.iter().enumerate() {
         let (sp, cp) = trig.map_or_else(|| base.theta[i].sin_cos(), |t| t[i]);
         let ray = Vector3::new(cp, sp, 0.0);
-        let dir = level_from_scanner * ray;
         let point = base
             .range(i)
             .map(|r| level_from_robot * (robot_from_scanner * (offset + r * ray)));
         let bearing = match &point {
             Some(p) if p.x != 0.0 || p.y != 0.0 => p.y.atan2(p.x),
-            _ => dir.y.atan2(dir.x),
+            _ => {
+                let dir = level_from_scanner * ray;
+                dir.y.atan2(dir.x)
+            }
         };
         out.theta.push(bearing);
         match (kept, point) {

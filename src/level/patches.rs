@@ -237,12 +237,7 @@ pub fn grow_patches(
                 false
             }
         });
-        let kept = if released.n == 0 {
-            acc
-        } else {
-            acc.minus(&released)
-        };
-        let made = make_patch(grid, &members, kept, params, sigma);
+        let made = make_patch(grid, &members, acc.minus(&released), params, sigma);
         match made {
             Some(p) => patches.push(p),
             None => {

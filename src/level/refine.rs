@@ -374,9 +374,7 @@ pub fn refine(
         let change = sol.up.angle(&up);
         up = sol.up;
         sigma_up = sol
-            .attitude_sigmas()
-            .iter()
-            .fold(0f64, |a, &b| a.max(b))
+            .max_attitude_sigma()
             .clamp(params.refine_min_sigma_deg.to_radians(), MAX_SIGMA_UP);
         wall_fits = models[..walls_found].iter().map(|m| m.fit).collect();
         level_fits = models[walls_found..].iter().map(|m| m.fit).collect();
@@ -794,7 +792,7 @@ const CONVERGED: f64 = 0.05;
 const MAX_SIGMA_UP: f64 = 0.06;
 
 fn start_sigma(start: &UpSolution, params: &LevelParams) -> f64 {
-    let s = start.attitude_sigmas().iter().fold(0f64, |a, &b| a.max(b));
+    let s = start.max_attitude_sigma();
     if s.is_finite() {
         s.clamp(params.refine_min_sigma_deg.to_radians(), MAX_SIGMA_UP)
     } else {

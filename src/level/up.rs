@@ -135,11 +135,6 @@ impl PlaneObs<'_> {
         }
     }
 
-    /// True for level evidence (planes and lines), false for walls.
-    pub fn is_level(&self) -> bool {
-        !matches!(self.evidence, Evidence::Wall(_))
-    }
-
     /// Scalar residuals this evidence contributes.
     fn constraints(&self) -> usize {
         match self.evidence {
@@ -253,6 +248,11 @@ pub struct UpSolution {
 impl UpSolution {
     pub fn attitude(&self) -> Attitude {
         Attitude::from_up(&self.up)
+    }
+
+    /// The larger of [`Self::attitude_sigmas`] [rad].
+    pub fn max_attitude_sigma(&self) -> f64 {
+        self.attitude_sigmas().iter().fold(0f64, |a, &b| a.max(b))
     }
 
     /// 1-sigma of theta_x and theta_y [rad], propagating `cov` through `Attitude::from_up`.

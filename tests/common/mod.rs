@@ -29,7 +29,6 @@ impl Room {
     }
 
     /// The room with an axis-aligned box (a pillar) from corner `lo` to corner `hi`.
-    #[allow(dead_code)] // not every test file places pillars
     pub fn with_box(mut self, lo: [f64; 2], hi: [f64; 2]) -> Room {
         let c = [lo, [hi[0], lo[1]], hi, [lo[0], hi[1]]];
         self.segments.extend((0..4).map(|i| (c[i], c[(i + 1) % 4])));
