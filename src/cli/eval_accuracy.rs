@@ -1,9 +1,10 @@
 //! `levelscan eval accuracy PLAN...`: the paper's Table I and Fig. 6 (sect. 8.1).
 
+use super::LevelArgs;
 use anyhow::Context;
 use levelscan::eval::accuracy::{AccuracyParams, CellStats, run_accuracy};
 use levelscan::formats::read_plan;
-use levelscan::level::Estimator;
+use levelscan::level::{Estimator, LevelParams};
 use levelscan::viz::histogram::{Series, write_histogram};
 use std::fmt::Write as _;
 use std::path::PathBuf;
@@ -39,22 +40,8 @@ pub struct Args {
     /// Roll and pitch uniform in +-tilt [deg].
     #[arg(long, default_value_t = 20.0)]
     pub tilt: f64,
-    /// A pose whose attitude sigma exceeds this fails as parallel_walls [deg].
-    #[arg(long, default_value_t = levelscan::level::LevelParams::default().max_sigma_deg)]
-    pub max_sigma: f64,
-    /// Use walls alone, as the paper does: do not take the floor and ceiling seen as level.
-    /// For places where the visible floor itself slopes (long ramps, rubble).
-    #[arg(long)]
-    pub walls_only: bool,
-    /// Do not use each scan's floor (or ceiling) points as a line that must be level where
-    /// no floor plane is found (on by default: it levels poses that see the floor in one
-    /// scan only).
-    #[arg(long)]
-    pub no_floor_lines: bool,
-    /// Passes of re-segmentation in the provisional level frame (robust estimator); 0 turns
-    /// it off.
-    #[arg(long, default_value_t = levelscan::level::LevelParams::default().refine_passes)]
-    pub refine_passes: usize,
+    #[command(flatten)]
+    pub leveling: LevelArgs,
     /// Take the scans with the adaptive robot (cleverRobot), as the paper's Table I did.
     #[arg(long)]
     pub adaptive: bool,
@@ -86,13 +73,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         step_deg: args.step,
         tilt_deg: args.tilt,
         adaptive: args.adaptive,
-        level: levelscan::level::LevelParams {
-            max_sigma_deg: args.max_sigma,
-            level_surfaces: !args.walls_only,
-            level_lines: !args.no_floor_lines,
-            refine_passes: args.refine_passes,
-            ..levelscan::level::LevelParams::default()
-        },
+        level: args.leveling.apply(LevelParams::default()),
         ..AccuracyParams::default()
     };
     let stats = run_accuracy(&plans, &params)?;

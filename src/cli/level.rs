@@ -1,7 +1,7 @@
 //! `levelscan level [SCANS]`: one pseudo-level scan per pose (paper sect. 5 and 6), in input
 //! order, as the contract's "Output of level" lays it out.
 
-use super::{open_input, open_output};
+use super::{LevelArgs, open_input, open_output};
 use anyhow::Context;
 use levelscan::formats::{InputError, ParallelScanReader, write_scan};
 use levelscan::level::{
@@ -36,23 +36,8 @@ pub struct Args {
     /// Quad width [rays].
     #[arg(long, default_value_t = LevelParams::default().quad_cols)]
     pub quad_cols: usize,
-    /// A pose whose attitude sigma exceeds this fails as parallel_walls [deg].
-    #[arg(long, default_value_t = LevelParams::default().max_sigma_deg)]
-    pub max_sigma: f64,
-    /// Use walls alone, as the paper does: do not take the floor and ceiling seen as level.
-    /// For places where the visible floor itself slopes (long ramps, rubble).
-    #[arg(long)]
-    pub walls_only: bool,
-    /// Do not use each scan's floor (or ceiling) points as a line that must be level where
-    /// no floor plane is found (on by default: it levels poses that see the floor in one
-    /// scan only).
-    #[arg(long)]
-    pub no_floor_lines: bool,
-    /// Passes of re-segmentation in the provisional level frame (robust estimator): points
-    /// re-assigned to the floor and ceiling by height and to walls as vertical planes, then
-    /// up re-estimated. 0 turns it off.
-    #[arg(long, default_value_t = LevelParams::default().refine_passes)]
-    pub refine_passes: usize,
+    #[command(flatten)]
+    pub leveling: LevelArgs,
     /// Gaps of at most this many rays between wall points are filled [rays].
     #[arg(long, default_value_t = PseudoLevelParams::default().max_gap)]
     pub max_gap: usize,
@@ -71,11 +56,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         estimator: args.estimator,
         quad_rows: args.quad_rows,
         quad_cols: args.quad_cols,
-        max_sigma_deg: args.max_sigma,
-        level_surfaces: !args.walls_only,
-        level_lines: !args.no_floor_lines,
-        refine_passes: args.refine_passes,
-        ..LevelParams::default()
+        ..args.leveling.apply(LevelParams::default())
     };
     if let Some(s) = params.sigma {
         anyhow::ensure!(

@@ -13,6 +13,7 @@ mod view;
 use anyhow::Context;
 use clap::{Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
+use levelscan::level::LevelParams;
 use levelscan::simulate::OdometryParams;
 use std::fs::File;
 use std::io::{self, BufRead, BufReader, BufWriter, Read, Write};
@@ -89,6 +90,41 @@ impl OdometryNoiseArgs {
             "--odo-trans, --odo-trans-min, --odo-rot and --odo-rot-min must be finite and >= 0"
         );
         Ok(p)
+    }
+}
+
+/// The leveling flags that `level` and `eval accuracy` share (`level::LevelParams`).
+#[derive(clap::Args, Debug, Clone)]
+pub struct LevelArgs {
+    /// A pose whose attitude sigma exceeds this fails as parallel_walls [deg].
+    #[arg(long, default_value_t = LevelParams::default().max_sigma_deg)]
+    pub max_sigma: f64,
+    /// Use walls alone, as the paper does: do not take the floor and ceiling seen as level.
+    /// For places where the visible floor itself slopes (long ramps, rubble).
+    #[arg(long)]
+    pub walls_only: bool,
+    /// Do not use each scan's floor (or ceiling) points as a line that must be level where
+    /// no floor plane is found (on by default: it levels poses that see the floor in one
+    /// scan only).
+    #[arg(long)]
+    pub no_floor_lines: bool,
+    /// Passes of re-segmentation in the provisional level frame (robust estimator): points
+    /// re-assigned to the floor and ceiling by height and to walls as vertical planes, then
+    /// up re-estimated. 0 turns it off.
+    #[arg(long, default_value_t = LevelParams::default().refine_passes)]
+    pub refine_passes: usize,
+}
+
+impl LevelArgs {
+    /// `params` with these flags applied.
+    pub fn apply(&self, params: LevelParams) -> LevelParams {
+        LevelParams {
+            max_sigma_deg: self.max_sigma,
+            level_surfaces: !self.walls_only,
+            level_lines: !self.no_floor_lines,
+            refine_passes: self.refine_passes,
+            ..params
+        }
     }
 }
 
