@@ -251,9 +251,15 @@ fn kept_rays(
     let floor_z = height_of(SurfaceKind::Floor);
     let ceiling_z = height_of(SurfaceKind::Ceiling);
     let attitude_sigma = est.sigmas.map_or(0.0, |s| s[0].max(s[1]));
-    let (ground_z, ground_floor_z) = match floor_z {
-        Some(f) => (Some(f), Some(f)),
-        None => ground_crowd(grid, level_from_robot, params.floor_margin),
+    // The floor's height and the band about it that blocks a point. Without floor patches,
+    // only the floor's own hits: a crowd's height is exact to the noise, and a wider band
+    // would take the foot of every wall with it.
+    let (ground_z, floor_band) = match floor_z {
+        Some(f) => (Some(f), Some((f, params.floor_margin))),
+        None => {
+            let (crowd, floor) = ground_crowd(grid, level_from_robot, params.floor_margin);
+            (crowd, floor.map(|f| (f, GROUND_BAND)))
+        }
     };
     let mut is_wall = vec![false; n];
     let mut blocked = vec![false; n];
@@ -267,15 +273,11 @@ fn kept_rays(
         let lp = level(&g.p);
         flat_points[c] = Some(lp.xy());
         let dz_noise = 3.0 * sigma * (level_from_robot * g.dir).z.abs();
-        let near_within =
-            |h: Option<f64>, margin: f64| h.is_some_and(|h| (lp.z - h).abs() < margin + dz_noise);
-        let near = |h: Option<f64>| near_within(h, params.floor_margin);
-        // Without floor patches, only the floor's own hits: a crowd's height is exact to the
-        // noise, and a wider band would take the foot of every wall with it.
-        let on_ground = floor_z.is_none() && near_within(ground_floor_z, GROUND_BAND);
+        let near = |(h, margin): (f64, f64)| (lp.z - h).abs() < margin + dz_noise;
+        let on_ceiling = ceiling_z.is_some_and(|h| near((h, params.floor_margin)));
         let label = est.labels.get(i).copied().unwrap_or(UNLABELLED);
         let on_flat = label != UNLABELLED && est.patches[label as usize].kind != SurfaceKind::Wall;
-        if near(floor_z) || on_ground || near(ceiling_z) || on_flat {
+        if floor_band.is_some_and(near) || on_ceiling || on_flat {
             blocked[c] = true;
             continue;
         }
