@@ -183,11 +183,7 @@ impl PlaneObs<'_> {
     /// Squared Mahalanobis distance of `up` from this evidence's constraint, per residual.
     fn z2(&self, up: &Vector3<f64>, sigma: f64) -> f64 {
         let (terms, k) = self.terms(up, sigma);
-        terms[..k]
-            .iter()
-            .map(|(a, v)| a.dot(up).powi(2) / v)
-            .sum::<f64>()
-            / k as f64
+        z2_of(&terms[..k], up)
     }
 
     /// The direction this evidence proposes for up on its own, if any: a level plane's normal.
@@ -351,8 +347,8 @@ pub fn up_robust(planes: &[PlaneObs], sigma: f64, iterations: usize) -> Option<U
     for _ in 0..iterations.max(1) {
         let mut m = Matrix3::zeros();
         for p in planes {
-            let w = cauchy2(p.z2(&up, sigma));
             let (terms, k) = p.terms(&up, sigma);
+            let w = cauchy2(z2_of(&terms[..k], &up));
             for (a, var) in &terms[..k] {
                 m += a * a.transpose() * (w / var);
             }
@@ -370,6 +366,15 @@ pub fn up_robust(planes: &[PlaneObs], sigma: f64, iterations: usize) -> Option<U
     Some(solution_at(up, planes, sigma, true))
 }
 
+/// [`PlaneObs::z2`] from the evidence's terms.
+fn z2_of(terms: &[Term], up: &Vector3<f64>) -> f64 {
+    terms
+        .iter()
+        .map(|(a, v)| a.dot(up).powi(2) / v)
+        .sum::<f64>()
+        / terms.len() as f64
+}
+
 /// Cauchy weight for a squared standardised residual.
 fn cauchy2(z2: f64) -> f64 {
     1.0 / (1.0 + z2 / (CAUCHY_C * CAUCHY_C))
@@ -385,12 +390,12 @@ pub fn solution_at(up: Vector3<f64>, planes: &[PlaneObs], sigma: f64, robust: bo
     let mut chi2 = 0.0;
     let mut wsum = 0.0;
     for p in planes {
+        let (terms, k) = p.terms(&up, sigma);
         let w = if robust {
-            cauchy2(p.z2(&up, sigma))
+            cauchy2(z2_of(&terms[..k], &up))
         } else {
             1.0
         };
-        let (terms, k) = p.terms(&up, sigma);
         for (a, var) in &terms[..k] {
             let g = Vector2::new(a.dot(&basis[0]), a.dot(&basis[1]));
             h += g * g.transpose() * (w / var);
