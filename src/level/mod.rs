@@ -670,25 +670,20 @@ fn refined_solution(
     params: &LevelParams,
 ) -> Option<UpSolution> {
     let (_, refined) = refine_estimate(est, levels, first, params)?;
-    let with_level =
-        refined.models.iter().any(|m| m.kind != SurfaceKind::Wall) || !refined.lines.is_empty();
+    let level_models = refined.models.iter().any(|m| m.kind != SurfaceKind::Wall);
     if refined.lines.is_empty() {
-        acceptable(&refined.solution, params, with_level).ok()?;
+        acceptable(&refined.solution, params, level_models).ok()?;
         return Some(refined.solution);
     }
     // A line pins up down across it only: the other direction rests on the walls that alone
     // could not pass the gate, so it is held to a stricter one; failing that, the models
     // without the lines are gated as usual.
-    let strict = LevelParams {
-        max_sigma_deg: params.max_sigma_deg.min(params.level_line_max_sigma_deg),
-        ..params.clone()
-    };
-    if acceptable(&refined.solution, &strict, with_level).is_ok() {
+    let strict = params.max_sigma_deg.min(params.level_line_max_sigma_deg);
+    if acceptable_within(&refined.solution, params, true, strict).is_ok() {
         return Some(refined.solution);
     }
-    let without = refined.without_lines?;
-    let with_level = refined.models.iter().any(|m| m.kind != SurfaceKind::Wall);
-    acceptable(&without, params, with_level).ok()?;
+    let without = refined.without_lines(params, est.range_sigma)?;
+    acceptable(&without, params, level_models).ok()?;
     Some(without)
 }
 
@@ -1040,12 +1035,22 @@ fn attitude_sigmas(sol: &UpSolution, params: &LevelParams) -> [f64; 2] {
 /// The eigenvalue-ratio test speaks of walls: with a level plane in the fit, up is pinned in
 /// both directions however unequal they are, and only the sigma test applies.
 fn acceptable(sol: &UpSolution, params: &LevelParams, with_level: bool) -> Result<(), FailReason> {
+    acceptable_within(sol, params, with_level, params.max_sigma_deg)
+}
+
+/// [`acceptable`] with the sigma gate at `max_sigma_deg` instead of the parameters' own.
+fn acceptable_within(
+    sol: &UpSolution,
+    params: &LevelParams,
+    with_level: bool,
+    max_sigma_deg: f64,
+) -> Result<(), FailReason> {
     let (lo, hi) = sol.info_eigenvalues;
     if hi.is_nan() || hi <= 0.0 || (!with_level && lo < params.parallel_ratio * hi) {
         return Err(FailReason::ParallelWalls);
     }
     let s = attitude_sigmas(sol, params);
-    let max_sigma = params.max_sigma_deg.to_radians();
+    let max_sigma = max_sigma_deg.to_radians();
     if !(s[0] <= max_sigma && s[1] <= max_sigma) {
         return Err(FailReason::ParallelWalls);
     }

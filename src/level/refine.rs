@@ -36,6 +36,19 @@ pub struct Model {
     pub members: Vec<usize>,
 }
 
+impl Model {
+    /// The model as evidence on up, its noise inflated by its misfit (floors and ceilings
+    /// by `refine_level_inflation` more), for effective range noise `s`.
+    fn obs(&self, s: f64, params: &LevelParams) -> PlaneObs<'_> {
+        let misfit = self.fit.misfit_ratio(s).max(1.0);
+        if self.kind == SurfaceKind::Wall {
+            PlaneObs::wall(&self.fit, misfit)
+        } else {
+            PlaneObs::level(&self.fit, misfit * params.refine_level_inflation)
+        }
+    }
+}
+
 /// The refined segmentation and the up vector it gives.
 #[derive(Clone, Debug)]
 pub struct Refined {
@@ -45,9 +58,16 @@ pub struct Refined {
     /// Lines on the floor or ceiling used where no level plane was found
     /// (`level_lines`).
     pub lines: Vec<LevelLine>,
-    /// With lines, up from the models alone (`None` without lines, or when the models alone
-    /// do not fix up).
-    pub without_lines: Option<UpSolution>,
+}
+
+impl Refined {
+    /// Up from the models alone, without the lines (`None` when they do not fix it), for
+    /// range noise `sigma` as given to [`refine`].
+    pub fn without_lines(&self, params: &LevelParams, sigma: f64) -> Option<UpSolution> {
+        let s = sigma.max(params.min_sigma);
+        let obs: Vec<PlaneObs> = self.models.iter().map(|m| m.obs(s, params)).collect();
+        up::up_robust(&obs, s, params.iterations)
+    }
 }
 
 /// A wall as a vertical plane in the level frame: `normal . (x, y) = offset`, with the height
@@ -343,33 +363,22 @@ pub fn refine(
         }
         let obs: Vec<PlaneObs> = models
             .iter()
-            .map(|m| {
-                let misfit = m.fit.misfit_ratio(s).max(1.0);
-                if m.kind == SurfaceKind::Wall {
-                    PlaneObs::wall(&m.fit, misfit)
-                } else {
-                    PlaneObs::level(&m.fit, misfit * params.refine_level_inflation)
-                }
-            })
+            .map(|m| m.obs(s, params))
             .chain(
                 flat_lines
                     .iter()
                     .map(|l| PlaneObs::level_line(l, params.level_line_inflation)),
             )
             .collect();
-        let mut without_lines = if flat_lines.is_empty() {
-            None
-        } else {
-            up::up_robust(&obs[..models.len()], s, params.iterations)
-        };
         let sol = match up::up_robust(&obs, s, params.iterations) {
             Some(sol) => sol,
             // Lines that leave no up within reach were wrong: the models stand alone.
-            None => {
-                let sol = without_lines.take()?;
+            None if !flat_lines.is_empty() => {
+                let sol = up::up_robust(&obs[..models.len()], s, params.iterations)?;
                 flat_lines.clear();
                 sol
             }
+            None => return None,
         };
         let change = sol.up.angle(&up);
         up = sol.up;
@@ -382,7 +391,6 @@ pub fn refine(
             solution: sol,
             models,
             lines: flat_lines,
-            without_lines,
         });
         // Converged when up moved by a small fraction of its own uncertainty.
         if change < CONVERGED * sigma_up {
