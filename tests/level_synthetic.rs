@@ -205,6 +205,60 @@ fn reported_sigmas_are_honest_within_three_sigma_for_95_percent() {
     }
 }
 
+/// No leveled pose claims more precision than the Cramér-Rao bound allows (the bound knows
+/// which surface every ray met; a leveler must also find that out), beyond the slack of a
+/// noise level estimated from the data: reported sigmas below the bound are overconfident.
+#[test]
+fn reported_sigmas_respect_the_cramer_rao_bound() {
+    use levelscan::eval::bound::{WallPlanes, attitude_bound, pose_rays};
+    use levelscan::simulate::{RandomPoseParams, random_poses};
+    let (mut leveled, mut below) = (0, 0);
+    for name in ["office", "two_rooms"] {
+        let path = format!("{}/examples/plans/{name}.wall", env!("CARGO_MANIFEST_DIR"));
+        let plan = read_plan(std::path::Path::new(&path)).unwrap();
+        let world = World::from_plan(&plan);
+        let planes = WallPlanes::new(&plan.segments());
+        let pose_params = RandomPoseParams {
+            tilt: deg(20.0),
+            clearance: 0.6,
+            height: 0.45,
+            ..RandomPoseParams::default()
+        };
+        let poses = random_poses(&world, 60, &pose_params, 7).unwrap();
+        for &(nscans, noise) in &[(3, 0.05), (3, 0.10), (5, 0.10)] {
+            let scanner = ScannerParams {
+                noise_sigma: noise,
+                ..ScannerParams::default()
+            };
+            for (k, pose) in poses.iter().enumerate() {
+                let scans = library_scans(&world, pose, nscans, &scanner, 500 + k as u64);
+                let Some(sigma) = level_pose(&scans, &LevelParams::default()).sigmas else {
+                    continue;
+                };
+                let rays = pose_rays(&world, &planes, &scans, pose, scanner.max_range);
+                let bound = attitude_bound(&rays, pose, noise).unwrap_or([f64::INFINITY; 2]);
+                leveled += 1;
+                for a in 0..2 {
+                    assert!(
+                        sigma[a] >= 0.6 * bound[a],
+                        "{name}, {nscans} scans, {noise} m, pose {k}: sigma {} deg, bound {} deg",
+                        sigma[a].to_degrees(),
+                        bound[a].to_degrees()
+                    );
+                }
+                if sigma[0] < bound[0] || sigma[1] < bound[1] {
+                    below += 1;
+                }
+            }
+        }
+    }
+    assert!(leveled >= 150, "only {leveled} poses leveled");
+    assert!(
+        below * 50 <= leveled,
+        "{below} of {leveled} poses claim sigmas below the bound"
+    );
+}
+
 /// The estimate's shared bearing sines and cosines give the pseudo-level scan, to the bit,
 /// that one sincos per ray gives.
 #[test]

@@ -1,6 +1,7 @@
 //! The paper's experiments (sect. 8) and trajectory metrics.
 
 pub mod accuracy;
+pub mod bound;
 pub mod matching;
 pub mod metrics;
 pub mod real;
