@@ -131,6 +131,14 @@ fn fmt_deg(x: f64) -> String {
     }
 }
 
+fn fmt_ratio(x: f64) -> String {
+    if x.is_finite() {
+        format!("{x:.1}x")
+    } else {
+        "-".to_string()
+    }
+}
+
 fn fmt_pct(x: f64) -> String {
     if x.is_finite() {
         format!("{:.1}%", 100.0 * x)
@@ -177,14 +185,17 @@ fn markdown(stats: &[CellStats], params: &AccuracyParams) -> String {
     let _ = writeln!(s, "### Every cell\n");
     let _ = writeln!(
         s,
-        "| estimator | scans | noise [m] | leveled | mean | median | p95 | max | ok > 5 deg | within 3 sigma | phantom | coverage | failures |"
+        "| estimator | scans | noise [m] | leveled | mean | median | p95 | max | ok > 5 deg | within 3 sigma | phantom | coverage | bound | bound within gate | sigma / bound | failures |"
     );
-    let _ = writeln!(s, "|---|---|---|---|---|---|---|---|---|---|---|---|---|");
+    let _ = writeln!(
+        s,
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"
+    );
     for c in stats {
         let failures: Vec<String> = c.failures.iter().map(|(k, v)| format!("{k} {v}")).collect();
         let _ = writeln!(
             s,
-            "| {} | {} | {} | {}/{} ({}) | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
+            "| {} | {} | {} | {}/{} ({}) | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
             c.estimator,
             c.scans,
             c.noise,
@@ -199,6 +210,9 @@ fn markdown(stats: &[CellStats], params: &AccuracyParams) -> String {
             fmt_pct(c.within_3_sigma),
             fmt_pct(c.phantom_rate),
             fmt_pct(c.coverage),
+            fmt_deg(c.bound_median_deg),
+            fmt_pct(c.bound_within_gate),
+            fmt_ratio(c.sigma_over_bound),
             failures.join(", ")
         );
     }

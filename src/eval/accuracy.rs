@@ -5,6 +5,7 @@
 //! leveled with every estimator asked for, so the estimators see identical data; its noise comes
 //! from its own random stream (seed, plan, scan count, pose), never from the thread order.
 
+use super::bound::{WallPlanes, attitude_bound, pose_rays};
 use crate::geometry::Pose;
 use crate::level::{Estimator, FailReason, LevelParams, level_pose};
 use crate::plan::{Plan, Segment};
@@ -110,6 +111,12 @@ pub struct PoseOutcome {
     pub phantoms: usize,
     /// Wall hits of the pose's best single scan (most wall hits).
     pub best_wall_hits: usize,
+    /// The larger reported attitude sigma [deg], when leveled.
+    pub sigma_deg: Option<f64>,
+    /// The larger of the pose's Cramér-Rao bounds on theta_x and theta_y [deg]
+    /// ([`super::bound`]); infinite when its rays cannot fix the attitude, `None` when not
+    /// computed (no noise).
+    pub bound_deg: Option<f64>,
 }
 
 /// Statistics of one cell of Table I for one estimator.
@@ -136,6 +143,15 @@ pub struct CellStats {
     pub coverage: f64,
     /// The paper's mean for this cell [deg], when it has one.
     pub paper_mean_deg: Option<f64>,
+    /// Median over all poses of the larger Cramér-Rao bound on the attitude [deg]: what no
+    /// leveler can beat ([`super::bound`]).
+    pub bound_median_deg: f64,
+    /// Poses whose bound lies within the leveling gate (`max_sigma`): the most a leveler with
+    /// honest sigmas and that gate could level.
+    pub bound_within_gate: f64,
+    /// Median over leveled poses of the reported sigma over the bound (1 is a leveler that
+    /// uses all the information in the ranges).
+    pub sigma_over_bound: f64,
     /// Failed poses by reason.
     pub failures: BTreeMap<String, usize>,
     /// Every leveled pose's error [deg], in pose order (for histograms).
@@ -169,6 +185,7 @@ pub fn run_accuracy(
         worlds.push(world);
         segments.push(plan.segments());
     }
+    let planes: Vec<WallPlanes> = segments.iter().map(|s| WallPlanes::new(s)).collect();
     let cells: Vec<(usize, f64)> = params
         .scans
         .iter()
@@ -218,6 +235,11 @@ pub fn run_accuracy(
                             &mut rng,
                         )
                     };
+                    let rays = pose_rays(&worlds[pi], &planes[pi], &scans, &pose, params.max_range);
+                    let bound_deg = (noise > 0.0).then(|| {
+                        attitude_bound(&rays, &pose, noise)
+                            .map_or(f64::INFINITY, |b| b[0].max(b[1]).to_degrees())
+                    });
                     params
                         .estimators
                         .iter()
@@ -226,7 +248,10 @@ pub fn run_accuracy(
                                 estimator,
                                 ..params.level.clone()
                             };
-                            evaluate_pose(&scans, &pose, &segments[pi], &level, params)
+                            PoseOutcome {
+                                bound_deg,
+                                ..evaluate_pose(&scans, &pose, &segments[pi], &level, params)
+                            }
                         })
                         .collect()
                 })
@@ -237,7 +262,13 @@ pub fn run_accuracy(
     for (ci, &(nscans, noise)) in cells.iter().enumerate() {
         for (ei, estimator) in params.estimators.iter().enumerate() {
             let pose_outcomes: Vec<&PoseOutcome> = outcomes.iter().map(|o| &o[ci][ei]).collect();
-            stats.push(cell_stats(nscans, noise, *estimator, &pose_outcomes));
+            stats.push(cell_stats(
+                nscans,
+                noise,
+                *estimator,
+                params.level.max_sigma_deg,
+                &pose_outcomes,
+            ));
         }
     }
     Ok(stats)
@@ -269,6 +300,8 @@ pub fn evaluate_pose(
             pseudo_valid: 0,
             phantoms: 0,
             best_wall_hits,
+            sigma_deg: None,
+            bound_deg: None,
         };
     };
     let t = truth.attitude();
@@ -300,14 +333,27 @@ pub fn evaluate_pose(
         pseudo_valid: valid,
         phantoms,
         best_wall_hits,
+        sigma_deg: Some(sig[0].max(sig[1]).to_degrees()),
+        bound_deg: None,
     }
 }
 
-fn cell_stats(scans: usize, noise: f64, estimator: Estimator, o: &[&PoseOutcome]) -> CellStats {
+fn cell_stats(
+    scans: usize,
+    noise: f64,
+    estimator: Estimator,
+    gate_deg: f64,
+    o: &[&PoseOutcome],
+) -> CellStats {
     let errors: Vec<f64> = o.iter().filter_map(|p| p.error_deg).collect();
     let mut sorted = errors.clone();
     sorted.sort_by(f64::total_cmp);
     let n = sorted.len();
+    let bounds: Vec<f64> = o.iter().filter_map(|p| p.bound_deg).collect();
+    let over_bound: Vec<f64> = o
+        .iter()
+        .filter_map(|p| Some(p.sigma_deg? / p.bound_deg?))
+        .collect();
     let quantile = |q: f64| -> f64 {
         if n == 0 {
             return f64::NAN;
@@ -316,13 +362,7 @@ fn cell_stats(scans: usize, noise: f64, estimator: Estimator, o: &[&PoseOutcome]
         let k = ((q * n as f64).ceil() as usize).clamp(1, n) - 1;
         sorted[k]
     };
-    let median = if n == 0 {
-        f64::NAN
-    } else if n % 2 == 1 {
-        sorted[n / 2]
-    } else {
-        0.5 * (sorted[n / 2 - 1] + sorted[n / 2])
-    };
+    let median = median_of(&sorted);
     let mut failures = BTreeMap::new();
     for p in o {
         if let Some(f) = p.failure {
@@ -360,8 +400,32 @@ fn cell_stats(scans: usize, noise: f64, estimator: Estimator, o: &[&PoseOutcome]
         phantom_rate: ratio(phantoms, valid),
         coverage: ratio(valid, walls),
         paper_mean_deg: paper_mean(scans, noise),
+        bound_median_deg: median_of(&sorted_copy(&bounds)),
+        bound_within_gate: ratio(
+            bounds.iter().filter(|&&b| b <= gate_deg).count(),
+            bounds.len(),
+        ),
+        sigma_over_bound: median_of(&sorted_copy(&over_bound)),
         failures,
         errors_deg: errors,
+    }
+}
+
+fn sorted_copy(v: &[f64]) -> Vec<f64> {
+    let mut v = v.to_vec();
+    v.sort_by(f64::total_cmp);
+    v
+}
+
+/// Median of sorted values; NaN when empty.
+fn median_of(sorted: &[f64]) -> f64 {
+    let n = sorted.len();
+    if n == 0 {
+        f64::NAN
+    } else if n % 2 == 1 {
+        sorted[n / 2]
+    } else {
+        0.5 * (sorted[n / 2 - 1] + sorted[n / 2])
     }
 }
 
@@ -389,10 +453,12 @@ mod tests {
             pseudo_valid: 10,
             phantoms: 1,
             best_wall_hits: 20,
+            sigma_deg: e.map(|x| x / 2.0),
+            bound_deg: Some(if e.is_none() { f64::INFINITY } else { 0.25 }),
         };
         let outcomes = [mk(Some(1.0)), mk(Some(3.0)), mk(None), mk(Some(6.0))];
         let refs: Vec<&PoseOutcome> = outcomes.iter().collect();
-        let s = cell_stats(3, 0.01, Estimator::Robust, &refs);
+        let s = cell_stats(3, 0.01, Estimator::Robust, 1.5, &refs);
         assert_eq!(s.leveled, 3);
         assert!((s.mean_deg - 10.0 / 3.0).abs() < 1e-12);
         assert_eq!(s.median_deg, 3.0);
@@ -401,5 +467,10 @@ mod tests {
         assert_eq!(s.failures.get("parallel_walls"), Some(&1));
         assert!((s.phantom_rate - 0.1).abs() < 1e-12);
         assert!((s.coverage - 0.5).abs() < 1e-12);
+        // Bounds 0.25, 0.25, inf, 0.25: three of four within the gate.
+        assert_eq!(s.bound_median_deg, 0.25);
+        assert!((s.bound_within_gate - 0.75).abs() < 1e-12);
+        // Sigmas 0.5, 1.5, 3.0 over 0.25.
+        assert!((s.sigma_over_bound - 6.0).abs() < 1e-12);
     }
 }
