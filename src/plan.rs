@@ -73,6 +73,23 @@ impl Plan {
     }
 }
 
+/// A rectangular room `w` x `h` with its corner at the origin: the scene of many unit tests.
+#[cfg(test)]
+pub(crate) fn box_plan(w: f64, h: f64, height: f64, ceiling: bool) -> Plan {
+    Plan {
+        wall_height: height,
+        walls: vec![vec![
+            Point2::new(0.0, 0.0),
+            Point2::new(w, 0.0),
+            Point2::new(w, h),
+            Point2::new(0.0, h),
+            Point2::new(0.0, 0.0),
+        ]],
+        ceiling,
+        poses: vec![],
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -214,8 +214,7 @@ fn reported_sigmas_respect_the_cramer_rao_bound() {
     use levelscan::simulate::{RandomPoseParams, random_poses};
     let (mut leveled, mut below) = (0, 0);
     for name in ["office", "two_rooms"] {
-        let path = format!("{}/examples/plans/{name}.wall", env!("CARGO_MANIFEST_DIR"));
-        let plan = read_plan(std::path::Path::new(&path)).unwrap();
+        let plan = example_plan(name);
         let world = World::from_plan(&plan);
         let planes = WallPlanes::new(&plan.segments());
         let pose_params = RandomPoseParams {
@@ -409,10 +408,15 @@ fn a_wall_line_with_a_floor_line_at_its_foot_never_levels_a_pose_wrongly() {
     assert_eq!(wrong, 0);
 }
 
-/// An example plan (examples/plans/NAME.wall) for the library's own simulator.
-fn example_world(name: &str) -> World {
+/// An example plan, examples/plans/NAME.wall.
+fn example_plan(name: &str) -> levelscan::plan::Plan {
     let path = format!("{}/examples/plans/{name}.wall", env!("CARGO_MANIFEST_DIR"));
-    World::from_plan(&read_plan(std::path::Path::new(&path)).unwrap())
+    read_plan(std::path::Path::new(&path)).unwrap()
+}
+
+/// An example plan for the library's own simulator.
+fn example_world(name: &str) -> World {
+    World::from_plan(&example_plan(name))
 }
 
 /// The library simulator's scans of `pose` at `scans` elevations 5 degrees apart, centred on

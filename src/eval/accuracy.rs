@@ -6,6 +6,7 @@
 //! from its own random stream (seed, plan, scan count, pose), never from the thread order.
 
 use super::bound::{WallPlanes, attitude_bound, pose_rays};
+use super::metrics::{median, nearest_rank};
 use crate::geometry::Pose;
 use crate::level::{Estimator, FailReason, LevelParams, level_pose};
 use crate::plan::{Plan, Segment};
@@ -235,8 +236,9 @@ pub fn run_accuracy(
                             &mut rng,
                         )
                     };
-                    let rays = pose_rays(&worlds[pi], &planes[pi], &scans, &pose, params.max_range);
                     let bound_deg = (noise > 0.0).then(|| {
+                        let rays =
+                            pose_rays(&worlds[pi], &planes[pi], &scans, &pose, params.max_range);
                         attitude_bound(&rays, &pose, noise)
                             .map_or(f64::INFINITY, |b| b[0].max(b[1]).to_degrees())
                     });
@@ -346,23 +348,13 @@ fn cell_stats(
     o: &[&PoseOutcome],
 ) -> CellStats {
     let errors: Vec<f64> = o.iter().filter_map(|p| p.error_deg).collect();
-    let mut sorted = errors.clone();
-    sorted.sort_by(f64::total_cmp);
+    let sorted = sorted_copy(&errors);
     let n = sorted.len();
     let bounds: Vec<f64> = o.iter().filter_map(|p| p.bound_deg).collect();
     let over_bound: Vec<f64> = o
         .iter()
         .filter_map(|p| Some(p.sigma_deg? / p.bound_deg?))
         .collect();
-    let quantile = |q: f64| -> f64 {
-        if n == 0 {
-            return f64::NAN;
-        }
-        // Nearest rank.
-        let k = ((q * n as f64).ceil() as usize).clamp(1, n) - 1;
-        sorted[k]
-    };
-    let median = median_of(&sorted);
     let mut failures = BTreeMap::new();
     for p in o {
         if let Some(f) = p.failure {
@@ -392,20 +384,20 @@ fn cell_stats(
         } else {
             errors.iter().sum::<f64>() / n as f64
         },
-        median_deg: median,
-        p95_deg: quantile(0.95),
+        median_deg: median(&sorted),
+        p95_deg: nearest_rank(&sorted, 0.95),
         max_deg: sorted.last().copied().unwrap_or(f64::NAN),
         wrong_over_5_deg: errors.iter().filter(|&&e| e > 5.0).count(),
         within_3_sigma: ratio(leveled.iter().filter(|p| p.within_3_sigma).count(), n),
         phantom_rate: ratio(phantoms, valid),
         coverage: ratio(valid, walls),
         paper_mean_deg: paper_mean(scans, noise),
-        bound_median_deg: median_of(&sorted_copy(&bounds)),
+        bound_median_deg: median(&sorted_copy(&bounds)),
         bound_within_gate: ratio(
             bounds.iter().filter(|&&b| b <= gate_deg).count(),
             bounds.len(),
         ),
-        sigma_over_bound: median_of(&sorted_copy(&over_bound)),
+        sigma_over_bound: median(&sorted_copy(&over_bound)),
         failures,
         errors_deg: errors,
     }
@@ -415,18 +407,6 @@ fn sorted_copy(v: &[f64]) -> Vec<f64> {
     let mut v = v.to_vec();
     v.sort_by(f64::total_cmp);
     v
-}
-
-/// Median of sorted values; NaN when empty.
-fn median_of(sorted: &[f64]) -> f64 {
-    let n = sorted.len();
-    if n == 0 {
-        f64::NAN
-    } else if n % 2 == 1 {
-        sorted[n / 2]
-    } else {
-        0.5 * (sorted[n / 2 - 1] + sorted[n / 2])
-    }
 }
 
 #[cfg(test)]

@@ -137,14 +137,15 @@ pub fn pose_rays(
                 continue;
             }
             let dir = beam_direction(elevation, bearing);
-            let Some(hit) = world.cast(&origin_world, &(world_from_robot * dir), max_range) else {
+            let dir_world = world_from_robot * dir;
+            let Some(hit) = world.cast(&origin_world, &dir_world, max_range) else {
                 continue;
             };
             let (surface, normal_world) = match hit.hit {
                 Hit::Floor => (Surface::Floor, Vector3::z()),
                 Hit::Ceiling => (Surface::Ceiling, Vector3::z()),
                 Hit::Wall => {
-                    let p = origin_world + (world_from_robot * dir) * hit.range;
+                    let p = origin_world + dir_world * hit.range;
                     let Some(plane) = planes.locate(&Point2::new(p.x, p.y)) else {
                         continue;
                     };
@@ -169,7 +170,8 @@ struct Linearization {
     level_from_robot: Matrix3<f64>,
     /// `d level_from_robot / d theta_x` and `/ d theta_y`.
     by_theta: [Matrix3<f64>; 2],
-    /// Sine and cosine of minus the yaw: world normals into the yaw-free level frame.
+    /// Sine and cosine of minus the yaw: world normals into the yaw-free level frame (the
+    /// floor's and ceiling's stay up).
     unyaw: (f64, f64),
 }
 
@@ -188,35 +190,19 @@ impl Linearization {
     }
 
     /// The derivatives of one ray's range: by `(theta_x, theta_y)`, and by its surface's
-    /// placement `(offset, azimuth)` (the azimuth term is zero for the floor and ceiling,
-    /// whose normal is up whatever the attitude).
+    /// placement `(offset, azimuth)`. The azimuth's tangent vanishes for the floor and
+    /// ceiling, whose normal is up whatever the attitude.
     fn gradient(&self, ray: &BoundRay) -> ([f64; 2], [f64; 2]) {
-        let normal = match ray.surface {
-            Surface::Floor | Surface::Ceiling => Vector3::z(),
-            Surface::Wall(_) => {
-                let (s, c) = self.unyaw;
-                let n = ray.normal_world;
-                Vector3::new(c * n.x - s * n.y, s * n.x + c * n.y, 0.0)
-            }
-        };
+        let (s, c) = self.unyaw;
+        let n = ray.normal_world;
+        let normal = Vector3::new(c * n.x - s * n.y, s * n.x + c * n.y, n.z);
         let q = ray.origin.coords + ray.dir * ray.range;
         let b = normal.dot(&(self.level_from_robot * ray.dir));
         let attitude = self.by_theta.map(|d| -normal.dot(&(d * q)) / b);
-        let azimuth = match ray.surface {
-            Surface::Wall(_) => {
-                let tangent = Vector3::new(-normal.y, normal.x, 0.0);
-                -tangent.dot(&(self.level_from_robot * q)) / b
-            }
-            _ => 0.0,
-        };
+        let tangent = Vector3::new(-normal.y, normal.x, 0.0);
+        let azimuth = -tangent.dot(&(self.level_from_robot * q)) / b;
         (attitude, [1.0 / b, azimuth])
     }
-}
-
-/// The derivatives of one ray's range at the truth: by `(theta_x, theta_y)`, and by its
-/// surface's placement `(offset, azimuth)`.
-pub fn range_gradient(ray: &BoundRay, truth: &Pose) -> ([f64; 2], [f64; 2]) {
-    Linearization::at(truth).gradient(ray)
 }
 
 /// 1-sigma bounds on `theta_x` and `theta_y` [rad] for range noise `sigma` [m]; `None` when
@@ -228,33 +214,32 @@ pub fn attitude_bound(rays: &[BoundRay], truth: &Pose, sigma: f64) -> Option<[f6
     }
     // Each ray meets one surface, so the placements' information is block-diagonal and each
     // surface is marginalised on its own: S = F_aa - sum_k F_ak F_kk^+ F_ka.
-    let mut keys: Vec<Surface> = Vec::new();
-    let mut blocks: Vec<(Matrix2<f64>, Matrix2<f64>)> = Vec::new();
+    // Per surface: its cross information with the attitude, and its own.
+    let mut blocks: Vec<(Surface, Matrix2<f64>, Matrix2<f64>)> = Vec::new();
     let mut info = Matrix2::zeros();
     let linear = Linearization::at(truth);
     for ray in rays {
         let (a, n) = linear.gradient(ray);
         let (a, n) = (Vector2::from(a), Vector2::from(n));
-        if !(a.iter().chain(n.iter()).all(|v| v.is_finite())) {
+        if !a.iter().chain(&n).all(|v| v.is_finite()) {
             continue;
         }
-        let k = keys
-            .iter()
-            .position(|&s| s == ray.surface)
-            .unwrap_or_else(|| {
-                keys.push(ray.surface);
-                blocks.push((Matrix2::zeros(), Matrix2::zeros()));
-                keys.len() - 1
-            });
+        let k = match blocks.iter().position(|b| b.0 == ray.surface) {
+            Some(k) => k,
+            None => {
+                blocks.push((ray.surface, Matrix2::zeros(), Matrix2::zeros()));
+                blocks.len() - 1
+            }
+        };
         info += a * a.transpose();
-        blocks[k].0 += a * n.transpose();
-        blocks[k].1 += n * n.transpose();
+        blocks[k].1 += a * n.transpose();
+        blocks[k].2 += n * n.transpose();
     }
     let scale = info.trace();
     if scale.is_nan() || scale <= 0.0 {
         return None;
     }
-    for (cross, own) in &blocks {
+    for (_, cross, own) in &blocks {
         let eps = own.norm() * 1e-12;
         let own_inv = own.pseudo_inverse(eps).ok()?;
         info -= cross * own_inv * cross.transpose();
@@ -271,28 +256,13 @@ pub fn attitude_bound(rays: &[BoundRay], truth: &Pose, sigma: f64) -> Option<[f6
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::plan::Plan;
+    use crate::plan::{Plan, box_plan};
     use crate::simulate::{ScannerParams, elevations_centred, simulate_pose};
     use proptest::prelude::*;
     use rand::SeedableRng;
     use rand::rngs::ChaCha8Rng;
 
     const DEG: f64 = std::f64::consts::PI / 180.0;
-
-    fn room(w: f64, h: f64, ceiling: bool) -> Plan {
-        Plan {
-            wall_height: 3.0,
-            walls: vec![vec![
-                Point2::new(0.0, 0.0),
-                Point2::new(w, 0.0),
-                Point2::new(w, h),
-                Point2::new(0.0, h),
-                Point2::new(0.0, 0.0),
-            ]],
-            ceiling,
-            poses: vec![],
-        }
-    }
 
     fn rays_at(plan: &Plan, pose: &Pose, elevations: &[f64]) -> Vec<BoundRay> {
         let world = World::from_plan(plan);
@@ -321,7 +291,7 @@ mod tests {
     /// turned robot (the walls, floor and ceiling staying where they are).
     #[test]
     fn gradient_matches_recast_ranges() {
-        let plan = room(6.0, 4.0, true);
+        let plan = box_plan(6.0, 4.0, 3.0, true);
         let world = World::from_plan(&plan);
         let truth = pose(2.0, 1.5, 0.4, 7.0 * DEG, -11.0 * DEG);
         let rays = rays_at(&plan, &truth, &elevations_centred(3, 5.0 * DEG));
@@ -333,9 +303,10 @@ mod tests {
                 .cast(&(iso * ray.origin), &(iso * ray.dir), 30.0)
                 .map(|hit| hit.range)
         };
+        let linear = Linearization::at(&truth);
         let mut checked = 0;
         for ray in &rays {
-            let (g, _) = range_gradient(ray, &truth);
+            let (g, _) = linear.gradient(ray);
             let bumped = [
                 Pose {
                     rx: truth.rx + h,
@@ -450,7 +421,7 @@ mod tests {
             x in 1.0f64..5.0, y in 1.0f64..3.0, rz in -3.0f64..3.0,
             ry in -20.0f64..20.0, rx in -20.0f64..20.0,
         ) {
-            let plan = room(6.0, 4.0, false);
+            let plan = box_plan(6.0, 4.0, 3.0, false);
             let truth = pose(x, y, rz, ry * DEG, rx * DEG);
             let three = rays_at(&plan, &truth, &elevations_centred(3, 5.0 * DEG));
             let five = rays_at(&plan, &truth, &elevations_centred(5, 5.0 * DEG));

@@ -118,18 +118,23 @@ pub fn rpe(estimate: &[Pose2], truth: &[Pose2]) -> Option<Rpe> {
     })
 }
 
-/// Median of sorted values (mean of the middle two for an even count).
-fn median(sorted: &[f64]) -> f64 {
+/// Median of sorted values (mean of the middle two for an even count); NaN when empty.
+pub(crate) fn median(sorted: &[f64]) -> f64 {
     let n = sorted.len();
-    if n % 2 == 1 {
+    if n == 0 {
+        f64::NAN
+    } else if n % 2 == 1 {
         sorted[n / 2]
     } else {
         0.5 * (sorted[n / 2 - 1] + sorted[n / 2])
     }
 }
 
-/// Nearest-rank percentile of sorted values, `q` in (0, 1].
-fn nearest_rank(sorted: &[f64], q: f64) -> f64 {
+/// Nearest-rank percentile of sorted values, `q` in (0, 1]; NaN when empty.
+pub(crate) fn nearest_rank(sorted: &[f64], q: f64) -> f64 {
+    if sorted.is_empty() {
+        return f64::NAN;
+    }
     let rank = (q * sorted.len() as f64).ceil() as usize;
     sorted[rank.clamp(1, sorted.len()) - 1]
 }

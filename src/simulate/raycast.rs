@@ -222,19 +222,7 @@ mod tests {
     }
 
     fn box_room(w: f64, h: f64, height: f64, ceiling: bool) -> World {
-        let plan = Plan {
-            wall_height: height,
-            walls: vec![vec![
-                Point2::new(0.0, 0.0),
-                Point2::new(w, 0.0),
-                Point2::new(w, h),
-                Point2::new(0.0, h),
-                Point2::new(0.0, 0.0),
-            ]],
-            ceiling,
-            poses: vec![],
-        };
-        World::from_plan(&plan)
+        World::from_plan(&crate::plan::box_plan(w, h, height, ceiling))
     }
 
     #[test]

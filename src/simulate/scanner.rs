@@ -146,28 +146,13 @@ pub fn simulate_pose<R: Rng + ?Sized>(
 mod tests {
     use super::*;
     use crate::geometry::rot_y;
-    use crate::plan::Plan;
+    use crate::plan::{Plan, box_plan};
     use nalgebra::{Point2, Point3};
     use proptest::prelude::*;
     use rand::SeedableRng;
     use rand::rngs::ChaCha8Rng;
 
     const DEG: f64 = std::f64::consts::PI / 180.0;
-
-    fn box_plan(w: f64, h: f64, height: f64, ceiling: bool) -> Plan {
-        Plan {
-            wall_height: height,
-            walls: vec![vec![
-                Point2::new(0.0, 0.0),
-                Point2::new(w, 0.0),
-                Point2::new(w, h),
-                Point2::new(0.0, h),
-                Point2::new(0.0, 0.0),
-            ]],
-            ceiling,
-            poses: vec![],
-        }
-    }
 
     fn noiseless() -> ScannerParams {
         ScannerParams {
