@@ -24,7 +24,7 @@ use super::patches::Patch;
 use super::up::{self, LevelLine, PlaneObs, UpSolution};
 use super::{LevelParams, SurfaceKind};
 use crate::geometry::Attitude;
-use nalgebra::{Rotation3, Vector2, Vector3};
+use nalgebra::{Matrix2, Rotation3, Vector2, Vector3};
 
 /// One model of the refined segmentation: a plane and the grid points assigned to it.
 #[derive(Clone, Debug)]
@@ -308,6 +308,11 @@ pub fn refine(
             };
             if fit.misfit_ratio(s) > params.refine_level_misfit
                 || fit.normal.dot(&up).abs() < params.refine_level_cos()
+                // Over two scans only, the plane is no evidence that its points are one
+                // surface: it must agree with up (it leveled a pose 7 degrees off with a
+                // sigma of 0.1). Over three, it may overrule a wrong start.
+                || (rows_supported(grid, &members, WALL_ROW_SHARE) < 3
+                    && level_z2(&fit, &up, s, sigma_up) > k * k)
             {
                 continue;
             }
@@ -398,6 +403,20 @@ pub fn refine(
         }
     }
     result
+}
+
+/// Squared angle between a level model's normal and up, in variances: the model's normal
+/// noise, inflated by its misfit, and up's own (`sigma_up` [rad]). Two scan lines that meet
+/// are coplanar whatever they lie on (a floor line and a wall's foot line), so a plane over
+/// two scans fits well and can still lean by degrees.
+fn level_z2(fit: &PlaneFit, up: &Vector3<f64>, s: f64, sigma_up: f64) -> f64 {
+    let n = fit.normal * fit.normal.dot(up).signum();
+    let off = up - n * n.dot(up);
+    let Some(u) = off.try_normalize(1e-12) else {
+        return 0.0;
+    };
+    let var = fit.normal_variance_along(&u, s) * fit.misfit_ratio(s).max(1.0) + sigma_up * sigma_up;
+    off.norm_squared() / var
 }
 
 /// What [`level_lines`] works on: the grid in the provisional level frame.
@@ -734,7 +753,17 @@ pub fn level_start(
     if fit.normal.z.abs() < min_z {
         return None;
     }
-    up::up_robust(&[PlaneObs::level(&fit, 1.0)], s, params.iterations)
+    let sol = up::up_robust(&[PlaneObs::level(&fit, 1.0)], s, params.iterations)?;
+    // Two scan lines that meet are coplanar whatever they lie on (a floor line and a wall's
+    // foot line): such a plane is only a loose start.
+    if rows_supported(grid, &members, WALL_ROW_SHARE) < 3 {
+        let loose = Matrix2::identity() * (MAX_SIGMA_UP * MAX_SIGMA_UP);
+        return Some(UpSolution {
+            cov: sol.cov + loose,
+            ..sol
+        });
+    }
+    Some(sol)
 }
 
 /// Floor and ceiling lines found without a level frame, for a start where neither the walls
@@ -1347,6 +1376,45 @@ mod tests {
             sigma_up: 0.2f64.to_radians(),
         };
         level_lines(&ctx, SurfaceKind::Floor, &LevelParams::default())
+    }
+
+    /// A level plane's lean from up counts against the plane's own noise and up's: many
+    /// sigmas when up is known to 0.2 degrees, about one when up is as uncertain as the lean.
+    #[test]
+    fn level_z2_weighs_a_lean_against_both_uncertainties() {
+        let grid = grid_of([across(2.0, -0.45, 21), across(3.0, -0.45, 21), vec![]]);
+        let members: Vec<usize> = (0..42).collect();
+        let fit = grid.accumulate(&members).fit(0.0).unwrap();
+        let lean = 3f64.to_radians();
+        let up = Vector3::new(lean.sin(), 0.0, lean.cos());
+        let level = level_z2(&fit, &Vector3::z(), 0.01, 0.2f64.to_radians());
+        assert!(level < 1e-12, "{level}");
+        let tight = level_z2(&fit, &up, 0.01, 0.2f64.to_radians());
+        let loose = level_z2(&fit, &up, 0.01, lean);
+        assert!(tight > 200.0, "{tight}");
+        assert!((0.9..1.0).contains(&loose), "{loose}");
+    }
+
+    /// A level start from floor points in two scans only is loose (any two scan lines that
+    /// meet are coplanar); from three it is as tight as its fit.
+    #[test]
+    fn a_level_start_over_two_scans_is_loose() {
+        let params = LevelParams::default();
+        let floor = |x: f64| across(x, -0.45, 41);
+        let two = grid_of([floor(2.0), floor(3.0), vec![]]);
+        let three = grid_of([floor(2.0), floor(3.0), floor(4.5)]);
+        let sigma_of = |grid: &PoseGrid| {
+            let steps = level_steps(grid, &params, 0.01);
+            level_start(grid, &steps, &params, 0.01)
+                .expect("a level start")
+                .max_attitude_sigma()
+        };
+        assert!(sigma_of(&two) >= MAX_SIGMA_UP, "{}", sigma_of(&two));
+        assert!(
+            sigma_of(&three) < 0.1f64.to_radians(),
+            "{}",
+            sigma_of(&three)
+        );
     }
 
     #[test]
