@@ -258,13 +258,20 @@ fn reported_sigmas_respect_the_cramer_rao_bound() {
     );
 }
 
+/// A robot tilted by 4 and 5 degrees in a 6 x 5 m box room, and its five scans at 1 cm
+/// (sequence 7).
+fn tilted_in_a_box() -> (Pose, Vec<Scan>) {
+    let room = Room::box_room(6.0, 5.0);
+    let pose = Pose::new(2.0, 2.5, 0.45, deg(20.0), deg(4.0), deg(5.0));
+    let scans = scans_at(&room, &pose, &elevations(5, 5.0), 0.01, 9, 7);
+    (pose, scans)
+}
+
 /// The estimate's shared bearing sines and cosines give the pseudo-level scan, to the bit,
 /// that one sincos per ray gives.
 #[test]
 fn pseudo_level_scan_is_the_same_with_the_shared_bearing_trig() {
-    let room = Room::box_room(6.0, 5.0);
-    let pose = Pose::new(2.0, 2.5, 0.45, deg(20.0), deg(4.0), deg(5.0));
-    let scans = scans_at(&room, &pose, &elevations(5, 5.0), 0.01, 9, 7);
+    let (_, scans) = tilted_in_a_box();
     let shared = level_pose(&scans, &LevelParams::default());
     assert!(shared.bearing_trig.is_some());
     let own = levelscan::level::LevelEstimate {
@@ -290,9 +297,7 @@ fn pseudo_level_scan_is_the_same_with_the_shared_bearing_trig() {
 
 #[test]
 fn pseudo_level_scan_keeps_walls_and_drops_floor_hits() {
-    let room = Room::box_room(6.0, 5.0);
-    let pose = Pose::new(2.0, 2.5, 0.45, deg(20.0), deg(4.0), deg(5.0));
-    let scans = scans_at(&room, &pose, &elevations(5, 5.0), 0.01, 9, 7);
+    let (pose, scans) = tilted_in_a_box();
     let e = level_pose(&scans, &LevelParams::default());
     assert!(
         e.is_ok(),

@@ -308,11 +308,9 @@ pub fn refine(
             };
             if fit.misfit_ratio(s) > params.refine_level_misfit
                 || fit.normal.dot(&up).abs() < params.refine_level_cos()
-                // Over two scans only, the plane is no evidence that its points are one
-                // surface: it must agree with up (it leveled a pose 7 degrees off with a
-                // sigma of 0.1). Over three, it may overrule a wrong start.
-                || (rows_supported(grid, &members, WALL_ROW_SHARE) < 3
-                    && level_z2(&fit, &up, s, sigma_up) > k * k)
+                // Over two scans it must agree with up (one leveled a pose 7 degrees off
+                // with a sigma of 0.1); over three, it may overrule a wrong start.
+                || (!three_rows_support(grid, &members) && level_z2(&fit, &up, s, sigma_up) > k * k)
             {
                 continue;
             }
@@ -406,9 +404,7 @@ pub fn refine(
 }
 
 /// Squared angle between a level model's normal and up, in variances: the model's normal
-/// noise, inflated by its misfit, and up's own (`sigma_up` [rad]). Two scan lines that meet
-/// are coplanar whatever they lie on (a floor line and a wall's foot line), so a plane over
-/// two scans fits well and can still lean by degrees.
+/// noise, inflated by its misfit, and up's own (`sigma_up` [rad]).
 fn level_z2(fit: &PlaneFit, up: &Vector3<f64>, s: f64, sigma_up: f64) -> f64 {
     let n = fit.normal * fit.normal.dot(up).signum();
     let off = up - n * n.dot(up);
@@ -754,9 +750,7 @@ pub fn level_start(
         return None;
     }
     let sol = up::up_robust(&[PlaneObs::level(&fit, 1.0)], s, params.iterations)?;
-    // Two scan lines that meet are coplanar whatever they lie on (a floor line and a wall's
-    // foot line): such a plane is only a loose start.
-    if rows_supported(grid, &members, WALL_ROW_SHARE) < 3 {
+    if !three_rows_support(grid, &members) {
         let loose = Matrix2::identity() * (MAX_SIGMA_UP * MAX_SIGMA_UP);
         return Some(UpSolution {
             cov: sol.cov + loose,
@@ -1287,6 +1281,13 @@ fn two_rows_support(grid: &PoseGrid, members: &[usize]) -> bool {
     rows_supported(grid, members, 0.2) >= 2
 }
 
+/// Whether a level plane spans three scans. Two scan lines that meet are coplanar whatever
+/// they lie on (a floor line and a wall's foot line), so a plane over two scans fits well and
+/// can still lean by degrees: it is no evidence of its own that its points are one surface.
+fn three_rows_support(grid: &PoseGrid, members: &[usize]) -> bool {
+    rows_supported(grid, members, WALL_ROW_SHARE) >= 3
+}
+
 /// Merges lines that are one wall: normals within `refine_merge_deg` and each one's pivot
 /// within the tolerance of the other (region growing splits one noisy wall into several
 /// patches; left apart they would claim the same points, which would then be dropped as
@@ -1409,12 +1410,9 @@ mod tests {
                 .expect("a level start")
                 .max_attitude_sigma()
         };
-        assert!(sigma_of(&two) >= MAX_SIGMA_UP, "{}", sigma_of(&two));
-        assert!(
-            sigma_of(&three) < 0.1f64.to_radians(),
-            "{}",
-            sigma_of(&three)
-        );
+        let (two, three) = (sigma_of(&two), sigma_of(&three));
+        assert!(two >= MAX_SIGMA_UP, "{two}");
+        assert!(three < 0.1f64.to_radians(), "{three}");
     }
 
     #[test]
