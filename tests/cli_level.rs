@@ -247,6 +247,45 @@ fn eval_accuracy_writes_table_i_json_and_fig6() {
     for f in ["fig6_robust.png", "fig6_robust.svg", "fig6_paper.svg"] {
         assert!(dir.join(f).exists(), "{f}");
     }
+    // Every pose of every cell, and its record agrees with the cell's statistics.
+    let poses: Vec<Value> = std::fs::read_to_string(dir.join("poses.jsonl"))
+        .unwrap()
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    assert_eq!(poses.len(), cells.len() * 6);
+    for c in cells {
+        let of_cell: Vec<&Value> = poses
+            .iter()
+            .filter(|p| {
+                p["scans"] == c["scans"]
+                    && p["noise"] == c["noise"]
+                    && p["estimator"] == c["estimator"]
+            })
+            .collect();
+        let mut index: Vec<u64> = of_cell
+            .iter()
+            .map(|p| p["pose"].as_u64().unwrap())
+            .collect();
+        index.sort_unstable();
+        assert_eq!(index, (0..6).collect::<Vec<_>>());
+        let ok: Vec<&&Value> = of_cell.iter().filter(|p| p["status"] == "ok").collect();
+        assert_eq!(ok.len() as u64, c["leveled"].as_u64().unwrap());
+        for p in &ok {
+            let (t, e) = (&p["truth_deg"], &p["estimate_deg"]);
+            let err = (0..2)
+                .map(|k| (t[k].as_f64().unwrap() - e[k].as_f64().unwrap()).abs())
+                .fold(0.0, f64::max);
+            assert!((err - p["error_deg"].as_f64().unwrap()).abs() < 1e-9, "{p}");
+            assert!(p["plan"].as_str().unwrap().ends_with(".wall"));
+        }
+        for p in of_cell.iter().filter(|p| p["status"] == "failed") {
+            assert!(
+                p["reason"].is_string() && p["estimate_deg"].is_null(),
+                "{p}"
+            );
+        }
+    }
     std::fs::remove_dir_all(dir).ok();
     std::fs::remove_file(plan).ok();
 }

@@ -45,7 +45,8 @@ pub struct Args {
     /// Take the scans with the adaptive robot (cleverRobot), as the paper's Table I did.
     #[arg(long)]
     pub adaptive: bool,
-    /// Write accuracy.json and the Fig. 6 histograms (PNG, SVG) here.
+    /// Write accuracy.json, poses.jsonl (every pose's outcome) and the Fig. 6 histograms
+    /// (PNG, SVG) here.
     #[arg(long)]
     pub out: Option<PathBuf>,
 }
@@ -93,6 +94,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         });
         std::fs::write(&path, serde_json::to_string_pretty(&json)?)
             .with_context(|| format!("{}: cannot write", path.display()))?;
+        let poses_path = dir.join("poses.jsonl");
+        std::fs::write(&poses_path, pose_lines(&stats, &args.plans))
+            .with_context(|| format!("{}: cannot write", poses_path.display()))?;
         // Fig. 6 at the noise nearest 5 cm, one file per estimator.
         let fig_noise = params
             .noise
@@ -121,6 +125,32 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         eprintln!("wrote {}", path.display());
     }
     Ok(())
+}
+
+/// One JSON line per pose, cell and estimator: what it was, what the leveler said, how far
+/// off it was, so that a user can find and re-run the poses behind a statistic.
+fn pose_lines(stats: &[CellStats], plans: &[PathBuf]) -> String {
+    let mut out = String::new();
+    for cell in stats {
+        for o in &cell.outcomes {
+            let line = serde_json::json!({
+                "scans": cell.scans,
+                "noise": cell.noise,
+                "estimator": cell.estimator,
+                "plan": plans.get(o.plan).map(|p| p.display().to_string()),
+                "pose": o.pose,
+                "status": if o.failure.is_none() { "ok" } else { "failed" },
+                "reason": o.failure.map(|r| r.as_str()),
+                "truth_deg": o.truth_deg,
+                "estimate_deg": o.estimate_deg,
+                "sigma_deg": o.sigma_deg,
+                "error_deg": o.error_deg,
+                "bound_deg": o.bound_deg.filter(|b| b.is_finite()),
+            });
+            let _ = writeln!(out, "{line}");
+        }
+    }
+    out
 }
 
 fn fmt_deg(x: f64) -> String {

@@ -101,6 +101,13 @@ impl Default for AccuracyParams {
 /// What happened at one pose in one cell with one estimator.
 #[derive(Clone, Debug, PartialEq)]
 pub struct PoseOutcome {
+    /// Index of the pose's plan and of the pose in that plan's draw.
+    pub plan: usize,
+    pub pose: usize,
+    /// True theta_x and theta_y [deg].
+    pub truth_deg: [f64; 2],
+    /// Estimated theta_x and theta_y [deg], when leveled.
+    pub estimate_deg: Option<[f64; 2]>,
     pub failure: Option<FailReason>,
     /// The paper's error `max(|dtheta_x|, |dtheta_y|)` [deg], when leveled.
     pub error_deg: Option<f64>,
@@ -157,6 +164,9 @@ pub struct CellStats {
     pub failures: BTreeMap<String, usize>,
     /// Every leveled pose's error [deg], in pose order (for histograms).
     pub errors_deg: Vec<f64>,
+    /// Every pose's outcome, in pose order (written apart, as `poses.jsonl`).
+    #[serde(skip)]
+    pub outcomes: Vec<PoseOutcome>,
 }
 
 /// Runs the experiment over `plans`. Returns one [`CellStats`] per (scans, noise, estimator),
@@ -251,6 +261,8 @@ pub fn run_accuracy(
                                 ..params.level.clone()
                             };
                             PoseOutcome {
+                                plan: pi,
+                                pose: k,
                                 bound_deg,
                                 ..evaluate_pose(&scans, &pose, &segments[pi], &level, params)
                             }
@@ -276,7 +288,8 @@ pub fn run_accuracy(
     Ok(stats)
 }
 
-/// Levels one pose's scans and scores the result against the truth.
+/// Levels one pose's scans and scores the result against the truth (its `plan` and `pose`
+/// indices are the caller's to set).
 pub fn evaluate_pose(
     scans: &[Scan],
     truth: &Pose,
@@ -285,6 +298,8 @@ pub fn evaluate_pose(
     params: &AccuracyParams,
 ) -> PoseOutcome {
     let est = level_pose(scans, level);
+    let t = truth.attitude();
+    let truth_deg = [t.theta_x.to_degrees(), t.theta_y.to_degrees()];
     let best_wall_hits = scans
         .iter()
         .map(|s| {
@@ -296,6 +311,10 @@ pub fn evaluate_pose(
         .unwrap_or(0);
     let (Some(att), Some(sig)) = (est.attitude, est.sigmas) else {
         return PoseOutcome {
+            plan: 0,
+            pose: 0,
+            truth_deg,
+            estimate_deg: None,
             failure: est.failure,
             error_deg: None,
             within_3_sigma: false,
@@ -306,7 +325,6 @@ pub fn evaluate_pose(
             bound_deg: None,
         };
     };
-    let t = truth.attitude();
     let (dx, dy) = (
         (att.theta_x - t.theta_x).abs(),
         (att.theta_y - t.theta_y).abs(),
@@ -329,6 +347,10 @@ pub fn evaluate_pose(
         }
     }
     PoseOutcome {
+        plan: 0,
+        pose: 0,
+        truth_deg,
+        estimate_deg: Some([att.theta_x.to_degrees(), att.theta_y.to_degrees()]),
         failure: None,
         error_deg: Some(dx.max(dy).to_degrees()),
         within_3_sigma: dx <= 3.0 * sig[0] && dy <= 3.0 * sig[1],
@@ -400,6 +422,7 @@ fn cell_stats(
         sigma_over_bound: median(&sorted_copy(&over_bound)),
         failures,
         errors_deg: errors,
+        outcomes: o.iter().map(|&p| p.clone()).collect(),
     }
 }
 
@@ -423,6 +446,10 @@ mod tests {
     #[test]
     fn cell_stats_on_known_errors() {
         let mk = |e: Option<f64>| PoseOutcome {
+            plan: 0,
+            pose: 0,
+            truth_deg: [0.0, 0.0],
+            estimate_deg: e.map(|x| [x, 0.0]),
             failure: if e.is_none() {
                 Some(FailReason::ParallelWalls)
             } else {
