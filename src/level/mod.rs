@@ -978,7 +978,10 @@ fn clean_level_fit(
         return None;
     }
     let floorlike = fit.normal.z.abs() > params.wall_min_angle_deg.to_radians().cos();
-    (floorlike && fit.misfit_ratio(sigma) <= params.max_level_misfit).then_some(fit)
+    (floorlike
+        && fit.misfit_ratio(sigma) <= params.max_level_misfit
+        && refine::opaque(grid, &fit, sigma, params))
+    .then_some(fit)
 }
 
 /// True when the patch's points rise steeply from scan to scan, as on a wall: in each column

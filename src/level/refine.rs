@@ -178,6 +178,7 @@ pub fn refine(
                 grid,
                 &lv,
                 &level_ok,
+                levelish,
                 &level_fits,
                 fresh,
                 &up,
@@ -308,9 +309,11 @@ pub fn refine(
             };
             if fit.misfit_ratio(s) > params.refine_level_misfit
                 || fit.normal.dot(&up).abs() < params.refine_level_cos()
+                || !clear_of_scanner(&fit)
                 // Over two scans it must agree with up (one leveled a pose 7 degrees off
                 // with a sigma of 0.1); over three, it may overrule a wrong start.
                 || (!three_rows_support(grid, &members) && level_z2(&fit, &up, s, sigma_up) > k * k)
+                || !opaque(grid, &fit, s, params)
             {
                 continue;
             }
@@ -402,6 +405,36 @@ pub fn refine(
     }
     result
 }
+
+/// Whether (almost) no point lies beyond a floor's or ceiling's plane: the scanner sees
+/// nothing through a floor or a ceiling, so points more than `refine_k` sigmas beyond the
+/// plane on the side away from the scanner (below a floor, above a ceiling), counting its tilt
+/// uncertainty over their distance, mean a wrong plane. A wall's line and the floor's line of
+/// the next scan, both across the view, are parallel and so always coplanar: one such "floor",
+/// tilted 13 degrees from the true one, had 13 of the pose's 543 points beyond it.
+pub(crate) fn opaque(grid: &PoseGrid, fit: &PlaneFit, s: f64, params: &LevelParams) -> bool {
+    let model = LevelModel::new(fit, s);
+    // Away from the scanner, which sits at the robot frame's origin.
+    let normal = if fit.normal.dot(&fit.centroid.coords) < 0.0 {
+        -fit.normal
+    } else {
+        fit.normal
+    };
+    let beyond = grid
+        .points
+        .iter()
+        .flatten()
+        .filter(|g| {
+            let (_, sd) = model.distance_sd(g, s, params.min_sigma);
+            normal.dot(&(g.p - fit.centroid)) > params.refine_k * sd
+        })
+        .count();
+    beyond <= MAX_BEYOND
+}
+
+/// Points beyond a level plane that [`opaque`] lets pass: true planes have a few (allowing
+/// none leveled 7 points fewer poses at 5-10 cm noise, allowing two 0.4 points fewer).
+const MAX_BEYOND: usize = 5;
 
 /// Squared angle between a level model's normal and up, in variances: the model's normal
 /// noise, inflated by its misfit, and up's own (`sigma_up` [rad]).
@@ -504,25 +537,10 @@ fn level_lines(ctx: &LineContext, kind: SurfaceKind, params: &LevelParams) -> Le
         .into_iter()
         .filter_map(|row| fit_line(grid, row, ctx.up, Some(ctx.sigma_up), s, params))
         .collect();
-    // One floor: with three lines or more, each must lie in the plane of the others. When one
-    // does not, which is wrong is not clear (a wall line near its foot sits at the floor's
-    // height within the provisional frame's tolerance, and lines of one floor seen by
-    // parallel scans leave the plane of any two free to tilt about them): none is used.
-    if found.len() >= 3 {
-        let consistent = (0..found.len()).all(|i| {
-            let others: Vec<usize> = found
-                .iter()
-                .enumerate()
-                .filter(|&(j, _)| j != i)
-                .flat_map(|(_, (_, m))| m.iter().copied())
-                .collect();
-            fit_members(grid, &others, s).is_some_and(|fit| {
-                line_offset_sigmas(grid, &found[i].1, &fit, s, params.min_sigma) <= params.refine_k
-            })
-        });
-        if !consistent {
-            return LevelEvidence::None;
-        }
+    // When the lines cannot be one floor, which is wrong is not clear (a wall line near its
+    // foot sits at the floor's height within the provisional frame's tolerance): none is used.
+    if !one_plane(grid, &found, s, params) {
+        return LevelEvidence::None;
     }
     if found.is_empty() {
         return LevelEvidence::None;
@@ -533,12 +551,39 @@ fn level_lines(ctx: &LineContext, kind: SurfaceKind, params: &LevelParams) -> Le
         if let Some(fit) = fit_members(grid, &members, s) {
             if fit.misfit_ratio(s) <= params.refine_level_misfit
                 && fit.normal.dot(ctx.up).abs() >= params.refine_level_cos()
+                && clear_of_scanner(&fit)
+                && opaque(grid, &fit, s, params)
             {
                 return LevelEvidence::Plane(fit, members);
             }
         }
     }
     LevelEvidence::Lines(found.into_iter().map(|(l, _)| l).collect())
+}
+
+/// Whether level lines (each with its points) can all lie in one plane: with three or more,
+/// each must lie in the plane of the others' points. Any two lines pass, as do lines of one
+/// floor seen by parallel scans (they leave the plane of any two free to tilt about them).
+fn one_plane(
+    grid: &PoseGrid,
+    lines: &[(LevelLine, Vec<usize>)],
+    s: f64,
+    params: &LevelParams,
+) -> bool {
+    if lines.len() < 3 {
+        return true;
+    }
+    (0..lines.len()).all(|i| {
+        let others: Vec<usize> = lines
+            .iter()
+            .enumerate()
+            .filter(|&(j, _)| j != i)
+            .flat_map(|(_, (_, m))| m.iter().copied())
+            .collect();
+        fit_members(grid, &others, s).is_some_and(|fit| {
+            line_offset_sigmas(grid, &lines[i].1, &fit, s, params.min_sigma) <= params.refine_k
+        })
+    })
 }
 
 /// How far, in standard deviations, a line's points lie from a plane on average: the mean
@@ -698,50 +743,11 @@ pub fn level_start(
     let idx: Vec<usize> = (0..grid.points.len())
         .filter(|&i| levelish[i] && grid.points[i].is_some())
         .collect();
-    let n = idx.len();
-    if n < params.min_level_points {
+    if idx.len() < params.min_level_points {
         return None;
     }
     let min_z = START_MAX_TILT_DEG.to_radians().cos();
-    let inliers = |p0: &nalgebra::Point3<f64>, normal: &Vector3<f64>| -> Vec<usize> {
-        idx.iter()
-            .copied()
-            .filter(|&i| {
-                grid.points[i].as_ref().is_some_and(|g| {
-                    let sd = (s * s * g.dir.dot(normal).powi(2) + params.min_sigma.powi(2)).sqrt();
-                    normal.dot(&(g.p - p0)).abs() <= params.refine_k * sd + params.flat_margin
-                })
-            })
-            .collect()
-    };
-    let mut best: Option<Vec<usize>> = None;
-    for h in 0..START_HYPOTHESES {
-        // Three points spread over the candidates: a fixed stride walk, no random state.
-        let pick = |k: usize| idx[(h * (2 * k + 1) * 7 + k * n / 3) % n];
-        let (a, b, c) = (pick(0), pick(1), pick(2));
-        let (Some(pa), Some(pb), Some(pc)) = (
-            grid.points[a].as_ref(),
-            grid.points[b].as_ref(),
-            grid.points[c].as_ref(),
-        ) else {
-            continue;
-        };
-        let (u, v) = (pb.p - pa.p, pc.p - pa.p);
-        let cross = u.cross(&v);
-        // Nearly collinear triples (one scan line) leave the plane free to turn.
-        if cross.norm() < 0.1 * u.norm() * v.norm() {
-            continue;
-        }
-        let normal = cross.normalize();
-        if normal.z.abs() < min_z {
-            continue;
-        }
-        let members = inliers(&pa.p, &normal);
-        if best.as_ref().is_none_or(|b| members.len() > b.len()) {
-            best = Some(members);
-        }
-    }
-    let members = best?;
+    let members = sampled_plane(grid, &idx, &idx, |n| n.z.abs() >= min_z, s, params)?;
     if members.len() < params.min_level_points || !two_rows_support(grid, &members) {
         return None;
     }
@@ -760,6 +766,63 @@ pub fn level_start(
     Some(sol)
 }
 
+/// The points of `idx` on the level plane through most of them, found by a deterministic
+/// sample of triples of the points `sample` (RANSAC, Fischler and Bolles 1981) among planes whose normal
+/// `accept`s and that pass clear of the scanner ([`clear_of_scanner`]: else one scan's own
+/// points, all in its plane, win): a point is on a plane within `refine_k` sigmas of its range
+/// noise along the normal, plus `flat_margin`. `None` when no triple gives such a plane.
+fn sampled_plane(
+    grid: &PoseGrid,
+    idx: &[usize],
+    sample: &[usize],
+    accept: impl Fn(&Vector3<f64>) -> bool,
+    s: f64,
+    params: &LevelParams,
+) -> Option<Vec<usize>> {
+    let n = sample.len();
+    if n < 3 {
+        return None;
+    }
+    let inliers = |p0: &nalgebra::Point3<f64>, normal: &Vector3<f64>| -> Vec<usize> {
+        idx.iter()
+            .copied()
+            .filter(|&i| {
+                grid.points[i].as_ref().is_some_and(|g| {
+                    let sd = (s * s * g.dir.dot(normal).powi(2) + params.min_sigma.powi(2)).sqrt();
+                    normal.dot(&(g.p - p0)).abs() <= params.refine_k * sd + params.flat_margin
+                })
+            })
+            .collect()
+    };
+    let mut best: Option<Vec<usize>> = None;
+    for h in 0..START_HYPOTHESES {
+        // Three points spread over the candidates: a fixed stride walk, no random state.
+        let pick = |k: usize| sample[(h * (2 * k + 1) * 7 + k * n / 3) % n];
+        let (Some(pa), Some(pb), Some(pc)) = (
+            grid.points[pick(0)].as_ref(),
+            grid.points[pick(1)].as_ref(),
+            grid.points[pick(2)].as_ref(),
+        ) else {
+            continue;
+        };
+        let (u, v) = (pb.p - pa.p, pc.p - pa.p);
+        let cross = u.cross(&v);
+        // Nearly collinear triples (one scan line) leave the plane free to turn.
+        if cross.norm() < 0.1 * u.norm() * v.norm() {
+            continue;
+        }
+        let normal = cross.normalize();
+        if !accept(&normal) || normal.dot(&pa.p.coords).abs() < MIN_LEVEL_DISTANCE {
+            continue;
+        }
+        let members = inliers(&pa.p, &normal);
+        if best.as_ref().is_none_or(|b| members.len() > b.len()) {
+            best = Some(members);
+        }
+    }
+    best
+}
+
 /// Floor and ceiling lines found without a level frame, for a start where neither the walls
 /// nor a level plane fix up ([`level_start`]): in each scan, the points whose range steps to
 /// the adjacent scans like the floor's ([`LevelSteps::floor`]) as one line, and likewise the
@@ -775,20 +838,22 @@ pub fn start_lines(
     let cols = grid.cols;
     let mut out = Vec::new();
     for mask in [&steps.floor, &steps.ceiling] {
-        let lines: Vec<LevelLine> = (0..grid.rows())
+        let lines: Vec<(LevelLine, Vec<usize>)> = (0..grid.rows())
             .filter_map(|r| {
                 let idx: Vec<usize> = (r * cols..(r + 1) * cols).filter(|&i| mask[i]).collect();
-                fit_line(grid, idx, &Vector3::z(), None, s, params).map(|(line, _)| line)
+                fit_line(grid, idx, &Vector3::z(), None, s, params)
             })
             .collect();
-        // One floor is one plane: lines of two scans that cannot lie in one plane are not
-        // both on it, and which one is not is unknown here. (A far wall met by the level scan
-        // steps to the floor in the next scan as the floor does; taken as a floor line it set
-        // a start 8 degrees off, and re-segmentation kept it.)
+        // One floor is one plane: lines that cannot lie in one plane are not all on it, and
+        // which one is not is unknown here. (A far wall met by the level scan steps to the
+        // floor in the next scan as the floor does; taken as a floor line it set a start 8
+        // degrees off, and re-segmentation kept it. A wall's line 14 cm above its foot,
+        // coplanar with each of two floor lines but not with both, set one 3 degrees off with
+        // a sigma of 0.17.)
         let coplanar = (0..lines.len())
-            .all(|i| (i + 1..lines.len()).all(|j| coplanar(&lines[i], &lines[j], s, params)));
-        if coplanar {
-            out.extend(lines);
+            .all(|i| (i + 1..lines.len()).all(|j| coplanar(&lines[i].0, &lines[j].0, s, params)));
+        if coplanar && one_plane(grid, &lines, s, params) {
+            out.extend(lines.into_iter().map(|(line, _)| line));
         }
     }
     out
@@ -839,6 +904,7 @@ fn find_levels(
     grid: &PoseGrid,
     lv: &Leveled,
     ok: &[bool],
+    levelish: &[bool],
     given: &[PlaneFit],
     fresh: bool,
     up: &Vector3<f64>,
@@ -887,7 +953,21 @@ fn find_levels(
         if best.1 - best.0 < params.min_level_points {
             continue;
         }
-        let mut members: Vec<usize> = zs[best.0..best.1].iter().map(|&(_, i)| i).collect();
+        // The window holds wall points too (a wall's foot, or a band of wall at one height
+        // in a frame degrees off): the plane through most of its points, rather than through
+        // all of them, starts the rounds.
+        let window: Vec<usize> = zs[best.0..best.1].iter().map(|&(_, i)| i).collect();
+        let stepping: Vec<usize> = window.iter().copied().filter(|&i| levelish[i]).collect();
+        let cos = params.refine_level_cos();
+        let mut members = sampled_plane(
+            grid,
+            &window,
+            &stepping,
+            |n| n.dot(up).abs() >= cos,
+            s,
+            params,
+        )
+        .unwrap_or(window);
         // A few rounds of refit and reassignment: the window's plane is only as level as the
         // provisional up, so far points fall outside it at first.
         let mut fit = None;
@@ -919,6 +999,7 @@ fn find_levels(
         if let Some(f) = fit {
             if f.normal.dot(up).abs() >= params.refine_level_cos()
                 && f.misfit_ratio(s) <= params.refine_level_misfit
+                && clear_of_scanner(&f)
             {
                 out.push(f);
             }
@@ -1255,6 +1336,17 @@ const LEVEL_ROUNDS: usize = 3;
 /// through the scanner is seen edge-on.
 const MIN_LEVEL_DISTANCE: f64 = 0.1;
 
+/// A floor or ceiling plane must pass clear of the scanner as well as its points: each scan's
+/// points lie in that scan's own plane through the scanner whatever they hit, so a band of
+/// wall points from one or two scans (near the hinge axis the scans nearly coincide) fits a
+/// plane through the scanner that can pass for level. One such "ceiling", 7 cm above the
+/// scanner over wall points alone, leveled a pose 6 degrees off with a sigma of 0.7.
+/// The band is also what a wall of one scan's points through the scanner fits, so a sample of
+/// level planes ([`sampled_plane`]) skips planes through the scanner as well.
+fn clear_of_scanner(fit: &PlaneFit) -> bool {
+    fit.centroid.coords.dot(&fit.normal).abs() >= MIN_LEVEL_DISTANCE
+}
+
 fn fit_members(grid: &PoseGrid, members: &[usize], sigma: f64) -> Option<PlaneFit> {
     grid.accumulate(members).fit(sigma)
 }
@@ -1501,6 +1593,101 @@ mod tests {
         assert!(fitted(&line(0.0)).is_some());
         assert!(fitted(&line(1.0)).is_some());
         assert!(fitted(&line(4.6)).is_none());
+    }
+
+    /// Two lines of points in one level plane, `x` and `x + 1.5` m ahead at height `z`, as one
+    /// row of a grid (a band of wall points at one height looks like this).
+    fn band(x: f64, z: f64) -> Vec<Vector3<f64>> {
+        let mut pts = across(x, z, 30);
+        pts.extend(across(x + 1.5, z, 30));
+        pts
+    }
+
+    /// A plane through the scanner is a scan's own plane, no floor, however level; one at the
+    /// scanner's height below it is.
+    #[test]
+    fn a_level_plane_must_pass_clear_of_the_scanner() {
+        let fit_of = |grid: &PoseGrid| {
+            let all: Vec<usize> = (0..grid.points.len()).collect();
+            grid.accumulate(&all).fit(0.0).unwrap()
+        };
+        let floor = grid_of([across(2.0, -0.45, 21), across(3.0, -0.45, 21), vec![]]);
+        let through = grid_of([band(2.0, 0.0), vec![], vec![]]);
+        assert!(clear_of_scanner(&fit_of(&floor)));
+        assert!(!clear_of_scanner(&fit_of(&through)));
+    }
+
+    /// The sample finds the plane of most points among those it samples from, passing clear
+    /// of the scanner: a band of 60 wall points 15 cm below the scanner beats 40 floor points
+    /// when sampled, not when only the floor's points (those stepping like a floor) are; a
+    /// band through the scanner never wins.
+    #[test]
+    fn sampled_planes_come_from_the_sample_and_pass_clear_of_the_scanner() {
+        let params = LevelParams::default();
+        let level = |n: &Vector3<f64>| n.z.abs() > 5f64.to_radians().cos();
+        let floor_rows = || [across(2.0, -0.45, 20), across(3.0, -0.45, 20)];
+        let [f1, f2] = floor_rows();
+        let grid = grid_of([band(3.0, -0.15), f1, f2]);
+        let all: Vec<usize> = (0..grid.points.len())
+            .filter(|&i| grid.points[i].is_some())
+            .collect();
+        let floor: Vec<usize> = all.iter().copied().filter(|&i| i >= grid.cols).collect();
+        let from_all = sampled_plane(&grid, &all, &all, level, 0.01, &params).unwrap();
+        assert_eq!(from_all.len(), 60);
+        let from_floor = sampled_plane(&grid, &all, &floor, level, 0.01, &params).unwrap();
+        assert_eq!(from_floor, floor);
+        let [f1, f2] = floor_rows();
+        let grid = grid_of([band(3.0, 0.0), f1, f2]);
+        let got = sampled_plane(&grid, &all, &all, level, 0.01, &params).unwrap();
+        assert_eq!(got, floor);
+    }
+
+    /// Three floor lines in one plane are one floor; a wall's line 14 cm above its foot with
+    /// two floor lines is not, though it is parallel to (so coplanar with) each of them.
+    #[test]
+    fn three_lines_must_share_one_plane() {
+        let params = LevelParams::default();
+        let lines_of = |third: f64| {
+            let grid = grid_of([
+                across(2.0, -0.45, 30),
+                across(3.0, -0.45, 30),
+                across(4.5, third, 30),
+            ]);
+            let lines: Vec<(LevelLine, Vec<usize>)> = (0..3)
+                .map(|r| {
+                    let idx: Vec<usize> = (r * grid.cols..(r + 1) * grid.cols).collect();
+                    fit_line(&grid, idx, &Vector3::z(), None, 0.01, &params).unwrap()
+                })
+                .collect();
+            (grid, lines)
+        };
+        let (grid, lines) = lines_of(-0.45);
+        assert!(one_plane(&grid, &lines, 0.01, &params));
+        let (grid, lines) = lines_of(-0.31);
+        assert!(coplanar(&lines[0].0, &lines[2].0, 0.01, &params));
+        assert!(!one_plane(&grid, &lines, 0.01, &params));
+        assert!(one_plane(&grid, &lines[..2], 0.01, &params));
+    }
+
+    /// Nothing is seen through a floor: a plane with ten points 20 cm beneath it is no floor;
+    /// the same plane with the points above it (a box on the floor) is.
+    #[test]
+    fn a_floor_with_points_beneath_it_is_no_floor() {
+        let params = LevelParams::default();
+        let fit_and_grid = |third: f64| {
+            let grid = grid_of([
+                across(2.0, -0.45, 30),
+                across(3.0, -0.45, 30),
+                across(2.5, third, 10),
+            ]);
+            let floor: Vec<usize> = (0..2 * grid.cols).collect();
+            let fit = grid.accumulate(&floor).fit(0.01).unwrap();
+            (grid, fit)
+        };
+        let (grid, fit) = fit_and_grid(-0.65);
+        assert!(!opaque(&grid, &fit, 0.01, &params));
+        let (grid, fit) = fit_and_grid(-0.25);
+        assert!(opaque(&grid, &fit, 0.01, &params));
     }
 
     #[test]
