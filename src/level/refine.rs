@@ -425,8 +425,9 @@ pub(crate) fn opaque(grid: &PoseGrid, fit: &PlaneFit, s: f64, params: &LevelPara
         .iter()
         .flatten()
         .filter(|g| {
-            let (_, sd) = model.distance_sd(g, s, params.min_sigma);
-            normal.dot(&(g.p - fit.centroid)) > params.refine_k * sd
+            // Most points lie on the scanner's side: no need for their sigma.
+            let d = normal.dot(&(g.p - fit.centroid));
+            d > 0.0 && d > params.refine_k * model.distance_sd(g, s, params.min_sigma).1
         })
         .count();
     beyond <= MAX_BEYOND
