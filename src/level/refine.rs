@@ -296,6 +296,7 @@ pub fn refine(
         }
         let walls_found = models.len();
         for (f, members) in level_fits.iter().zip(level_members) {
+            let members = without_standing_rows(grid, members, s, params);
             if members.len() < params.min_level_points || !two_rows_support(grid, &members) {
                 continue;
             }
@@ -587,6 +588,53 @@ fn one_plane(
     })
 }
 
+/// A level surface's members without an edge row (the lowest or highest scan among them) that
+/// stands off the plane of the other rows by more than `refine_k` sigmas ([`line_offset_sigmas`]).
+/// The scan above a floor meets the walls just above their feet: that line lies centimetres
+/// over the floor, passes for floor within a provisional frame's tolerance, and tilts the plane
+/// (one such row, 6 cm up, set a start 2.8 degrees off with a sigma of 0.11). Only with three
+/// rows or more, so that the others still make a plane.
+fn without_standing_rows(
+    grid: &PoseGrid,
+    members: Vec<usize>,
+    s: f64,
+    params: &LevelParams,
+) -> Vec<usize> {
+    let rc = grid.row_col();
+    let mut rows: Vec<usize> = members.iter().map(|&i| rc.row(i)).collect();
+    rows.sort_unstable();
+    rows.dedup();
+    if rows.len() < 3 {
+        return members;
+    }
+    let (first, last) = (rows[0], rows[rows.len() - 1]);
+    let mut drop = Vec::new();
+    for edge in [first, last] {
+        // The others must still span two rows to make a plane.
+        if rows.len() - drop.len() < 3 {
+            break;
+        }
+        let (line, others): (Vec<usize>, Vec<usize>) = members
+            .iter()
+            .copied()
+            .filter(|&i| !drop.contains(&rc.row(i)))
+            .partition(|&i| rc.row(i) == edge);
+        let Some(fit) = fit_members(grid, &others, s) else {
+            continue;
+        };
+        if line_offset_sigmas(grid, &line, &fit, s, params.min_sigma) > params.refine_k {
+            drop.push(edge);
+        }
+    }
+    if drop.is_empty() {
+        return members;
+    }
+    members
+        .into_iter()
+        .filter(|&i| !drop.contains(&rc.row(i)))
+        .collect()
+}
+
 /// How far, in standard deviations, a line's points lie from a plane on average: the mean
 /// signed distance against its noise (the points' range noise along the normal, averaged,
 /// and the plane's tilt uncertainty at the line's distance from the plane's centroid).
@@ -749,6 +797,7 @@ pub fn level_start(
     }
     let min_z = START_MAX_TILT_DEG.to_radians().cos();
     let members = sampled_plane(grid, &idx, &idx, |n| n.z.abs() >= min_z, s, params)?;
+    let members = without_standing_rows(grid, members, s, params);
     if members.len() < params.min_level_points || !two_rows_support(grid, &members) {
         return None;
     }
@@ -1668,6 +1717,35 @@ mod tests {
         assert!(coplanar(&lines[0].0, &lines[2].0, 0.01, &params));
         assert!(!one_plane(&grid, &lines, 0.01, &params));
         assert!(one_plane(&grid, &lines[..2], 0.01, &params));
+    }
+
+    /// A floor's edge row 6 cm above the plane of its other rows (the walls' feet seen by the
+    /// scan above the floor) is trimmed; a floor's own rows, or two rows alone, are kept.
+    #[test]
+    fn an_edge_row_above_the_floor_is_trimmed() {
+        let params = LevelParams::default();
+        let trimmed = |rows: [Vec<Vector3<f64>>; 3]| {
+            let grid = grid_of(rows);
+            let all: Vec<usize> = (0..grid.points.len())
+                .filter(|&i| grid.points[i].is_some())
+                .collect();
+            let kept = without_standing_rows(&grid, all.clone(), 0.01, &params);
+            (all.len(), kept.len())
+        };
+        let floor = |x: f64| across(x, -0.45, 30);
+        assert_eq!(trimmed([floor(2.0), floor(3.0), floor(4.5)]), (90, 90));
+        assert_eq!(
+            trimmed([across(4.5, -0.39, 30), floor(3.0), floor(2.0)]),
+            (90, 60)
+        );
+        assert_eq!(
+            trimmed([floor(2.0), floor(3.0), across(4.5, -0.39, 30)]),
+            (90, 60)
+        );
+        assert_eq!(
+            trimmed([floor(2.0), across(4.5, -0.39, 30), vec![]]),
+            (60, 60)
+        );
     }
 
     /// Nothing is seen through a floor: a plane with ten points 20 cm beneath it is no floor;
