@@ -310,7 +310,7 @@ pub fn refine(
             };
             if fit.misfit_ratio(s) > params.refine_level_misfit
                 || fit.normal.dot(&up).abs() < params.refine_level_cos()
-                || !clear_of_scanner(&fit)
+                || !clear_of_scanner(&fit.normal, &fit.centroid)
                 // Over two scans it must agree with up (one leveled a pose 7 degrees off
                 // with a sigma of 0.1); over three, it may overrule a wrong start.
                 || (!three_rows_support(grid, &members) && level_z2(&fit, &up, s, sigma_up) > k * k)
@@ -553,7 +553,7 @@ fn level_lines(ctx: &LineContext, kind: SurfaceKind, params: &LevelParams) -> Le
         if let Some(fit) = fit_members(grid, &members, s) {
             if fit.misfit_ratio(s) <= params.refine_level_misfit
                 && fit.normal.dot(ctx.up).abs() >= params.refine_level_cos()
-                && clear_of_scanner(&fit)
+                && clear_of_scanner(&fit.normal, &fit.centroid)
                 && opaque(grid, &fit, s, params)
             {
                 return LevelEvidence::Plane(fit, members);
@@ -816,9 +816,9 @@ pub fn level_start(
     Some(sol)
 }
 
-/// The points of `idx` on the level plane through most of them, found by a deterministic
-/// sample of triples of the points `sample` (RANSAC, Fischler and Bolles 1981) among planes whose normal
-/// `accept`s and that pass clear of the scanner ([`clear_of_scanner`]: else one scan's own
+/// The points of `idx` on the plane through most of them, found by a deterministic sample of
+/// triples of the points `sample` (RANSAC, Fischler and Bolles 1981) among planes whose normal
+/// `accept`s and that pass clear of the scanner ([`clear_of_scanner`]; else one scan's own
 /// points, all in its plane, win): a point is on a plane within `refine_k` sigmas of its range
 /// noise along the normal, plus `flat_margin`. `None` when no triple gives such a plane.
 fn sampled_plane(
@@ -862,7 +862,7 @@ fn sampled_plane(
             continue;
         }
         let normal = cross.normalize();
-        if !accept(&normal) || normal.dot(&pa.p.coords).abs() < MIN_LEVEL_DISTANCE {
+        if !accept(&normal) || !clear_of_scanner(&normal, &pa.p) {
             continue;
         }
         let members = inliers(&pa.p, &normal);
@@ -1049,7 +1049,7 @@ fn find_levels(
         if let Some(f) = fit {
             if f.normal.dot(up).abs() >= params.refine_level_cos()
                 && f.misfit_ratio(s) <= params.refine_level_misfit
-                && clear_of_scanner(&f)
+                && clear_of_scanner(&f.normal, &f.centroid)
             {
                 out.push(f);
             }
@@ -1386,15 +1386,14 @@ const LEVEL_ROUNDS: usize = 3;
 /// through the scanner is seen edge-on.
 const MIN_LEVEL_DISTANCE: f64 = 0.1;
 
-/// A floor or ceiling plane must pass clear of the scanner as well as its points: each scan's
-/// points lie in that scan's own plane through the scanner whatever they hit, so a band of
-/// wall points from one or two scans (near the hinge axis the scans nearly coincide) fits a
-/// plane through the scanner that can pass for level. One such "ceiling", 7 cm above the
-/// scanner over wall points alone, leveled a pose 6 degrees off with a sigma of 0.7.
-/// The band is also what a wall of one scan's points through the scanner fits, so a sample of
-/// level planes ([`sampled_plane`]) skips planes through the scanner as well.
-fn clear_of_scanner(fit: &PlaneFit) -> bool {
-    fit.centroid.coords.dot(&fit.normal).abs() >= MIN_LEVEL_DISTANCE
+/// Whether the plane through `point` with unit `normal` passes clear of the scanner, as a
+/// floor's or ceiling's must, not only its points: each scan's points lie in that scan's own
+/// plane through the scanner whatever they hit, so a band of wall points from one or two scans
+/// (near the hinge axis the scans nearly coincide) fits a plane through the scanner that can
+/// pass for level. One such "ceiling", 7 cm above the scanner over wall points alone, leveled
+/// a pose 6 degrees off with a sigma of 0.7.
+fn clear_of_scanner(normal: &Vector3<f64>, point: &nalgebra::Point3<f64>) -> bool {
+    normal.dot(&point.coords).abs() >= MIN_LEVEL_DISTANCE
 }
 
 fn fit_members(grid: &PoseGrid, members: &[usize], sigma: f64) -> Option<PlaneFit> {
@@ -1663,8 +1662,9 @@ mod tests {
         };
         let floor = grid_of([across(2.0, -0.45, 21), across(3.0, -0.45, 21), vec![]]);
         let through = grid_of([band(2.0, 0.0), vec![], vec![]]);
-        assert!(clear_of_scanner(&fit_of(&floor)));
-        assert!(!clear_of_scanner(&fit_of(&through)));
+        let clear = |f: PlaneFit| clear_of_scanner(&f.normal, &f.centroid);
+        assert!(clear(fit_of(&floor)));
+        assert!(!clear(fit_of(&through)));
     }
 
     /// The sample finds the plane of most points among those it samples from, passing clear
