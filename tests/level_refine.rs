@@ -171,47 +171,49 @@ fn level_start_finds_the_floor_without_any_up() {
     assert!(err.to_degrees() < 1.0, "error {} deg", err.to_degrees());
 }
 
-/// Poses of the accuracy protocol (`eval accuracy examples/plans/office.wall`, its random
-/// streams) once reported ok while degrees off, each traced to a floor that could not be one:
-/// a wall's line and the next scan's floor line, parallel, as a "floor" 13 degrees off (seed
-/// 8); a loose start's floor lost among wall points (seed 14); a wall line 14 cm above its
-/// foot taken as a third floor line (seed 1). Each now fails or is right.
+/// Poses of the accuracy protocol (`eval accuracy examples/plans/{office,angled,ceiling,
+/// two_rooms}.wall`, its random streams) once reported ok while degrees off. In the office,
+/// each traced to a floor that could not be one: a wall's line and the next scan's floor line,
+/// parallel, as a "floor" 13 degrees off (seed 8); a loose start's floor lost among wall
+/// points (seed 14); a wall line 14 cm above its foot taken as a third floor line (seed 1). In
+/// the ceiling room at 10 cm, the first and the re-segmented solutions 4-5 degrees apart with
+/// sigmas near one degree, the kept one 6 degrees off (seeds 4 and 8). Each now fails or is
+/// right.
 #[test]
-fn traced_poses_with_impossible_floors_fail_or_are_right() {
+fn traced_poses_reported_ok_and_wrong_now_fail_or_are_right() {
     use levelscan::simulate::{
         RandomPoseParams, ScannerParams, Stream, World, elevations_centred, random_poses,
         simulate_pose, stream_rng,
     };
-    let plan = levelscan::formats::read_plan(std::path::Path::new(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/examples/plans/office.wall"
-    )))
-    .unwrap();
-    let world = World::from_plan(&plan);
     let protocol = RandomPoseParams {
         tilt: deg(20.0),
         clearance: 0.6,
         height: 0.45,
         ..RandomPoseParams::default()
     };
-    // (seed, poses drawn, pose, scans, noise)
-    for (seed, count, k, nscans, noise) in [
-        (8u64, 100, 39usize, 3usize, 0.05),
-        (14, 150, 15, 3, 0.05),
-        (1, 200, 110, 3, 0.05),
+    // (plan, its index in the list, seed, poses drawn, pose, scans, noise)
+    for (name, pi, seed, count, k, nscans, noise) in [
+        ("office", 0u64, 8u64, 100, 39usize, 3usize, 0.05),
+        ("office", 0, 14, 150, 15, 3, 0.05),
+        ("office", 0, 1, 200, 110, 3, 0.05),
+        ("ceiling", 2, 4, 100, 94, 5, 0.10),
+        ("ceiling", 2, 8, 100, 81, 5, 0.10),
     ] {
-        let pose = random_poses(&world, count, &protocol, seed).unwrap()[k];
+        let path = format!("{}/examples/plans/{name}.wall", env!("CARGO_MANIFEST_DIR"));
+        let world = World::from_plan(&levelscan::formats::read_plan(path.as_ref()).unwrap());
+        let pose = random_poses(&world, count, &protocol, seed + pi).unwrap()[k];
         let scanner = ScannerParams {
             noise_sigma: noise,
             ..ScannerParams::default()
         };
-        let mut rng = stream_rng(seed + ((nscans as u64) << 48), Stream::Scans, k as u64);
+        let stream = seed + (pi << 32) + ((nscans as u64) << 48);
+        let mut rng = stream_rng(stream, Stream::Scans, k as u64);
         let elevations = elevations_centred(nscans, deg(5.0));
         let scans = simulate_pose(&world, k as u64, &pose, &elevations, &scanner, &mut rng);
         let est = level_pose(&scans, &LevelParams::default());
         if let Some(att) = est.attitude {
             let err = att.max_abs_error(&pose.attitude()).to_degrees();
-            assert!(err < 1.0, "seed {seed} pose {k}: {err} deg off");
+            assert!(err < 1.5, "{name} seed {seed} pose {k}: {err} deg off");
         }
     }
 }

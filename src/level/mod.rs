@@ -545,8 +545,17 @@ pub fn level_pose_with(
         Err(_) => true,
     };
     if params.estimator == Estimator::Robust && params.refine_passes > 0 && needs_refine {
-        if let Some(refined) = refined_solution(&est, &levels, &result, params) {
-            result = Ok(refined);
+        let (accepted, raw) = refined_solution(&est, &levels, &result, params);
+        // The solution kept and the other one of the two: the first when the refined one is
+        // kept, else the refined one, gated or not.
+        let other = match accepted {
+            Some(refined) => std::mem::replace(&mut result, Ok(refined)).ok(),
+            None => raw,
+        };
+        if let (Ok(kept), Some(other)) = (&result, other) {
+            if let Some(widened) = widened_by_disagreement(kept, &other) {
+                result = acceptable(&widened, params, true).map(|()| widened);
+            }
         }
     }
     let Some(grid) = &est.grid else {
@@ -668,24 +677,51 @@ fn refined_solution(
     levels: &[PlaneFit],
     first: &Result<UpSolution, FailReason>,
     params: &LevelParams,
-) -> Option<UpSolution> {
-    let (_, refined) = refine_estimate(est, levels, first, params)?;
+) -> (Option<UpSolution>, Option<UpSolution>) {
+    let Some((_, refined)) = refine_estimate(est, levels, first, params) else {
+        return (None, None);
+    };
+    let raw = Some(refined.solution);
     let level_models = refined.models.iter().any(|m| m.kind != SurfaceKind::Wall);
     if refined.lines.is_empty() {
-        acceptable(&refined.solution, params, level_models).ok()?;
-        return Some(refined.solution);
+        let ok = acceptable(&refined.solution, params, level_models).is_ok();
+        return (ok.then_some(refined.solution), raw);
     }
     // A line pins up down across it only: the other direction rests on the walls that alone
     // could not pass the gate, so it is held to a stricter one; failing that, the models
     // without the lines are gated as usual.
     let strict = params.max_sigma_deg.min(params.level_line_max_sigma_deg);
     if acceptable_within(&refined.solution, params, true, strict).is_ok() {
-        return Some(refined.solution);
+        return (Some(refined.solution), raw);
     }
-    let without = refined.without_lines(params, est.range_sigma)?;
-    acceptable(&without, params, level_models).ok()?;
-    Some(without)
+    let without = refined
+        .without_lines(params, est.range_sigma)
+        .filter(|w| acceptable(w, params, level_models).is_ok());
+    (without, raw)
 }
+
+/// `kept` with its covariance widened by its distance from `other` when the two disagree
+/// beyond [`DISAGREEMENT_SIGMAS`] of their joint uncertainty; `None` when they agree. The
+/// first solution and the re-segmented one rest on nearly the same ranges, so they can only
+/// disagree that much when one of them rests on a wrong segmentation, and which one is not
+/// known: traced poses ended 5-7 degrees off either way, with sigmas near one degree.
+fn widened_by_disagreement(kept: &UpSolution, other: &UpSolution) -> Option<UpSolution> {
+    let d = nalgebra::Vector2::new(other.up.dot(&kept.basis[0]), other.up.dot(&kept.basis[1]));
+    let joint = (kept.cov + other.cov).try_inverse()?;
+    let z2 = (d.transpose() * joint * d)[(0, 0)];
+    (z2 > DISAGREEMENT_SIGMAS * DISAGREEMENT_SIGMAS).then(|| UpSolution {
+        cov: kept.cov + d * d.transpose(),
+        ..*kept
+    })
+}
+
+/// How far apart, in joint sigmas, the first and the re-segmented solutions may lie before
+/// the kept one's covariance takes in their distance. The sum of the two covariances
+/// overstates their difference's (they share most of their data), so 2.5 of it is a stricter
+/// test than it looks. Over 145,800 poses of nine plans, it cut the poses reported ok and more
+/// than 5 degrees off from 22 to 17 for 0.25 points fewer leveled at 5-10 cm (3: 20 and 0.1;
+/// 2: 13 and 0.65).
+const DISAGREEMENT_SIGMAS: f64 = 2.5;
 
 /// Points at the height of the floor or ceiling patches once leveled with `att` (within
 /// `flat_margin` plus three sigmas of their range noise along the vertical); `None` when
@@ -1075,6 +1111,32 @@ pub(crate) fn from_total_order_key(key: i64) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Up tilted by `deg` about the robot's x axis, with a 1-sigma of `sigma_deg` both ways.
+    fn solution(deg: f64, sigma_deg: f64) -> UpSolution {
+        let a = deg.to_radians();
+        let up = Vector3::new(0.0, -a.sin(), a.cos());
+        let basis = [Vector3::x(), up.cross(&Vector3::x())];
+        UpSolution {
+            up,
+            basis,
+            cov: nalgebra::Matrix2::identity() * sigma_deg.to_radians().powi(2),
+            info_eigenvalues: (1.0, 1.0),
+        }
+    }
+
+    /// Two solutions 4 degrees apart with 1-degree sigmas (2.8 joint sigmas) widen the kept
+    /// one by their distance; 2 degrees apart, or against a 10-degree sigma, they agree.
+    #[test]
+    fn disagreeing_solutions_widen_the_kept_one() {
+        let kept = solution(0.0, 1.0);
+        let widened = widened_by_disagreement(&kept, &solution(4.0, 1.0)).expect("widened");
+        let extra = (widened.cov - kept.cov).norm().sqrt().to_degrees();
+        assert!((extra - 4.0).abs() < 0.01, "{extra}");
+        assert_eq!(widened.up, kept.up);
+        assert!(widened_by_disagreement(&kept, &solution(2.0, 1.0)).is_none());
+        assert!(widened_by_disagreement(&kept, &solution(4.0, 10.0)).is_none());
+    }
 
     /// The integer keys order as `total_cmp` does and give back the same bits.
     #[test]
