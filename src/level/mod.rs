@@ -999,7 +999,7 @@ fn clean_level_fit(
         }
     }
     let usable = |acc: &grid::PlaneAccumulator, per_row: &[usize]| -> Option<PlaneFit> {
-        let supported = per_row.iter().filter(|&&n| 5 * n >= acc.n).count();
+        let supported = refine::supported_rows(per_row, 0.2);
         if acc.n < params.min_level_points || supported < 2 {
             return None;
         }
