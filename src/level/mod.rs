@@ -554,6 +554,7 @@ pub fn level_pose_with(
         };
         if let (Ok(kept), Some(other)) = (&result, other) {
             if let Some(widened) = widened_by_disagreement(kept, &other) {
+                // Only its sigma changed: the walls' spread was judged already.
                 result = acceptable(&widened, params, true).map(|()| widened);
             }
         }

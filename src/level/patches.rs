@@ -299,6 +299,8 @@ fn make_patch(
     let first = acc.fit(sigma)?;
     let trimmed = trim_edge_rows(grid, members, &acc, &first, sigma, params);
     let (members, first) = match &trimmed {
+        // A three-row patch that lost a row is no wall.
+        Some(kept) if kept.is_empty() => return None,
         Some(kept) => (&kept[..], grid.accumulate(kept).fit(sigma)?),
         None => (members, first),
     };

@@ -1653,6 +1653,11 @@ mod tests {
         assert!(fitted(&line(4.6)).is_none());
     }
 
+    /// Floor lines 2 and 3 m ahead, 0.45 m down, 30 points each, over `third` as the last row.
+    fn two_floor_rows_and(third: Vec<Vector3<f64>>) -> PoseGrid {
+        grid_of([across(2.0, -0.45, 30), across(3.0, -0.45, 30), third])
+    }
+
     /// Two lines of points in one level plane, `x` and `x + 1.5` m ahead at height `z`, as one
     /// row of a grid (a band of wall points at one height looks like this).
     fn band(x: f64, z: f64) -> Vec<Vector3<f64>> {
@@ -1707,11 +1712,7 @@ mod tests {
     fn three_lines_must_share_one_plane() {
         let params = LevelParams::default();
         let lines_of = |third: f64| {
-            let grid = grid_of([
-                across(2.0, -0.45, 30),
-                across(3.0, -0.45, 30),
-                across(4.5, third, 30),
-            ]);
+            let grid = two_floor_rows_and(across(4.5, third, 30));
             let lines: Vec<(LevelLine, Vec<usize>)> = (0..3)
                 .map(|r| {
                     let idx: Vec<usize> = (r * grid.cols..(r + 1) * grid.cols).collect();
@@ -1773,11 +1774,7 @@ mod tests {
     fn a_floor_with_points_beneath_it_is_no_floor() {
         let params = LevelParams::default();
         let fit_and_grid = |third: f64| {
-            let grid = grid_of([
-                across(2.0, -0.45, 30),
-                across(3.0, -0.45, 30),
-                across(2.5, third, 10),
-            ]);
+            let grid = two_floor_rows_and(across(2.5, third, 10));
             let floor: Vec<usize> = (0..2 * grid.cols).collect();
             let fit = grid.accumulate(&floor).fit(0.01).unwrap();
             (grid, fit)
