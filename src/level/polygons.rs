@@ -101,6 +101,13 @@ pub fn extract_quads_sized(
     out
 }
 
+/// How far from the diagonals' plane, in coplanarity tolerances, a quad's point may lie before
+/// the quad is refused without a fit. At 1.5 rather than 3 it spares fits that the final test
+/// would refuse, 2.6% of `level`'s CPU time at 1 cm; the wall quads kept changed by 0.007% at
+/// 1 cm and 0.18% at 10 cm, and no accuracy statistic moved beyond its noise (148,500
+/// protocol poses, 1-10 cm).
+const DIAGONAL_PLANE_TOLERANCES: f64 = 1.5;
+
 #[allow(clippy::too_many_arguments)]
 fn quad_at(
     grid: &PoseGrid,
@@ -138,14 +145,14 @@ fn quad_at(
     }
     // Cheap rejection before the eigen decomposition: the plane through the centroid normal to
     // the diagonals' cross product is close to the fit for any quad that can pass, so a point
-    // beyond three times the tolerance from it means a corner or an edge.
+    // beyond `DIAGONAL_PLANE_TOLERANCES` tolerances from it means a corner or an edge.
     let diag = (corners[2] - corners[0]).cross(&(corners[3] - corners[1]));
     if let Some(n) = diag.try_normalize(1e-12) {
         let centroid = Point3::from(sum / (qr * qc) as f64);
         for rr in r..r + qr {
             for cc in c..c + qc {
                 let p = grid.at(rr, cc)?.p;
-                if n.dot(&(p - centroid)).abs() > 3.0 * tol {
+                if n.dot(&(p - centroid)).abs() > DIAGONAL_PLANE_TOLERANCES * tol {
                     return None;
                 }
             }
