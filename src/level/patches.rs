@@ -268,6 +268,14 @@ pub fn grow_patches(
     (split, labels)
 }
 
+/// [`rows_span`] of members in ascending order: their first and last.
+fn rows_span_sorted(members: &[usize], cols: usize) -> (usize, usize) {
+    match (members.first(), members.last()) {
+        (Some(&lo), Some(&hi)) => (lo / cols, hi / cols),
+        _ => (usize::MAX, 0),
+    }
+}
+
 fn rows_span(members: &[usize], cols: usize) -> (usize, usize) {
     // Rows grow with the grid index: the lowest and highest rows are those of the lowest and
     // highest index.
@@ -286,16 +294,16 @@ fn make_patch(
     params: &LevelParams,
     sigma: f64,
 ) -> Option<Patch> {
-    // The rows spanned, unless too small or one row: nothing to fit (trimming only takes
-    // points away).
-    let span = |members: &[usize]| {
-        let (lo, hi) = rows_span(members, grid.cols);
-        (members.len() >= params.min_patch_points && hi > lo).then_some((lo, hi))
-    };
-    span(members)?;
     // In grid order from here: the passes below then walk the grid forwards.
     let sorted = ascending(members);
     let members = &sorted[..];
+    // The rows spanned, unless too small or one row: nothing to fit (trimming only takes
+    // points away).
+    let span = |members: &[usize]| {
+        let (lo, hi) = rows_span_sorted(members, grid.cols);
+        (members.len() >= params.min_patch_points && hi > lo).then_some((lo, hi))
+    };
+    span(members)?;
     let first = acc.fit(sigma)?;
     let trimmed = trim_edge_rows(grid, members, &acc, &first, sigma, params);
     let (members, first) = match &trimmed {
@@ -346,7 +354,7 @@ fn trim_edge_rows(
     // Over four rows or more the rest is still a three-row wall. Over three, an edge row
     // standing off leaves no wall to keep: trimmed to two rows, such patches let other,
     // wrong planes decide some poses at 10 cm; the patch goes (an empty list).
-    let (lo, hi) = rows_span(members, grid.cols);
+    let (lo, hi) = rows_span_sorted(members, grid.cols);
     let three = hi == lo + 2;
     if hi < lo + 2 {
         return None;
@@ -446,17 +454,21 @@ const MIN_TRIMMED_ROW_SHARE: f64 = 0.15;
 /// columns, and those few points decide its tilt: a steep "wall" off by degrees. Rows that
 /// are not adjacent do not count: two wall lines over a floor line (the middle scan's beam
 /// meets the floor, or another surface, between them) once passed as stacked and tilted a
-/// pose's attitude by 20 degrees with a small sigma.
+/// pose's attitude by 20 degrees with a small sigma. `members` are in ascending order.
 fn stacked(members: &[usize], grid: &PoseGrid, params: &LevelParams) -> bool {
-    let n = grid.points.len();
+    // Members ascend: the neighbours one row down and one row up are found by two cursors
+    // that only move forwards, rather than in a mask over the whole grid.
     let cols = grid.cols;
-    let mut member = vec![false; n];
-    for &i in members {
-        member[i] = true;
-    }
+    let (mut down, mut up) = (0, 0);
+    let has = |cursor: &mut usize, target: usize| {
+        while *cursor < members.len() && members[*cursor] < target {
+            *cursor += 1;
+        }
+        *cursor < members.len() && members[*cursor] == target
+    };
     let stacked = members
         .iter()
-        .filter(|&&i| (i >= cols && member[i - cols]) || (i + cols < n && member[i + cols]))
+        .filter(|&&i| (i >= cols && has(&mut down, i - cols)) || has(&mut up, i + cols))
         .count();
     stacked as f64 >= params.min_stacked_share * members.len() as f64
 }
