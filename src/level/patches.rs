@@ -160,8 +160,8 @@ pub fn grow_patches(
     keys.sort_unstable();
     let seeds = keys.iter().map(|&k| candidates[(k as u32) as usize].1);
     let mut members = Vec::new();
-    // Column of every grid point, without a division per visit.
-    let col_of: Vec<usize> = (0..grid.rows()).flat_map(|_| 0..cols).collect();
+    // Columns without a division per visit.
+    let rc = grid.row_col();
     for q in seeds {
         if q.span(cols).any(|i| labels[i] != UNLABELLED) {
             continue;
@@ -186,7 +186,7 @@ pub fn grow_patches(
         let mut next = 0;
         while let Some(&i) = members.get(next) {
             next += 1;
-            let c = col_of[i];
+            let c = rc.col(i);
             let mut neighbours = [usize::MAX; 4];
             if c > 0 {
                 neighbours[0] = i - 1;
