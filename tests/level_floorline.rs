@@ -111,7 +111,9 @@ fn floor_lines_level_more_poses_at_10cm_and_none_wrong() {
 /// A robot 4 degrees nose-down in a box room at 10 cm noise: only its lowest scan meets the
 /// floor, and the scan above it runs along the wall's foot. The floor line and that wall line
 /// are coplanar within the noise, and region growing joins them into one "floor" patch 13
-/// degrees off level, which passed the gate with sigmas under 1 degree.
+/// degrees off level, which passed the gate with sigmas under 1 degree. Two rules now refuse
+/// it: the steep veto (the wall line's points have a steep neighbour) and, at 3 cm of noise and
+/// more, the need for three scan lines, which alone suffices here.
 #[test]
 fn a_floor_line_and_a_wall_line_at_its_foot_are_no_floor() {
     let room = Room::box_room(6.0, 5.0);
@@ -142,14 +144,20 @@ fn a_floor_line_and_a_wall_line_at_its_foot_are_no_floor() {
             .map(|f| f.normal.dot(&up).abs().min(1.0).acos().to_degrees())
             .fold(0f64, f64::max)
     };
+    // Both rules start at `level_steep_min_sigma` of noise.
     let without = LevelParams {
-        level_steep_veto: false,
+        level_steep_min_sigma: f64::INFINITY,
         ..LevelParams::default()
     };
     assert!(
         tilt(&without) > 5.0,
-        "without the veto the case has no wrong floor"
+        "without the rules the case has no wrong floor"
     );
+    let lines_rule_alone = LevelParams {
+        level_steep_veto: false,
+        ..LevelParams::default()
+    };
+    assert!(tilt(&lines_rule_alone) < 2.0);
     assert!(tilt(&LevelParams::default()) < 2.0);
     let e = level_pose(&scans, &LevelParams::default());
     if let (Some(a), Some(s)) = (e.attitude, e.sigmas) {
