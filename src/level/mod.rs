@@ -734,7 +734,12 @@ struct Refinement {
 /// disagree that much when one of them rests on a wrong segmentation, and which one is not
 /// known: traced poses ended 5-7 degrees off either way, with sigmas near one degree.
 fn widened_by_disagreement(kept: &UpSolution, other: &UpSolution) -> Option<UpSolution> {
-    widened_beyond(kept, other, kept.cov + other.cov, DISAGREEMENT_SIGMAS)
+    widened_beyond(
+        kept,
+        other,
+        kept.cov + other.cov_in(&kept.basis),
+        DISAGREEMENT_SIGMAS,
+    )
 }
 
 /// `kept`, the first solution, with its covariance widened by its distance from `other`, a
@@ -757,11 +762,11 @@ fn widened_unconfirmed(kept: &UpSolution, other: &UpSolution) -> Option<UpSoluti
 /// Traced: a start 11 degrees off with sigmas of 1.6-1.8 degrees led to a refined solution 6
 /// degrees off with sigmas under one degree.
 fn widened_from_start(kept: &UpSolution, start: &UpSolution) -> Option<UpSolution> {
-    widened_beyond(kept, start, start.cov, FROM_START_SIGMAS)
+    widened_beyond(kept, start, start.cov_in(&kept.basis), FROM_START_SIGMAS)
 }
 
 /// `kept` with `d d^T` added to its covariance, for `d` its distance from `other` in its tangent
-/// plane, when `d` lies beyond `sigmas` of `spread`.
+/// plane, when `d` lies beyond `sigmas` of `spread` (a covariance in `kept`'s basis).
 fn widened_beyond(
     kept: &UpSolution,
     other: &UpSolution,

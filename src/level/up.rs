@@ -246,6 +246,13 @@ impl UpSolution {
         Attitude::from_up(&self.up)
     }
 
+    /// Its covariance expressed in another tangent `basis` (of a nearby up): `J cov J^T` with
+    /// `J[i][j] = basis[i] . self.basis[j]`.
+    pub fn cov_in(&self, basis: &[Vector3<f64>; 2]) -> Matrix2<f64> {
+        let j = Matrix2::from_fn(|i, k| basis[i].dot(&self.basis[k]));
+        j * self.cov * j.transpose()
+    }
+
     /// The larger of [`Self::attitude_sigmas`] [rad].
     pub fn max_attitude_sigma(&self) -> f64 {
         self.attitude_sigmas().iter().fold(0f64, |a, &b| a.max(b))
@@ -433,6 +440,28 @@ mod tests {
     /// One wall leaves up free to turn about its normal: that direction's sigma is infinite,
     /// not zero (an undetermined direction once claimed a sigma of 0 and won the choice of a
     /// start over a pose's floor lines).
+    /// A covariance carried into its own basis is unchanged; into the basis turned a quarter
+    /// turn about up, its variances swap.
+    #[test]
+    fn covariance_follows_the_basis() {
+        let up = Vector3::new(0.1, -0.2, 1.0).normalize();
+        let basis = tangent_basis(&up);
+        let sol = UpSolution {
+            up,
+            basis,
+            cov: Matrix2::new(4.0, 1.0, 1.0, 9.0),
+            info_eigenvalues: (1.0, 1.0),
+        };
+        assert!((sol.cov_in(&basis) - sol.cov).norm() < 1e-12);
+        let turned = [basis[1], -basis[0]];
+        let c = sol.cov_in(&turned);
+        assert!(
+            (c[(0, 0)] - 9.0).abs() < 1e-12 && (c[(1, 1)] - 4.0).abs() < 1e-12,
+            "{c}"
+        );
+        assert!((c[(0, 1)] + 1.0).abs() < 1e-12, "{c}");
+    }
+
     #[test]
     fn one_wall_leaves_an_infinite_sigma() {
         let fit = PlaneFit {
