@@ -1075,7 +1075,9 @@ fn clean_level_fit(
         let from_below = i >= cols && member(i - cols) && levelish(i - cols);
         levelish(i) || from_below
     };
-    let veto = params.level_steep_veto && sigma >= params.level_steep_min_sigma;
+    // From this noise up a wall's line and a floor line can pass for one plane.
+    let noisy = sigma >= params.level_steep_min_sigma;
+    let veto = params.level_steep_veto && noisy;
     // The fit with every kept point, and without those on a steep surface.
     let mut all = grid::PlaneAccumulator::default();
     let mut flat = grid::PlaneAccumulator::default();
@@ -1090,11 +1092,7 @@ fn clean_level_fit(
             rows_flat[rc.row(i)] += 1;
         }
     }
-    let min_rows = if sigma >= params.level_steep_min_sigma {
-        LEVEL_MIN_ROWS_NOISY
-    } else {
-        2
-    };
+    let min_rows = if noisy { LEVEL_MIN_ROWS_NOISY } else { 2 };
     let usable = |acc: &grid::PlaneAccumulator, per_row: &[usize]| -> Option<PlaneFit> {
         let supported = refine::supported_rows(per_row, 0.2);
         if acc.n < params.min_level_points || supported < min_rows {
@@ -1222,13 +1220,19 @@ mod tests {
         }
     }
 
+    /// How far `widened`'s covariance reaches beyond `kept`'s [deg], for a widening by a
+    /// distance along one direction.
+    fn added_deg(widened: &UpSolution, kept: &UpSolution) -> f64 {
+        (widened.cov - kept.cov).norm().sqrt().to_degrees()
+    }
+
     /// Two solutions 4 degrees apart with 1-degree sigmas (2.8 joint sigmas) widen the kept
     /// one by their distance; 2 degrees apart, or against a 10-degree sigma, they agree.
     #[test]
     fn disagreeing_solutions_widen_the_kept_one() {
         let kept = solution(0.0, 1.0);
         let widened = widened_by_disagreement(&kept, &solution(4.0, 1.0)).expect("widened");
-        let extra = (widened.cov - kept.cov).norm().sqrt().to_degrees();
+        let extra = added_deg(&widened, &kept);
         assert!((extra - 4.0).abs() < 0.01, "{extra}");
         assert_eq!(widened.up, kept.up);
         assert!(widened_by_disagreement(&kept, &solution(2.0, 1.0)).is_none());
@@ -1243,7 +1247,7 @@ mod tests {
         let loose = solution(4.0, 10.0);
         assert!(widened_by_disagreement(&kept, &loose).is_none());
         let widened = widened_unconfirmed(&kept, &loose).expect("widened");
-        let extra = (widened.cov - kept.cov).norm().sqrt().to_degrees();
+        let extra = added_deg(&widened, &kept);
         assert!((extra - 4.0).abs() < 0.01, "{extra}");
         assert_eq!(widened.up, kept.up);
         assert!(widened_unconfirmed(&kept, &solution(2.0, 10.0)).is_none());
@@ -1255,7 +1259,7 @@ mod tests {
     fn a_refined_solution_far_from_its_start_widens() {
         let refined = solution(0.0, 0.5);
         let widened = widened_from_start(&refined, &solution(5.0, 1.0)).expect("widened");
-        let extra = (widened.cov - refined.cov).norm().sqrt().to_degrees();
+        let extra = added_deg(&widened, &refined);
         assert!((extra - 5.0).abs() < 0.01, "{extra}");
         assert!(widened_from_start(&refined, &solution(3.0, 1.0)).is_none());
     }
