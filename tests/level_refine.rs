@@ -172,6 +172,58 @@ fn level_start_finds_the_floor_without_any_up() {
     assert!(err.to_degrees() < 1.0, "error {} deg", err.to_degrees());
 }
 
+/// Pose `k` of `count` drawn in the example plan `name` (its index `pi` in `eval accuracy`'s
+/// list), as `eval accuracy --seed SEED` draws and scans it: roll and pitch within 20 degrees,
+/// the scanner 0.45 m up, `nscans` scans 5 degrees apart, range noise `noise`.
+struct ProtocolPose {
+    name: &'static str,
+    pi: u64,
+    seed: u64,
+    count: usize,
+    k: usize,
+    nscans: usize,
+    noise: f64,
+}
+
+impl ProtocolPose {
+    /// The true pose and its scans, taken by cleverRobot when `adaptive`.
+    fn scans(&self, adaptive: bool) -> (Pose, Vec<Scan>) {
+        use levelscan::simulate::{
+            AdaptiveParams, RandomPoseParams, ScannerParams, Stream, World, elevations_centred,
+            random_poses, simulate_pose, simulate_pose_adaptive, stream_rng,
+        };
+        let protocol = RandomPoseParams {
+            tilt: deg(20.0),
+            clearance: 0.6,
+            height: 0.45,
+            ..RandomPoseParams::default()
+        };
+        let path = format!(
+            "{}/examples/plans/{}.wall",
+            env!("CARGO_MANIFEST_DIR"),
+            self.name
+        );
+        let world = World::from_plan(&levelscan::formats::read_plan(path.as_ref()).unwrap());
+        let pose =
+            random_poses(&world, self.count, &protocol, self.seed + self.pi).unwrap()[self.k];
+        let scanner = ScannerParams {
+            noise_sigma: self.noise,
+            ..ScannerParams::default()
+        };
+        let stream = self.seed + (self.pi << 32) + ((self.nscans as u64) << 48);
+        let mut rng = stream_rng(stream, Stream::Scans, self.k as u64);
+        let elevations = elevations_centred(self.nscans, deg(5.0));
+        let k = self.k as u64;
+        let scans = if adaptive {
+            let params = AdaptiveParams::default();
+            simulate_pose_adaptive(&world, k, &pose, &elevations, &scanner, &params, &mut rng)
+        } else {
+            simulate_pose(&world, k, &pose, &elevations, &scanner, &mut rng)
+        };
+        (pose, scans)
+    }
+}
+
 /// Poses of the accuracy protocol (`eval accuracy examples/plans/{office,angled,ceiling,
 /// two_rooms}.wall`, its random streams) once reported ok while degrees off. In the office,
 /// each traced to a floor that could not be one: a wall's line and the next scan's floor line,
@@ -189,16 +241,6 @@ fn level_start_finds_the_floor_without_any_up() {
 /// 1.5 degrees (angled seed 15, office seed 14). Each now fails or is right.
 #[test]
 fn traced_poses_reported_ok_and_wrong_now_fail_or_are_right() {
-    use levelscan::simulate::{
-        RandomPoseParams, ScannerParams, Stream, World, elevations_centred, random_poses,
-        simulate_pose, stream_rng,
-    };
-    let protocol = RandomPoseParams {
-        tilt: deg(20.0),
-        clearance: 0.6,
-        height: 0.45,
-        ..RandomPoseParams::default()
-    };
     // (plan, its index in the list, seed, poses drawn, pose, scans, noise)
     for (name, pi, seed, count, k, nscans, noise) in [
         ("office", 0u64, 8u64, 100, 39usize, 3usize, 0.05),
@@ -215,17 +257,16 @@ fn traced_poses_reported_ok_and_wrong_now_fail_or_are_right() {
         ("angled", 1, 15, 100, 75, 3, 0.05),
         ("office", 0, 14, 100, 58, 3, 0.10),
     ] {
-        let path = format!("{}/examples/plans/{name}.wall", env!("CARGO_MANIFEST_DIR"));
-        let world = World::from_plan(&levelscan::formats::read_plan(path.as_ref()).unwrap());
-        let pose = random_poses(&world, count, &protocol, seed + pi).unwrap()[k];
-        let scanner = ScannerParams {
-            noise_sigma: noise,
-            ..ScannerParams::default()
+        let protocol = ProtocolPose {
+            name,
+            pi,
+            seed,
+            count,
+            k,
+            nscans,
+            noise,
         };
-        let stream = seed + (pi << 32) + ((nscans as u64) << 48);
-        let mut rng = stream_rng(stream, Stream::Scans, k as u64);
-        let elevations = elevations_centred(nscans, deg(5.0));
-        let scans = simulate_pose(&world, k as u64, &pose, &elevations, &scanner, &mut rng);
+        let (pose, scans) = protocol.scans(false);
         let est = level_pose(&scans, &LevelParams::default());
         if let Some(att) = est.attitude {
             let err = att.max_abs_error(&pose.attitude()).to_degrees();
@@ -242,40 +283,17 @@ fn traced_poses_reported_ok_and_wrong_now_fail_or_are_right() {
 /// start and keeping both readings in view, it now fails or is right.
 #[test]
 fn cleverrobot_pose_with_two_self_consistent_readings_fails_or_is_right() {
-    use levelscan::simulate::{
-        AdaptiveParams, RandomPoseParams, ScannerParams, Stream, World, elevations_centred,
-        random_poses, simulate_pose_adaptive, stream_rng,
+    let protocol = ProtocolPose {
+        name: "two_rooms",
+        pi: 3,
+        seed: 1,
+        count: 100,
+        k: 61,
+        nscans: 4,
+        noise: 0.10,
     };
-    let protocol = RandomPoseParams {
-        tilt: deg(20.0),
-        clearance: 0.6,
-        height: 0.45,
-        ..RandomPoseParams::default()
-    };
-    let (pi, seed, k, nscans) = (3u64, 1u64, 61usize, 4usize);
-    let path = format!(
-        "{}/examples/plans/two_rooms.wall",
-        env!("CARGO_MANIFEST_DIR")
-    );
-    let world = World::from_plan(&levelscan::formats::read_plan(path.as_ref()).unwrap());
-    let pose = random_poses(&world, 100, &protocol, seed + pi).unwrap()[k];
-    let scanner = ScannerParams {
-        noise_sigma: 0.10,
-        ..ScannerParams::default()
-    };
-    let stream = seed + (pi << 32) + ((nscans as u64) << 48);
-    let mut rng = stream_rng(stream, Stream::Scans, k as u64);
-    let elevations = elevations_centred(nscans, deg(5.0));
-    let scans = simulate_pose_adaptive(
-        &world,
-        k as u64,
-        &pose,
-        &elevations,
-        &scanner,
-        &AdaptiveParams::default(),
-        &mut rng,
-    );
-    assert!(scans.len() > nscans, "the robot retook scans");
+    let (pose, scans) = protocol.scans(true);
+    assert!(scans.len() > protocol.nscans, "the robot retook scans");
     let est = level_pose(&scans, &LevelParams::default());
     if let Some(att) = est.attitude {
         let err = att.max_abs_error(&pose.attitude()).to_degrees();

@@ -645,7 +645,7 @@ pub fn refine_estimate(
     let steps = refine::level_steps(grid, params, sigma);
     let starts = match first {
         Ok(sol) => vec![*sol],
-        Err(_) => blind_starts(est, levels, &steps, params),
+        Err(_) => blind_starts(est, grid, levels, &steps, params),
     };
     let walls: Vec<&Patch> = est
         .patches
@@ -686,13 +686,11 @@ pub fn refine_estimate(
 /// turn about their normal); and a floor or ceiling found by its range steps alone.
 fn blind_starts(
     est: &LevelEstimate,
+    grid: &PoseGrid,
     levels: &[PlaneFit],
     steps: &refine::LevelSteps,
     params: &LevelParams,
 ) -> Vec<UpSolution> {
-    let Some(grid) = est.grid.as_ref() else {
-        return Vec::new();
-    };
     let sigma = est.range_sigma;
     let sigma_eff = sigma.max(params.min_sigma);
     let obs = robust_obs(est, levels, params, sigma, false);
@@ -805,8 +803,8 @@ fn widened_unconfirmed(kept: &UpSolution, other: &UpSolution) -> Option<UpSoluti
 
 /// `kept`, a refined solution that passed the gate where the first solution had failed, with
 /// its covariance widened by its distance from the solution re-segmentation started from when
-/// that exceeds [`FROM_START_SIGMAS`] of the start's own uncertainty. The start (the ungated
-/// first solution, or walls with floor lines) seeded the re-segmentation; landing that far
+/// that exceeds [`FROM_START_SIGMAS`] of the start's own uncertainty. The start (one of
+/// [`blind_starts`]) seeded the re-segmentation; landing that far
 /// from it means its planes were wrong, and a segmentation grown from them is in doubt too.
 /// Traced: a start 11 degrees off with sigmas of 1.6-1.8 degrees led to a refined solution 6
 /// degrees off with sigmas under one degree.
