@@ -146,6 +146,7 @@ fn pose_lines(stats: &[CellStats], plans: &[PathBuf]) -> String {
                 "sigma_deg": o.sigma_deg,
                 "error_deg": o.error_deg,
                 "bound_deg": o.bound_deg.filter(|b| b.is_finite()),
+                "segmented_deg": o.segmented_deg.filter(|b| b.is_finite()),
             });
             let _ = writeln!(out, "{line}");
         }
@@ -215,17 +216,17 @@ fn markdown(stats: &[CellStats], params: &AccuracyParams) -> String {
     let _ = writeln!(s, "### Every cell\n");
     let _ = writeln!(
         s,
-        "| estimator | scans | noise [m] | leveled | mean | median | p95 | max | ok > 5 deg | within 3 sigma | phantom | coverage | bound | bound within gate | sigma / bound | failures |"
+        "| estimator | scans | noise [m] | leveled | mean | median | p95 | max | ok > 5 deg | within 3 sigma | phantom | coverage | bound | bound within gate | true segments within gate | sigma / bound | failures |"
     );
     let _ = writeln!(
         s,
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"
     );
     for c in stats {
         let failures: Vec<String> = c.failures.iter().map(|(k, v)| format!("{k} {v}")).collect();
         let _ = writeln!(
             s,
-            "| {} | {} | {} | {}/{} ({}) | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
+            "| {} | {} | {} | {}/{} ({}) | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
             c.estimator,
             c.scans,
             c.noise,
@@ -242,6 +243,7 @@ fn markdown(stats: &[CellStats], params: &AccuracyParams) -> String {
             fmt_pct(c.coverage),
             fmt_deg(c.bound_median_deg),
             fmt_pct(c.bound_within_gate),
+            fmt_pct(c.segmented_within_gate),
             fmt_ratio(c.sigma_over_bound),
             failures.join(", ")
         );

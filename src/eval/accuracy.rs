@@ -5,7 +5,7 @@
 //! leveled with every estimator asked for, so the estimators see identical data; its noise comes
 //! from its own random stream (seed, plan, scan count, pose), never from the thread order.
 
-use super::bound::{WallPlanes, attitude_bound, pose_rays};
+use super::bound::{WallPlanes, attitude_bound, pose_rays, segmented_solution};
 use super::metrics::{median, nearest_rank};
 use crate::geometry::Pose;
 use crate::level::{Estimator, FailReason, LevelParams, level_pose};
@@ -125,6 +125,10 @@ pub struct PoseOutcome {
     /// ([`super::bound`]); infinite when its rays cannot fix the attitude, `None` when not
     /// computed (no noise).
     pub bound_deg: Option<f64>,
+    /// The larger sigma [deg] of up found from the true segmentation
+    /// ([`super::bound::segmented_solution`]); infinite when that cannot fix up, `None` when not
+    /// computed (no noise).
+    pub segmented_deg: Option<f64>,
 }
 
 /// Statistics of one cell of Table I for one estimator.
@@ -157,6 +161,9 @@ pub struct CellStats {
     /// Poses whose bound lies within the leveling gate (`max_sigma`): the most a leveler with
     /// honest sigmas and that gate could level.
     pub bound_within_gate: f64,
+    /// Poses whose sigma from the true segmentation lies within the leveling gate: what this
+    /// estimator could level if it found every surface and nothing else.
+    pub segmented_within_gate: f64,
     /// Median over leveled poses of the reported sigma over the bound (1 is a leveler that
     /// uses all the information in the ranges).
     pub sigma_over_bound: f64,
@@ -246,12 +253,17 @@ pub fn run_accuracy(
                             &mut rng,
                         )
                     };
-                    let bound_deg = (noise > 0.0).then(|| {
+                    let (bound_deg, segmented_deg) = if noise > 0.0 {
                         let rays =
                             pose_rays(&worlds[pi], &planes[pi], &scans, &pose, params.max_range);
-                        attitude_bound(&rays, &pose, noise)
-                            .map_or(f64::INFINITY, |b| b[0].max(b[1]).to_degrees())
-                    });
+                        let bound = attitude_bound(&rays, &pose, noise)
+                            .map_or(f64::INFINITY, |b| b[0].max(b[1]).to_degrees());
+                        let segmented = segmented_solution(&rays, noise)
+                            .map_or(f64::INFINITY, |s| s.max_attitude_sigma().to_degrees());
+                        (Some(bound), Some(segmented))
+                    } else {
+                        (None, None)
+                    };
                     params
                         .estimators
                         .iter()
@@ -264,6 +276,7 @@ pub fn run_accuracy(
                                 plan: pi,
                                 pose: k,
                                 bound_deg,
+                                segmented_deg,
                                 ..evaluate_pose(&scans, &pose, &segments[pi], &level, params)
                             }
                         })
@@ -323,6 +336,7 @@ pub fn evaluate_pose(
             best_wall_hits,
             sigma_deg: None,
             bound_deg: None,
+            segmented_deg: None,
         };
     };
     let (dx, dy) = (
@@ -359,6 +373,7 @@ pub fn evaluate_pose(
         best_wall_hits,
         sigma_deg: Some(sig[0].max(sig[1]).to_degrees()),
         bound_deg: None,
+        segmented_deg: None,
     }
 }
 
@@ -373,6 +388,7 @@ fn cell_stats(
     let sorted = sorted_copy(&errors);
     let n = sorted.len();
     let bounds: Vec<f64> = o.iter().filter_map(|p| p.bound_deg).collect();
+    let segmented: Vec<f64> = o.iter().filter_map(|p| p.segmented_deg).collect();
     let over_bound: Vec<f64> = o
         .iter()
         .filter_map(|p| Some(p.sigma_deg? / p.bound_deg?))
@@ -419,6 +435,10 @@ fn cell_stats(
             bounds.iter().filter(|&&b| b <= gate_deg).count(),
             bounds.len(),
         ),
+        segmented_within_gate: ratio(
+            segmented.iter().filter(|&&b| b <= gate_deg).count(),
+            segmented.len(),
+        ),
         sigma_over_bound: median(&sorted_copy(&over_bound)),
         failures,
         errors_deg: errors,
@@ -462,6 +482,7 @@ mod tests {
             best_wall_hits: 20,
             sigma_deg: e.map(|x| x / 2.0),
             bound_deg: Some(if e.is_none() { f64::INFINITY } else { 0.25 }),
+            segmented_deg: Some(if e == Some(1.0) { 0.5 } else { 2.0 }),
         };
         let outcomes = [mk(Some(1.0)), mk(Some(3.0)), mk(None), mk(Some(6.0))];
         let refs: Vec<&PoseOutcome> = outcomes.iter().collect();
@@ -477,6 +498,8 @@ mod tests {
         // Bounds 0.25, 0.25, inf, 0.25: three of four within the gate.
         assert_eq!(s.bound_median_deg, 0.25);
         assert!((s.bound_within_gate - 0.75).abs() < 1e-12);
+        // From the true segmentation 0.5, 2, 2, 2: one of four.
+        assert!((s.segmented_within_gate - 0.25).abs() < 1e-12);
         // Sigmas 0.5, 1.5, 3.0 over 0.25.
         assert!((s.sigma_over_bound - 6.0).abs() < 1e-12);
     }
