@@ -222,6 +222,19 @@ impl ProtocolPose {
         };
         (pose, scans)
     }
+
+    /// Levels the pose's scans ([`Self::scans`]) and asserts that they fail or come out within
+    /// 1.5 degrees of the truth; returns how many scans there were.
+    fn fails_or_is_right(&self, adaptive: bool) -> usize {
+        let (pose, scans) = self.scans(adaptive);
+        let est = level_pose(&scans, &LevelParams::default());
+        if let Some(att) = est.attitude {
+            let err = att.max_abs_error(&pose.attitude()).to_degrees();
+            let (name, seed, k) = (self.name, self.seed, self.k);
+            assert!(err < 1.5, "{name} seed {seed} pose {k}: {err} deg off");
+        }
+        scans.len()
+    }
 }
 
 /// Poses of the accuracy protocol (`eval accuracy examples/plans/{office,angled,ceiling,
@@ -266,12 +279,7 @@ fn traced_poses_reported_ok_and_wrong_now_fail_or_are_right() {
             nscans,
             noise,
         };
-        let (pose, scans) = protocol.scans(false);
-        let est = level_pose(&scans, &LevelParams::default());
-        if let Some(att) = est.attitude {
-            let err = att.max_abs_error(&pose.attitude()).to_degrees();
-            assert!(err < 1.5, "{name} seed {seed} pose {k}: {err} deg off");
-        }
+        protocol.fails_or_is_right(false);
     }
 }
 
@@ -292,11 +300,6 @@ fn cleverrobot_pose_with_two_self_consistent_readings_fails_or_is_right() {
         nscans: 4,
         noise: 0.10,
     };
-    let (pose, scans) = protocol.scans(true);
-    assert!(scans.len() > protocol.nscans, "the robot retook scans");
-    let est = level_pose(&scans, &LevelParams::default());
-    if let Some(att) = est.attitude {
-        let err = att.max_abs_error(&pose.attitude()).to_degrees();
-        assert!(err < 1.5, "{err} deg off");
-    }
+    let scans = protocol.fails_or_is_right(true);
+    assert!(scans > protocol.nscans, "the robot retook scans");
 }

@@ -410,6 +410,12 @@ fn cell_stats(
             a as f64 / b as f64
         }
     };
+    let within_gate = |sigmas: &[f64]| {
+        ratio(
+            sigmas.iter().filter(|&&s| s <= gate_deg).count(),
+            sigmas.len(),
+        )
+    };
     CellStats {
         scans,
         noise,
@@ -431,14 +437,8 @@ fn cell_stats(
         coverage: ratio(valid, walls),
         paper_mean_deg: paper_mean(scans, noise),
         bound_median_deg: median(&sorted_copy(&bounds)),
-        bound_within_gate: ratio(
-            bounds.iter().filter(|&&b| b <= gate_deg).count(),
-            bounds.len(),
-        ),
-        segmented_within_gate: ratio(
-            segmented.iter().filter(|&&b| b <= gate_deg).count(),
-            segmented.len(),
-        ),
+        bound_within_gate: within_gate(&bounds),
+        segmented_within_gate: within_gate(&segmented),
         sigma_over_bound: median(&sorted_copy(&over_bound)),
         failures,
         errors_deg: errors,

@@ -437,9 +437,6 @@ pub fn solution_at(up: Vector3<f64>, planes: &[PlaneObs], sigma: f64, robust: bo
 mod tests {
     use super::*;
 
-    /// One wall leaves up free to turn about its normal: that direction's sigma is infinite,
-    /// not zero (an undetermined direction once claimed a sigma of 0 and won the choice of a
-    /// start over a pose's floor lines).
     /// A covariance carried into its own basis is unchanged; into the basis turned a quarter
     /// turn about up, its variances swap.
     #[test]
@@ -462,6 +459,9 @@ mod tests {
         assert!((c[(0, 1)] + 1.0).abs() < 1e-12, "{c}");
     }
 
+    /// One wall leaves up free to turn about its normal: that direction's sigma is infinite,
+    /// not zero (an undetermined direction once claimed a sigma of 0 and won the choice of a
+    /// start over a pose's floor lines).
     #[test]
     fn one_wall_leaves_an_infinite_sigma() {
         let fit = PlaneFit {
