@@ -1230,12 +1230,24 @@ fn acceptable_within(
     if hi.is_nan() || hi <= 0.0 || (!with_level && lo < params.parallel_ratio * hi) {
         return Err(FailReason::ParallelWalls);
     }
+    if !within_wall_angle(&sol.up, params) {
+        return Err(FailReason::ParallelWalls);
+    }
     let s = attitude_sigmas(sol, params);
     let max_sigma = max_sigma_deg.to_radians();
     if !(s[0] <= max_sigma && s[1] <= max_sigma) {
         return Err(FailReason::ParallelWalls);
     }
     Ok(())
+}
+
+/// Whether up lies within `wall_min_angle_deg` of the robot's z axis. Walls, floors and
+/// ceilings were told apart by that angle (sect. 5.2: floors slope less than 45 degrees), so an
+/// up tilted beyond it contradicts the segmentation it came from: the floor would have been
+/// taken for a wall. Re-segmentation from a blind start once settled on a floor and a wall's
+/// top as one "wall" and leveled a pose 55 degrees off (361 rays, 10 cm noise).
+fn within_wall_angle(up: &Vector3<f64>, params: &LevelParams) -> bool {
+    up.z >= params.wall_min_angle_deg.to_radians().cos()
 }
 
 /// The key `f64::total_cmp` orders by: the bits as a signed integer, with the magnitude bits
@@ -1271,6 +1283,18 @@ mod tests {
     /// distance along one direction.
     fn added_deg(widened: &UpSolution, kept: &UpSolution) -> f64 {
         (widened.cov - kept.cov).norm().sqrt().to_degrees()
+    }
+
+    /// An up tilted beyond the wall angle (45 degrees) is refused however small its sigma; one
+    /// just inside it passes.
+    #[test]
+    fn an_up_beyond_the_wall_angle_is_refused() {
+        let params = LevelParams::default();
+        assert_eq!(
+            acceptable(&solution(46.0, 0.1), &params, true),
+            Err(FailReason::ParallelWalls)
+        );
+        assert_eq!(acceptable(&solution(44.0, 0.1), &params, true), Ok(()));
     }
 
     /// Two solutions 4 degrees apart with 1-degree sigmas (2.8 joint sigmas) widen the kept
