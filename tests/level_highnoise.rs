@@ -54,14 +54,15 @@ fn floor_patch_stays_off_the_wall_foot_at_10cm() {
     for seed in 0..6 {
         let (_, scans) = facing_wall_over_floor(seed, 0.10);
         let on = wall_points_in_floor_patches(&scans, &LevelParams::default());
-        // Before: an isotropic tolerance, and no test of the rows' bend or of an edge row
-        // standing off.
+        // Before: an isotropic tolerance, and no test of the rows' bend, of an edge row
+        // standing off, or of runs at the rows' ends standing in front.
         let off = wall_points_in_floor_patches(
             &scans,
             &LevelParams {
                 ray_tolerance: false,
                 max_row_bend_sigmas: 0.0,
                 trim_sigmas: 0.0,
+                front_end_sigmas: 0.0,
                 ..LevelParams::default()
             },
         );

@@ -150,6 +150,10 @@ pub struct LevelParams {
     /// Default 5 (on three-row patches, which it would cut to two, it left wrong planes to
     /// decide a few poses at 10 cm noise).
     pub trim_sigmas: f64,
+    /// A run of points at either end of a patch's row goes when it stands in front of the
+    /// patch's plane (towards the scanner) by more than this many sigmas of its points' noise,
+    /// as the floor just in front of a wall's foot does; 0 keeps them. Default 3.
+    pub front_end_sigmas: f64,
     /// Fewer wall quads than this fails the pose (too_few_polygons / facing_floor /
     /// facing_ceiling). Default 3.
     pub min_polygons: usize,
@@ -301,6 +305,7 @@ impl Default for LevelParams {
             min_stacked_share: 0.75,
             max_row_bend_sigmas: 4.0,
             trim_sigmas: 5.0,
+            front_end_sigmas: 3.0,
             min_polygons: 3,
             parallel_ratio: 0.01,
             max_sigma_deg: 1.5,

@@ -6,7 +6,7 @@
 use super::grid::{GridPoint, PlaneAccumulator, PlaneFit, PoseGrid};
 use super::polygons::{Polygon, classify, extract_quads_sized};
 use super::{LevelParams, SurfaceKind, total_order_key};
-use nalgebra::{Matrix3, Vector3};
+use nalgebra::{Matrix3, Point3, Vector3};
 
 /// One grown planar patch.
 #[derive(Clone, Debug)]
@@ -312,11 +312,24 @@ fn make_patch(
         Some(kept) => (&kept[..], grid.accumulate(kept).fit(sigma)?),
         None => (members, first),
     };
-    let (lo, hi) = span(members)?;
+    span(members)?;
     if !stacked(members, grid, params) {
         return None;
     }
     let fit = robust_fit(grid, members, first, params, sigma)?;
+    let fronted = without_front_row_ends(grid, members, &fit, params, sigma);
+    let (members, fit) = match &fronted {
+        Some(kept) => {
+            span(kept)?;
+            if !stacked(kept, grid, params) {
+                return None;
+            }
+            let first = grid.accumulate(kept).fit(sigma)?;
+            (&kept[..], robust_fit(grid, kept, first, params, sigma)?)
+        }
+        None => (members, fit),
+    };
+    let (lo, hi) = span(members)?;
     if too_bent_to_split(&fit, members.len(), params, sigma)
         || bent_across_rows(grid, members, &fit, params, sigma)
     {
@@ -446,6 +459,91 @@ fn trim_edge_rows(
 /// Fewest points, as a share of the patch's, in each of three adjacent rows that a trimmed
 /// patch keeps.
 const MIN_TRIMMED_ROW_SHARE: f64 = 0.15;
+
+/// The members (ascending) without the runs of points at either end of their rows that stand
+/// in front of the plane `fit`; `None` when no run does.
+///
+/// Where a wall meets the floor, the floor just in front of its foot lies within the growing
+/// tolerance of the wall's plane at high noise, and the scans that reach below the foot meet it
+/// at one end of their run over the wall, where the floor takes over along the scan line. Those
+/// points all lie on the scanner's side of the wall and tilt it: at 10 cm noise with 361 rays,
+/// one pose leveled 2.4 degrees off on average over 300 noise draws (the true segmentation: 0.0).
+/// The ceiling over a wall's top, a wall's foot in a floor patch and the other wall of a
+/// concave corner join the same way. A true plane's residuals take no side, so the test is the
+/// sum of the residuals towards the scanner over the first `m` points of the run (`m` from
+/// [`MIN_FRONT_RUN`] to half the run), over its noise (each point's `sigma |d . n|`), above
+/// `front_end_sigmas`. [`make_patch`] applies it to the plane it has fitted and fits again
+/// without the runs that go. Over 129,600 protocol poses at 5-10 cm (two seed sets, nine
+/// plans), poses reported ok and more than 5 degrees off fell from 14 to 4 and those beyond 3
+/// sigmas from 157 to 110, with 0.24 points more leveled; at 1 cm, 0.04 points more.
+fn without_front_row_ends(
+    grid: &PoseGrid,
+    members: &[usize],
+    fit: &PlaneFit,
+    params: &LevelParams,
+    sigma: f64,
+) -> Option<Vec<usize>> {
+    if params.front_end_sigmas <= 0.0 {
+        return None;
+    }
+    let s = sigma.max(params.min_sigma);
+    // The scanner sits at the robot frame's origin.
+    let towards = fit.distance(&Point3::origin()).signum();
+    let in_front = |i: usize| {
+        grid.points[i].as_ref().map_or(0.0, |g| {
+            let sd = s * g.dir.dot(&fit.normal).abs().max(params.min_ray_share);
+            towards * fit.distance(&g.p) / sd
+        })
+    };
+    let rc = grid.row_col();
+    let mut keep = vec![true; members.len()];
+    // Members ascend: each row's are one slice, in column order.
+    let mut start = 0;
+    while start < members.len() {
+        let row = rc.row(members[start]);
+        let len = members[start..]
+            .iter()
+            .take_while(|&&i| rc.row(i) == row)
+            .count();
+        let run = &members[start..start + len];
+        let k = params.front_end_sigmas;
+        let left = front_run(run.iter().map(|&i| in_front(i)), len / 2, k);
+        let right = front_run(run.iter().rev().map(|&i| in_front(i)), len / 2, k);
+        keep[start..start + left].fill(false);
+        keep[start + len - right..start + len].fill(false);
+        start += len;
+    }
+    if keep.iter().all(|&k| k) {
+        return None;
+    }
+    Some(
+        members
+            .iter()
+            .zip(&keep)
+            .filter_map(|(&i, &k)| k.then_some(i))
+            .collect(),
+    )
+}
+
+/// Shortest run at a row's end that [`without_front_row_ends`] tests: shorter ones are single
+/// noisy points rather than another surface.
+const MIN_FRONT_RUN: usize = 3;
+
+/// Length of the leading run of `z` (residuals towards the scanner, in sigmas) whose sum over
+/// the square root of its length is largest, when that exceeds `k` and the run is at least
+/// [`MIN_FRONT_RUN`] and at most `longest` long; 0 otherwise.
+fn front_run(z: impl Iterator<Item = f64>, longest: usize, k: f64) -> usize {
+    let mut sum = 0.0;
+    let mut best = (k, 0);
+    for (m, z) in (1..=longest).zip(z) {
+        sum += z;
+        let score = sum / (m as f64).sqrt();
+        if m >= MIN_FRONT_RUN && score > best.0 {
+            best = (score, m);
+        }
+    }
+    best.1
+}
 
 /// Whether the members are stacked: at least `min_stacked_share` of them have a member in an
 /// adjacent row of their column (the scan next in elevation). On a wall the scans meet the
@@ -967,6 +1065,97 @@ mod tests {
             points,
         };
         (grid, members)
+    }
+
+    /// A wall at x = 2.5 m seen by four scans (61 rays over 60 degrees), with 10 cm range noise;
+    /// with `floor_run`, the last 12 rays of the lowest scan meet the floor just in front of
+    /// the wall's foot instead, 2 to 25 cm short of it along the ray (within the growing
+    /// tolerance). Returns the grid, every point as members, and the floor run's indices.
+    fn wall_with_floor_run(floor_run: bool, seed: u64) -> (PoseGrid, Vec<usize>, Vec<usize>) {
+        let mut rng = rand::rngs::ChaCha8Rng::seed_from_u64(seed);
+        let noise = Normal::new(0.0, 0.1).unwrap();
+        let (rows, cols) = (4, 61);
+        let elevation: Vec<f64> = (0..rows).map(|r| (r as f64 - 1.5) * 0.087).collect();
+        let (mut points, mut floor) = (Vec::new(), Vec::new());
+        for (r, &e) in elevation.iter().enumerate() {
+            for c in 0..cols {
+                let bearing = (c as f64 - 30.0).to_radians();
+                let dir = Vector3::new(bearing.cos() * e.cos(), bearing.sin(), -e.sin());
+                let mut range = 2.5 / dir.x;
+                let run_at = c as isize - (cols as isize - 12);
+                if floor_run && r == rows - 1 && run_at >= 0 {
+                    range -= 0.02 + 0.02 * run_at as f64;
+                    floor.push(r * cols + c);
+                }
+                range += noise.sample(&mut rng);
+                points.push(Some(GridPoint {
+                    p: Point3::from(dir * range),
+                    dir,
+                    range,
+                }));
+            }
+        }
+        let members = (0..points.len()).collect();
+        let grid = PoseGrid {
+            scan_index: (0..rows).collect(),
+            elevation,
+            cols,
+            points,
+        };
+        (grid, members, floor)
+    }
+
+    /// The floor run at the end of a wall's lowest row tilts the wall's plane towards it by 1.6
+    /// degrees on average over 40 noise draws; without the runs that go (more than half of its
+    /// points, and at most 0.5% of the wall's) the average tilt is within 0.3 degrees of zero.
+    #[test]
+    fn a_floor_run_in_front_of_a_walls_foot_goes() {
+        let params = LevelParams::default();
+        let (mut floor_dropped, mut floor_total, mut wall_dropped, mut wall_total) = (0, 0, 0, 0);
+        let (mut tilt_all, mut tilt_kept) = (0.0, 0.0);
+        // Signed: positive when the plane leans away at its top.
+        let tilt = |n: &Vector3<f64>| (n.z * n.x.signum()).asin().to_degrees() / 40.0;
+        for seed in 0..40 {
+            let (grid, members, floor) = wall_with_floor_run(true, seed);
+            let fit = grid.accumulate(&members).fit(0.1).unwrap();
+            let kept = without_front_row_ends(&grid, &members, &fit, &params, 0.1)
+                .unwrap_or_else(|| members.clone());
+            let dropped = |i: &usize| kept.binary_search(i).is_err();
+            floor_dropped += floor.iter().filter(|i| dropped(i)).count();
+            floor_total += floor.len();
+            wall_dropped += members
+                .iter()
+                .filter(|i| !floor.contains(i) && dropped(i))
+                .count();
+            wall_total += members.len() - floor.len();
+            tilt_all += tilt(&fit.normal);
+            tilt_kept += tilt(&grid.accumulate(&kept).fit(0.1).unwrap().normal);
+        }
+        assert!(tilt_all < -1.0, "{tilt_all}");
+        assert!(tilt_kept.abs() < 0.3, "{tilt_kept}");
+        assert!(
+            2 * floor_dropped > floor_total,
+            "{floor_dropped} of {floor_total} floor points dropped"
+        );
+        assert!(
+            wall_dropped as f64 <= 0.005 * wall_total as f64,
+            "{wall_dropped} of {wall_total} wall points dropped"
+        );
+    }
+
+    /// A true plane keeps every point in at least 95 of 100 noise draws: its residuals take no
+    /// side.
+    #[test]
+    fn a_true_plane_rarely_loses_a_row_end() {
+        let params = LevelParams::default();
+        let trimmed = (0..100)
+            .filter(|&seed| {
+                let (grid, members, _) = wall_with_floor_run(false, seed);
+                let fit = grid.accumulate(&members).fit(0.1).unwrap();
+                without_front_row_ends(&grid, &members, &fit, &params, 0.1).is_some()
+            })
+            .count();
+        assert!(trimmed <= 5, "{trimmed} of 100 draws trimmed");
     }
 
     #[test]
