@@ -24,7 +24,7 @@ use super::patches::Patch;
 use super::up::{self, LevelLine, PlaneObs, UpSolution};
 use super::{LevelParams, SurfaceKind};
 use crate::geometry::Attitude;
-use nalgebra::{Matrix2, Rotation3, Vector2, Vector3};
+use nalgebra::{Matrix2, Point3, Rotation3, Vector2, Vector3};
 
 /// One model of the refined segmentation: a plane and the grid points assigned to it.
 #[derive(Clone, Debug)]
@@ -833,18 +833,23 @@ fn sampled_plane(
     if n < 3 {
         return None;
     }
-    let inliers = |p0: &nalgebra::Point3<f64>, normal: &Vector3<f64>| -> Vec<usize> {
-        idx.iter()
-            .copied()
-            .filter(|&i| {
-                grid.points[i].as_ref().is_some_and(|g| {
-                    let sd = (s * s * g.dir.dot(normal).powi(2) + params.min_sigma.powi(2)).sqrt();
-                    normal.dot(&(g.p - p0)).abs() <= params.refine_k * sd + params.flat_margin
-                })
-            })
-            .collect()
+    // `|r| <= k sd + margin` with `sd^2 = s^2 (d . n)^2 + min_sigma^2`, squared: no root per
+    // point.
+    let k2 = params.refine_k * params.refine_k;
+    let floor2 = params.min_sigma * params.min_sigma;
+    let on_plane = |g: &GridPoint, p0: &Point3<f64>, normal: &Vector3<f64>| {
+        let beyond = normal.dot(&(g.p - p0)).abs() - params.flat_margin;
+        beyond <= 0.0 || beyond * beyond <= k2 * (s * s * g.dir.dot(normal).powi(2) + floor2)
     };
-    let mut best: Option<Vec<usize>> = None;
+    let inliers = |p0: Point3<f64>, normal: Vector3<f64>| {
+        idx.iter().copied().filter(move |&i| {
+            grid.points[i]
+                .as_ref()
+                .is_some_and(|g| on_plane(g, &p0, &normal))
+        })
+    };
+    // Counted per hypothesis; only the best one's points are gathered.
+    let mut best: Option<(usize, Point3<f64>, Vector3<f64>)> = None;
     for h in 0..START_HYPOTHESES {
         // Three points spread over the candidates: a fixed stride walk, no random state.
         let pick = |k: usize| sample[(h * (2 * k + 1) * 7 + k * n / 3) % n];
@@ -865,12 +870,13 @@ fn sampled_plane(
         if !accept(&normal) || !clear_of_scanner(&normal, &pa.p) {
             continue;
         }
-        let members = inliers(&pa.p, &normal);
-        if best.as_ref().is_none_or(|b| members.len() > b.len()) {
-            best = Some(members);
+        let count = inliers(pa.p, normal).count();
+        if best.is_none_or(|b| count > b.0) {
+            best = Some((count, pa.p, normal));
         }
     }
-    best
+    let (_, p0, normal) = best?;
+    Some(inliers(p0, normal).collect())
 }
 
 /// Floor and ceiling lines found without a level frame, for a start where neither the walls
