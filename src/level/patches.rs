@@ -499,24 +499,24 @@ fn without_front_row_ends(
         })
     };
     let rc = grid.row_col();
+    let k = params.front_end_sigmas;
     let mut keep = vec![true; members.len()];
+    let mut dropped = false;
     // Members ascend: each row's are one slice, in column order.
     let mut start = 0;
     while start < members.len() {
-        let row = rc.row(members[start]);
-        let len = members[start..]
-            .iter()
-            .take_while(|&&i| rc.row(i) == row)
-            .count();
+        let next_row = (rc.row(members[start]) + 1) * grid.cols;
+        let len = members[start..].partition_point(|&i| i < next_row);
         let run = &members[start..start + len];
-        let k = params.front_end_sigmas;
-        let left = front_run(run.iter().map(|&i| in_front(i)), len / 2, k);
-        let right = front_run(run.iter().rev().map(|&i| in_front(i)), len / 2, k);
+        let half = len / 2;
+        let left = front_run(run[..half].iter().map(|&i| in_front(i)), k);
+        let right = front_run(run[len - half..].iter().rev().map(|&i| in_front(i)), k);
         keep[start..start + left].fill(false);
         keep[start + len - right..start + len].fill(false);
+        dropped |= left + right > 0;
         start += len;
     }
-    if keep.iter().all(|&k| k) {
+    if !dropped {
         return None;
     }
     Some(
@@ -532,19 +532,19 @@ fn without_front_row_ends(
 /// noisy points rather than another surface.
 const MIN_FRONT_RUN: usize = 3;
 
-/// Length of the leading run whose summed residuals (with their variances) stand out most in
+/// Length of the leading run of `residuals` whose sum (with their variances) stands out most in
 /// standard deviations of that sum, when by more than `k` and the run is at least
-/// [`MIN_FRONT_RUN`] and at most `longest` long; 0 otherwise.
-fn front_run(residuals: impl Iterator<Item = (f64, f64)>, longest: usize, k: f64) -> usize {
+/// [`MIN_FRONT_RUN`] long; 0 otherwise.
+fn front_run(residuals: impl Iterator<Item = (f64, f64)>, k: f64) -> usize {
     let (mut sum, mut var) = (0.0, 0.0);
     // Compared squared and cross-multiplied, `sum^2 / var > best`, with no root or division
     // per point.
     let (mut best_sum2, mut best_var, mut best) = (k * k, 1.0, 0);
-    for (m, (r, v)) in (1..=longest).zip(residuals) {
+    for (m, (r, v)) in residuals.enumerate() {
         sum += r;
         var += v;
-        if m >= MIN_FRONT_RUN && sum > 0.0 && sum * sum * best_var > best_sum2 * var {
-            (best_sum2, best_var, best) = (sum * sum, var, m);
+        if m + 1 >= MIN_FRONT_RUN && sum > 0.0 && sum * sum * best_var > best_sum2 * var {
+            (best_sum2, best_var, best) = (sum * sum, var, m + 1);
         }
     }
     best
