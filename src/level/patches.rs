@@ -975,19 +975,37 @@ mod tests {
     /// A wall met obliquely: the plane through (3, 0, 0) with normal `n`, seen by 3 scans of
     /// 61 rays from the origin, with Gaussian range noise `sigma`.
     fn oblique_wall_grid(n: &Vector3<f64>, sigma: f64, seed: u64) -> PoseGrid {
+        let elevation: Vec<f64> = (0..3).map(|r| (r as f64 - 1.0) * 0.087).collect();
+        let dirs = elevation.clone();
+        noisy_grid(elevation, 61, sigma, seed, Point3::origin(), |r, c| {
+            let (e, bearing) = (dirs[r], (c as f64 - 30.0).to_radians() * 1.2);
+            let dir = Vector3::new(bearing.cos() * e.cos(), bearing.sin(), -e.sin());
+            // Range to the plane n . (p - (3, 0, 0)) = 0 along dir.
+            (dir, 3.0 * n.x / n.dot(&dir))
+        })
+    }
+
+    /// A grid of scans at `elevation`, `cols` rays each, seen from `origin`: ray (row, column)
+    /// goes along the direction `ray` gives and meets its surface at the range it gives, plus
+    /// Gaussian range noise `sigma` (drawn in grid order).
+    fn noisy_grid(
+        elevation: Vec<f64>,
+        cols: usize,
+        sigma: f64,
+        seed: u64,
+        origin: Point3<f64>,
+        ray: impl Fn(usize, usize) -> (Vector3<f64>, f64),
+    ) -> PoseGrid {
         let mut rng = rand::rngs::ChaCha8Rng::seed_from_u64(seed);
         let noise = Normal::new(0.0, sigma).unwrap();
-        let (rows, cols) = (3, 61);
-        let elevation: Vec<f64> = (0..rows).map(|r| (r as f64 - 1.0) * 0.087).collect();
-        let mut points = Vec::new();
-        for &e in &elevation {
+        let rows = elevation.len();
+        let mut points = Vec::with_capacity(rows * cols);
+        for r in 0..rows {
             for c in 0..cols {
-                let bearing = (c as f64 - 30.0).to_radians() * 1.2;
-                let dir = Vector3::new(bearing.cos() * e.cos(), bearing.sin(), -e.sin());
-                // Range to the plane n . (p - (3, 0, 0)) = 0 along dir.
-                let range = 3.0 * n.x / n.dot(&dir) + noise.sample(&mut rng);
+                let (dir, exact) = ray(r, c);
+                let range = exact + noise.sample(&mut rng);
                 points.push(Some(GridPoint {
-                    p: Point3::from(dir * range),
+                    p: origin + dir * range,
                     dir,
                     range,
                 }));
@@ -1038,37 +1056,21 @@ mod tests {
     /// ahead of a wall 2.3 m away: rows 0 and 1 meet the wall, row 2 (pitched down) the floor
     /// at `foot` metres.
     fn wall_over_floor_line(foot: f64, sigma: f64, seed: u64) -> (PoseGrid, Vec<usize>) {
-        let mut rng = rand::rngs::ChaCha8Rng::seed_from_u64(seed);
-        let noise = Normal::new(0.0, sigma).unwrap();
-        let (rows, cols) = (3, 21);
-        let elevation: Vec<f64> = (0..rows).map(|r| (r as f64 - 1.0) * 0.087).collect();
-        let mut points = Vec::new();
-        for (r, &e) in elevation.iter().enumerate() {
+        let elevation: Vec<f64> = (0..3).map(|r| (r as f64 - 1.0) * 0.087).collect();
+        let dirs = elevation.clone();
+        let origin = Point3::new(0.0, 0.0, 0.45);
+        let grid = noisy_grid(elevation, 21, sigma, seed, origin, |r, c| {
             // Pitched 7 degrees towards the floor: depressions 2, 7, 12 degrees.
-            let dep = e + 0.122;
-            for c in 0..cols {
-                let bearing = (c as f64 - 10.0).to_radians();
-                let dir = Vector3::new(bearing.cos() * dep.cos(), bearing.sin(), -dep.sin());
-                let exact = if r < 2 {
-                    2.3 / dir.x
-                } else {
-                    foot / (dir.x * dir.x + dir.y * dir.y).sqrt()
-                };
-                let range = exact + noise.sample(&mut rng);
-                points.push(Some(GridPoint {
-                    p: Point3::new(0.0, 0.0, 0.45) + dir * range,
-                    dir,
-                    range,
-                }));
-            }
-        }
-        let members = (0..points.len()).collect();
-        let grid = PoseGrid {
-            scan_index: (0..rows).collect(),
-            elevation,
-            cols,
-            points,
-        };
+            let (dep, bearing) = (dirs[r] + 0.122, (c as f64 - 10.0).to_radians());
+            let dir = Vector3::new(bearing.cos() * dep.cos(), bearing.sin(), -dep.sin());
+            let exact = if r < 2 {
+                2.3 / dir.x
+            } else {
+                foot / (dir.x * dir.x + dir.y * dir.y).sqrt()
+            };
+            (dir, exact)
+        });
+        let members = (0..grid.points.len()).collect();
         (grid, members)
     }
 
@@ -1077,36 +1079,24 @@ mod tests {
     /// the wall's foot instead, 2 to 25 cm short of it along the ray (within the growing
     /// tolerance). Returns the grid, every point as members, and the floor run's indices.
     fn wall_with_floor_run(floor_run: bool, seed: u64) -> (PoseGrid, Vec<usize>, Vec<usize>) {
-        let mut rng = rand::rngs::ChaCha8Rng::seed_from_u64(seed);
-        let noise = Normal::new(0.0, 0.1).unwrap();
-        let (rows, cols) = (4, 61);
+        let (rows, cols, run) = (4, 61, 12);
         let elevation: Vec<f64> = (0..rows).map(|r| (r as f64 - 1.5) * 0.087).collect();
-        let (mut points, mut floor) = (Vec::new(), Vec::new());
-        for (r, &e) in elevation.iter().enumerate() {
-            for c in 0..cols {
-                let bearing = (c as f64 - 30.0).to_radians();
-                let dir = Vector3::new(bearing.cos() * e.cos(), bearing.sin(), -e.sin());
-                let mut range = 2.5 / dir.x;
-                let run_at = c as isize - (cols as isize - 12);
-                if floor_run && r == rows - 1 && run_at >= 0 {
-                    range -= 0.02 + 0.02 * run_at as f64;
-                    floor.push(r * cols + c);
-                }
-                range += noise.sample(&mut rng);
-                points.push(Some(GridPoint {
-                    p: Point3::from(dir * range),
-                    dir,
-                    range,
-                }));
-            }
-        }
-        let members = (0..points.len()).collect();
-        let grid = PoseGrid {
-            scan_index: (0..rows).collect(),
-            elevation,
-            cols,
-            points,
-        };
+        let dirs = elevation.clone();
+        let in_run = |r: usize, c: usize| floor_run && r == rows - 1 && c + run >= cols;
+        let grid = noisy_grid(elevation, cols, 0.1, seed, Point3::origin(), |r, c| {
+            let (e, bearing) = (dirs[r], (c as f64 - 30.0).to_radians());
+            let dir = Vector3::new(bearing.cos() * e.cos(), bearing.sin(), -e.sin());
+            let short = if in_run(r, c) {
+                0.02 + 0.02 * (c + run - cols) as f64
+            } else {
+                0.0
+            };
+            (dir, 2.5 / dir.x - short)
+        });
+        let members = (0..grid.points.len()).collect();
+        let floor = (0..grid.points.len())
+            .filter(|&i| in_run(i / cols, i % cols))
+            .collect();
         (grid, members, floor)
     }
 
