@@ -151,8 +151,9 @@ pub struct LevelParams {
     /// decide a few poses at 10 cm noise).
     pub trim_sigmas: f64,
     /// A run of points at either end of a patch's row goes when it stands in front of the
-    /// patch's plane (towards the scanner) by more than this many sigmas of its points' noise,
-    /// as the floor just in front of a wall's foot does; 0 keeps them. Default 3.
+    /// patch's plane (towards the scanner): the sum of its residuals beyond this many standard
+    /// deviations of that sum, as the floor just in front of a wall's foot does; 0 keeps them.
+    /// Default 3.
     pub front_end_sigmas: f64,
     /// Fewer wall quads than this fails the pose (too_few_polygons / facing_floor /
     /// facing_ceiling). Default 3.
