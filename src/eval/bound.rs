@@ -274,9 +274,9 @@ pub fn attitude_bound(rays: &[BoundRay], truth: &Pose, sigma: f64) -> Option<[f6
 const SEGMENTED_MIN_SHARE: f64 = 0.2;
 
 /// Up as the robust estimator finds it when told which surface every point met: each surface
-/// met by at least two scans in comparable numbers ([`SEGMENTED_MIN_SHARE`]) fitted as a plane from the
-/// measured points, walls taken as vertical and the floor and ceiling as level, with no
-/// inflation ([`up::up_robust`]). Between the bound and a leveler's own sigma, its sigma tells
+/// met by at least two scans in comparable numbers ([`SEGMENTED_MIN_SHARE`]) fitted as a plane
+/// from the measured points, walls taken as vertical and the floor and ceiling as level, with
+/// no inflation ([`up::up_robust`]). Between the bound and a leveler's own sigma, its sigma tells
 /// how much is lost to finding the surfaces rather than to using them; `None` when those
 /// planes cannot fix up.
 pub fn segmented_solution(rays: &[BoundRay], sigma: f64) -> Option<UpSolution> {

@@ -267,6 +267,11 @@ pub struct LevelParams {
 }
 
 impl LevelParams {
+    /// Cosine of `wall_min_angle_deg`: a plane whose normal's cosine to up is below it is a wall.
+    pub fn wall_cos(&self) -> f64 {
+        self.wall_min_angle_deg.to_radians().cos()
+    }
+
     /// Cosine of `refine_level_max_deg`.
     pub fn refine_level_cos(&self) -> f64 {
         self.refine_level_max_deg.to_radians().cos()
@@ -1161,7 +1166,7 @@ fn clean_level_fit(
     if steep > 0 && usable(&flat, &rows_flat).is_none() && 5 * steep > all.n {
         return None;
     }
-    let floorlike = fit.normal.z.abs() > params.wall_min_angle_deg.to_radians().cos();
+    let floorlike = fit.normal.z.abs() > params.wall_cos();
     (floorlike
         && fit.misfit_ratio(sigma) <= params.max_level_misfit
         && refine::opaque(grid, &fit, sigma, params))
@@ -1253,7 +1258,7 @@ fn acceptable_within(
 /// taken for a wall. Re-segmentation from a blind start once settled on a floor and a wall's
 /// top as one "wall" and leveled a pose 55 degrees off (361 rays, 10 cm noise).
 fn within_wall_angle(up: &Vector3<f64>, params: &LevelParams) -> bool {
-    up.z >= params.wall_min_angle_deg.to_radians().cos()
+    up.z >= params.wall_cos()
 }
 
 /// The key `f64::total_cmp` orders by: the bits as a signed integer, with the magnitude bits

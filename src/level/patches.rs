@@ -303,6 +303,9 @@ fn make_patch(
         let (lo, hi) = rows_span_sorted(members, grid.cols);
         (members.len() >= params.min_patch_points && hi > lo).then_some((lo, hi))
     };
+    // Still a patch once points went: big enough, over two rows, and stacked.
+    let still_a_patch =
+        |members: &[usize]| span(members).is_some() && stacked(members, grid, params);
     span(members)?;
     let first = acc.fit(sigma)?;
     let trimmed = trim_edge_rows(grid, members, &acc, &first, sigma, params);
@@ -312,16 +315,14 @@ fn make_patch(
         Some(kept) => (&kept[..], grid.accumulate(kept).fit(sigma)?),
         None => (members, first),
     };
-    span(members)?;
-    if !stacked(members, grid, params) {
+    if !still_a_patch(members) {
         return None;
     }
     let fit = robust_fit(grid, members, first, params, sigma)?;
     let fronted = without_front_row_ends(grid, members, &fit, params, sigma);
     let (members, fit) = match &fronted {
         Some(kept) => {
-            span(kept)?;
-            if !stacked(kept, grid, params) {
+            if !still_a_patch(kept) {
                 return None;
             }
             let first = grid.accumulate(kept).fit(sigma)?;
@@ -472,8 +473,8 @@ const MIN_TRIMMED_ROW_SHARE: f64 = 0.15;
 /// concave corner join the same way. A true plane's residuals take no side, so the test is the
 /// sum of the residuals towards the scanner over the first `m` points of the run (`m` from
 /// [`MIN_FRONT_RUN`] to half the run), over that sum's standard deviation (each point's
-/// `sigma |d . n|` in quadrature), above `front_end_sigmas`. [`make_patch`] applies it to the plane it has fitted and fits again
-/// without the runs that go. Over 129,600 protocol poses at 5-10 cm (two seed sets, nine
+/// `sigma |d . n|` in quadrature), above `front_end_sigmas`. [`make_patch`] applies it to the
+/// plane it has fitted and fits again without the runs that go. Over 129,600 protocol poses at 5-10 cm (two seed sets, nine
 /// plans), poses reported ok and more than 5 degrees off fell from 14 to 4 and those beyond 3
 /// sigmas from 157 to 110, with 0.24 points more leveled; at 1 cm, 0.04 points more.
 fn without_front_row_ends(

@@ -40,11 +40,7 @@ pub fn classify(
     centroid: &Point3<f64>,
     params: &LevelParams,
 ) -> SurfaceKind {
-    classify_below(
-        normal,
-        centroid,
-        params.wall_min_angle_deg.to_radians().cos(),
-    )
+    classify_below(normal, centroid, params.wall_cos())
 }
 
 /// [`classify`] with the cosine of the wall angle given (computed once for many quads).
@@ -85,7 +81,7 @@ pub fn extract_quads_sized(
     let bands = grid.rows() - qr + 1;
     let mut out = Vec::with_capacity(bands * (grid.cols / (qc - 1)));
     let tol = params.coplanar_k * sigma.max(params.min_sigma);
-    let wall_cos = params.wall_min_angle_deg.to_radians().cos();
+    let wall_cos = params.wall_cos();
     for r in 0..=grid.rows() - qr {
         let mut c = 0;
         while c + qc <= grid.cols {

@@ -285,7 +285,7 @@ pub fn refine(
                 continue;
             };
             // A wall must stay a wall; what turned towards up was floor after all.
-            if fit.normal.dot(&up).abs() > params.wall_min_angle_deg.to_radians().cos() {
+            if fit.normal.dot(&up).abs() > params.wall_cos() {
                 continue;
             }
             models.push(Model {

@@ -300,7 +300,8 @@ fn tangent_basis(up: &Vector3<f64>) -> [Vector3<f64>; 2] {
 /// Cauchy scale for the robust weights, in standard deviations.
 const CAUCHY_C: f64 = 2.385;
 
-/// Largest tilt of the robot considered [rad]: the paper assumes floors below 45 degrees.
+/// Largest tilt of the robot considered [rad]: the paper assumes floors below 45 degrees. The
+/// search keeps a margin beyond that; the gate refuses an up past `wall_min_angle_deg`.
 const MAX_TILT: f64 = 50.0 * std::f64::consts::PI / 180.0;
 
 /// Iteratively reweighted least squares for up over plane fits with range noise `sigma` [m].
