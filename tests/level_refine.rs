@@ -173,8 +173,9 @@ fn level_start_finds_the_floor_without_any_up() {
 }
 
 /// Pose `k` of `count` drawn in the example plan `name`, as `eval accuracy
-/// examples/plans/{office,angled,ceiling,two_rooms}.wall --seed SEED` draws and scans it: roll and pitch within 20 degrees,
-/// the scanner 0.45 m up, `nscans` scans 5 degrees apart, range noise `noise`.
+/// examples/plans/{office,angled,ceiling,two_rooms}.wall --seed SEED` draws and scans it: roll
+/// and pitch within 20 degrees, the scanner 0.45 m up, `nscans` scans 5 degrees apart, range
+/// noise `noise`.
 struct ProtocolPose {
     name: &'static str,
     seed: u64,

@@ -674,10 +674,11 @@ pub fn refine_estimate(
             Some((start, r))
         })
         .collect();
-    let best = (0..refined.len()).min_by(|&a, &b| {
-        let sigma_of = |k: usize| refined[k].1.solution.max_attitude_sigma();
-        sigma_of(a).total_cmp(&sigma_of(b))
-    })?;
+    let (best, _) = refined
+        .iter()
+        .map(|(_, r)| r.solution.max_attitude_sigma())
+        .enumerate()
+        .min_by(|a, b| a.1.total_cmp(&b.1))?;
     let (start, kept) = refined.swap_remove(best);
     let rivals = refined
         .into_iter()

@@ -474,9 +474,10 @@ const MIN_TRIMMED_ROW_SHARE: f64 = 0.15;
 /// sum of the residuals towards the scanner over the first `m` points of the run (`m` from
 /// [`MIN_FRONT_RUN`] to half the run), over that sum's standard deviation (each point's
 /// `sigma |d . n|` in quadrature), above `front_end_sigmas`. [`make_patch`] applies it to the
-/// plane it has fitted and fits again without the runs that go. Over 129,600 protocol poses at 5-10 cm (two seed sets, nine
-/// plans), poses reported ok and more than 5 degrees off fell from 14 to 4 and those beyond 3
-/// sigmas from 157 to 110, with 0.24 points more leveled; at 1 cm, 0.04 points more.
+/// plane it has fitted and fits again without the runs that go. Over 129,600 protocol poses at
+/// 5-10 cm (two seed sets, nine plans), poses reported ok and more than 5 degrees off fell from
+/// 14 to 4 and those beyond 3 sigmas from 157 to 110, with 0.24 points more leveled; at 1 cm,
+/// 0.04 points more.
 fn without_front_row_ends(
     grid: &PoseGrid,
     members: &[usize],
@@ -977,9 +978,8 @@ mod tests {
     /// 61 rays from the origin, with Gaussian range noise `sigma`.
     fn oblique_wall_grid(n: &Vector3<f64>, sigma: f64, seed: u64) -> PoseGrid {
         let elevation: Vec<f64> = (0..3).map(|r| (r as f64 - 1.0) * 0.087).collect();
-        let dirs = elevation.clone();
-        noisy_grid(elevation, 61, sigma, seed, Point3::origin(), |r, c| {
-            let (e, bearing) = (dirs[r], (c as f64 - 30.0).to_radians() * 1.2);
+        noisy_grid(elevation, 61, sigma, seed, Point3::origin(), |_, c, e| {
+            let bearing = (c as f64 - 30.0).to_radians() * 1.2;
             let dir = Vector3::new(bearing.cos() * e.cos(), bearing.sin(), -e.sin());
             // Range to the plane n . (p - (3, 0, 0)) = 0 along dir.
             (dir, 3.0 * n.x / n.dot(&dir))
@@ -987,23 +987,23 @@ mod tests {
     }
 
     /// A grid of scans at `elevation`, `cols` rays each, seen from `origin`: ray (row, column)
-    /// goes along the direction `ray` gives and meets its surface at the range it gives, plus
-    /// Gaussian range noise `sigma` (drawn in grid order).
+    /// at its row's elevation goes along the direction `ray` gives and meets its surface at the
+    /// range it gives, plus Gaussian range noise `sigma` (drawn in grid order).
     fn noisy_grid(
         elevation: Vec<f64>,
         cols: usize,
         sigma: f64,
         seed: u64,
         origin: Point3<f64>,
-        ray: impl Fn(usize, usize) -> (Vector3<f64>, f64),
+        ray: impl Fn(usize, usize, f64) -> (Vector3<f64>, f64),
     ) -> PoseGrid {
         let mut rng = rand::rngs::ChaCha8Rng::seed_from_u64(seed);
         let noise = Normal::new(0.0, sigma).unwrap();
         let rows = elevation.len();
         let mut points = Vec::with_capacity(rows * cols);
-        for r in 0..rows {
+        for (r, &e) in elevation.iter().enumerate() {
             for c in 0..cols {
-                let (dir, exact) = ray(r, c);
+                let (dir, exact) = ray(r, c, e);
                 let range = exact + noise.sample(&mut rng);
                 points.push(Some(GridPoint {
                     p: origin + dir * range,
@@ -1058,11 +1058,10 @@ mod tests {
     /// at `foot` metres.
     fn wall_over_floor_line(foot: f64, sigma: f64, seed: u64) -> (PoseGrid, Vec<usize>) {
         let elevation: Vec<f64> = (0..3).map(|r| (r as f64 - 1.0) * 0.087).collect();
-        let dirs = elevation.clone();
         let origin = Point3::new(0.0, 0.0, 0.45);
-        let grid = noisy_grid(elevation, 21, sigma, seed, origin, |r, c| {
+        let grid = noisy_grid(elevation, 21, sigma, seed, origin, |r, c, e| {
             // Pitched 7 degrees towards the floor: depressions 2, 7, 12 degrees.
-            let (dep, bearing) = (dirs[r] + 0.122, (c as f64 - 10.0).to_radians());
+            let (dep, bearing) = (e + 0.122, (c as f64 - 10.0).to_radians());
             let dir = Vector3::new(bearing.cos() * dep.cos(), bearing.sin(), -dep.sin());
             let exact = if r < 2 {
                 2.3 / dir.x
@@ -1082,10 +1081,9 @@ mod tests {
     fn wall_with_floor_run(floor_run: bool, seed: u64) -> (PoseGrid, Vec<usize>, Vec<usize>) {
         let (rows, cols, run) = (4, 61, 12);
         let elevation: Vec<f64> = (0..rows).map(|r| (r as f64 - 1.5) * 0.087).collect();
-        let dirs = elevation.clone();
         let in_run = |r: usize, c: usize| floor_run && r == rows - 1 && c + run >= cols;
-        let grid = noisy_grid(elevation, cols, 0.1, seed, Point3::origin(), |r, c| {
-            let (e, bearing) = (dirs[r], (c as f64 - 30.0).to_radians());
+        let grid = noisy_grid(elevation, cols, 0.1, seed, Point3::origin(), |r, c, e| {
+            let bearing = (c as f64 - 30.0).to_radians();
             let dir = Vector3::new(bearing.cos() * e.cos(), bearing.sin(), -e.sin());
             let short = if in_run(r, c) {
                 0.02 + 0.02 * (c + run - cols) as f64

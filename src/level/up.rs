@@ -530,8 +530,8 @@ mod tests {
         // information is smaller by `1 + tilt^2`.
         let (shrink, z2) = (1.0 + tilt * tilt, tilt * tilt / (1.0 + tilt * tilt) / 1e-4);
         for (count, roughly) in [(3, 17.0 / 6.0), (30, 125.0 / 33.0)] {
-            let cov = |tilt: f64| {
-                let fits = tilted_walls(count, tilt);
+            let cov = |walls_tilt: f64| {
+                let fits = tilted_walls(count, walls_tilt);
                 let obs: Vec<PlaneObs> = fits.iter().map(|f| PlaneObs::wall(f, 1.0)).collect();
                 solution_at(Vector3::z(), &obs, 0.01, false).cov
             };
