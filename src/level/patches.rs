@@ -807,8 +807,9 @@ fn ascending(members: &[usize]) -> Vec<usize> {
 /// Splits a patch's members into planes while two planes explain them significantly better
 /// than one: the best split by column (walls meet at corners, which are column ranges) or by
 /// row (contiguous splits only: freely reassigning points would split one noisy plane into two
-/// parallel ones and fool the test), accepted by an F test on the residual sums of squares, `F = ((RSS1 - RSS2) / 3) / (RSS2 / (n - 6))`,
-/// which needs no noise level. Recurses into the parts up to `depth` times.
+/// parallel ones and fool the test), accepted by an F test on the residual sums of squares,
+/// `F = ((RSS1 - RSS2) / 3) / (RSS2 / (n - 6))`, which needs no noise level. Recurses into the
+/// parts up to `depth` times.
 pub fn split_members(
     grid: &PoseGrid,
     members: &[usize],
