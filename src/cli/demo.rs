@@ -1,9 +1,10 @@
 //! `levelscan demo`: the whole system on a built-in plan, in one command (README's first).
 //!
 //! Simulates a tilted run through the office plan (the paper's Fig. 5c setting: partitions and
-//! pillars, a path over an uneven floor) with the adaptive robot, levels every pose (sect. 5-6), matches raw and leveled
-//! scans pairwise and against a growing map (sect. 8.2, Figs. 8-10), runs Table I on the same
-//! plan (sect. 8.1), and writes `DIR/report.html` (self-contained) with the JSON behind it.
+//! pillars, a path over an uneven floor) with the adaptive robot, levels every pose (sect.
+//! 5-6), matches raw and leveled scans pairwise and against a growing map (sect. 8.2, Figs.
+//! 8-10), runs Table I on the same plan (sect. 8.1), and writes `DIR/report.html`
+//! (self-contained) with the JSON behind it.
 
 use super::level::level_record;
 use super::progress_bar;

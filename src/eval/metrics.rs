@@ -179,7 +179,8 @@ mod tests {
     fn rpe_counts_one_bad_step_exactly() {
         let truth: Vec<Pose2> = (0..11).map(|i| Pose2::new(i as f64, 0.0, 0.0)).collect();
         let mut est = truth.clone();
-        // Step 4 -> 5 is 6 cm too long; every later pose carries the offset, so only that step is off.
+        // Step 4 -> 5 is 6 cm too long; every later pose carries the offset, so only that step
+        // is off.
         for p in est.iter_mut().skip(5) {
             p.x += 0.06;
         }

@@ -122,8 +122,9 @@ pub struct PosePrior {
     pub weight_theta: f64,
 }
 
-/// Aligns `source` (points in the source scanner's frame, the scanner at the origin) to `target`, starting from `guess`
-/// (`target_from_source`). Returns `None` when the target is empty or no point associates.
+/// Aligns `source` (points in the source scanner's frame, the scanner at the origin) to
+/// `target`, starting from `guess` (`target_from_source`). Returns `None` when the target is
+/// empty or no point associates.
 pub fn icp(
     source: &[Point2<f64>],
     target: &dyn Target,

@@ -240,7 +240,8 @@ pub fn scan_points(scan: &Scan, ranges: &RangeParams) -> Vec<Point2<f64>> {
         .collect()
 }
 
-/// The odometry step from one scan to the next (`prev⁻¹ ⊕ cur`), identity when either is unknown.
+/// The odometry step from one scan to the next (`prev⁻¹ ⊕ cur`), identity when either is
+/// unknown.
 pub fn odometry_step(prev: Option<Pose2>, cur: Option<Pose2>) -> Pose2 {
     match (prev, cur) {
         (Some(a), Some(b)) => a.between(&b),
