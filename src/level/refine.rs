@@ -482,10 +482,11 @@ enum LevelEvidence {
 /// the lowest height window that holds a third as many candidates as the densest one gives
 /// that height, and each candidate within its own vertical tolerance of it (range noise along
 /// the vertical, and an error of up `sigma_up` at its horizontal distance) joins its scan's
-/// line. Each scan's line is fitted
-/// with outliers removed and must fit within `level_line_misfit` of its noise. With
-/// `level_line_plane` and two or more scans, the lines are one plane (its lever arm is the
-/// distance between the lines) when their points fit one within `refine_level_misfit`.
+/// line. Each scan's line is fitted with outliers removed and must fit within
+/// `level_line_misfit` of its noise. With `level_line_plane` and two or more scans, the lines
+/// are one plane (its lever arm is the distance between the lines) when their points fit one
+/// within `refine_level_misfit`; in a plane with a full line, a line of as few as
+/// [`PLANE_LINE_MIN_POINTS`] counts.
 fn level_lines(ctx: &LineContext, kind: SurfaceKind, params: &LevelParams) -> LevelEvidence {
     let (grid, lv, s) = (ctx.grid, ctx.lv, ctx.s);
     let floor = kind == SurfaceKind::Floor;
