@@ -41,9 +41,9 @@ pub fn wrap_angle(a: f64) -> f64 {
 /// The robot's attitude to the level plane: roll `theta_x` and pitch `theta_y`, radians.
 #[derive(Clone, Copy, Debug, PartialEq, Default, Serialize, Deserialize)]
 pub struct Attitude {
-    /// Roll, rotation about the robot's x axis [rad].
+    /// Roll, rotation about the robot's x axis \[rad\].
     pub theta_x: f64,
-    /// Pitch, rotation about the robot's y axis [rad].
+    /// Pitch, rotation about the robot's y axis \[rad\].
     pub theta_y: f64,
 }
 
@@ -89,11 +89,11 @@ pub struct Pose {
     pub x: f64,
     pub y: f64,
     pub z: f64,
-    /// Yaw [rad].
+    /// Yaw \[rad\].
     pub rz: f64,
-    /// Pitch [rad].
+    /// Pitch \[rad\].
     pub ry: f64,
-    /// Roll [rad].
+    /// Roll \[rad\].
     pub rx: f64,
 }
 

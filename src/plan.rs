@@ -7,7 +7,7 @@ use nalgebra::Point2;
 
 #[derive(Clone, Debug, PartialEq)]
 pub struct Plan {
-    /// Height of every wall above the floor [m]; > 0.
+    /// Height of every wall above the floor \[m\]; > 0.
     pub wall_height: f64,
     /// Polylines of at least two points; each segment is a wall from z = 0 to `wall_height`.
     pub walls: Vec<Vec<Point2<f64>>>,

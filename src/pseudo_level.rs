@@ -26,14 +26,14 @@ use nalgebra::{Matrix3, Point3, Vector2, Vector3};
 /// Parameters of the pseudo-level scan.
 #[derive(Clone, Debug, PartialEq)]
 pub struct PseudoLevelParams {
-    /// Gaps of at most this many rays between kept points are filled [rays]. Default 3.
+    /// Gaps of at most this many rays between kept points are filled \[rays\]. Default 3.
     pub max_gap: usize,
     /// The per-point vertical test: a pair of points in adjacent scans is wall-like when its
-    /// height difference exceeds this many times its horizontal distance (less noise) [1].
+    /// height difference exceeds this many times its horizontal distance (less noise) \[1\].
     /// Default 1.5; 0 turns the test off.
     pub vertical_ratio: f64,
     /// Points within this height of the floor or ceiling (plus three sigmas of the range noise
-    /// along the vertical) are never kept [m]. Default 0.05.
+    /// along the vertical) are never kept \[m\]. Default 0.05.
     pub floor_margin: f64,
     /// Keep points that lie clear of the floor (and the ceiling) by their height alone, when
     /// the floor's height is known: by `floor_margin`, plus three sigmas of the range noise
@@ -137,7 +137,7 @@ pub fn base_scan_index(scans: &[Scan], est: &LevelEstimate) -> usize {
 
 /// Fewest points that make a crowd at the floor's height.
 const MIN_GROUND_POINTS: usize = 20;
-/// Half-width of the band around a crowd-found floor whose points are floor hits [m].
+/// Half-width of the band around a crowd-found floor whose points are floor hits \[m\].
 const GROUND_BAND: f64 = 0.02;
 /// Fewest points of one scan in that crowd for the scan to count as seeing the floor there.
 const MIN_ROW_CROWD: usize = 5;
@@ -221,7 +221,7 @@ fn ground_crowd(
     (Some(z0), (rows >= 2).then_some(z0))
 }
 
-/// Slack on how far a filled gap point may stray from its wall neighbours [m].
+/// Slack on how far a filled gap point may stray from its wall neighbours \[m\].
 const GAP_SLACK: f64 = 0.05;
 
 fn planar(p: Pose) -> Pose {

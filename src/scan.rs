@@ -54,11 +54,11 @@ impl Timestamp {
 pub struct Scan {
     /// The pose this scan was taken at; scans of one pose share it.
     pub sequence: Option<u64>,
-    /// Hinge elevation [rad]; positive tilts the beams down.
+    /// Hinge elevation \[rad\]; positive tilts the beams down.
     pub elevation: Option<f64>,
-    /// Bearing of each ray [rad].
+    /// Bearing of each ray \[rad\].
     pub theta: Vec<f64>,
-    /// Range of each ray [m]; `None` where there was no return.
+    /// Range of each ray \[m\]; `None` where there was no return.
     pub readings: Vec<Option<f64>>,
     /// True where the ray hit something.
     pub valid: Vec<bool>,
@@ -67,9 +67,9 @@ pub struct Scan {
     /// Ground truth; written by simulators, never read by `level` or `match`.
     pub true_pose: Option<Pose>,
     pub timestamp: Option<Timestamp>,
-    /// Range noise per ray [m].
+    /// Range noise per ray \[m\].
     pub readings_sigma: Option<Vec<Option<f64>>>,
-    /// The scanner's origin seen from the hinge axis point, in the scanner's tilted frame [m].
+    /// The scanner's origin seen from the hinge axis point, in the scanner's tilted frame \[m\].
     pub hinge_offset: Option<[f64; 3]>,
     /// Simulators only: what each ray hit.
     pub hit: Option<Vec<Hit>>,

@@ -51,13 +51,13 @@ pub struct Args {
     /// Random seed (same seed, same report numbers).
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
-    /// Range noise of the simulated scanner [m].
+    /// Range noise of the simulated scanner \[m\].
     #[arg(long, default_value_t = 0.01)]
     pub noise: f64,
     /// Scans per pose, at elevations --step apart centred on level.
     #[arg(long, default_value_t = 5)]
     pub scans: usize,
-    /// Elevation step between scans [deg].
+    /// Elevation step between scans \[deg\].
     #[arg(long, default_value_t = 5.0)]
     pub step: f64,
     /// Random poses per cell of Table I (the paper's 100).
@@ -102,7 +102,7 @@ struct PoseLevel {
     sequence: u64,
     status: String,
     reason: Option<String>,
-    /// The paper's error max(|dx|, |dy|) against the simulator's truth [deg].
+    /// The paper's error max(|dx|, |dy|) against the simulator's truth \[deg\].
     error_deg: Option<f64>,
     polygons: usize,
     valid_points: usize,

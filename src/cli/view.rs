@@ -26,7 +26,7 @@ pub struct Args {
     /// Most scan points embedded in the page; bigger inputs keep every k-th pose.
     #[arg(long, default_value_t = ViewParams::default().max_points)]
     pub max_points: usize,
-    /// Scanner height [m] for `level` output whose raw scans are not loaded alongside.
+    /// Scanner height \[m\] for `level` output whose raw scans are not loaded alongside.
     #[arg(long, default_value_t = ViewParams::default().default_height)]
     pub height: f64,
     /// Page title.

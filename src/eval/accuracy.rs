@@ -20,7 +20,7 @@ use nalgebra::Point2;
 use rayon::prelude::*;
 use std::collections::BTreeMap;
 
-/// The paper's Table I, mean error [deg], rows 3 / 4 / 5 scans, columns 1 / 5 / 10 cm.
+/// The paper's Table I, mean error \[deg\], rows 3 / 4 / 5 scans, columns 1 / 5 / 10 cm.
 pub const PAPER_TABLE_I: [[f64; 3]; 3] = [
     [0.857, 2.083, 5.724],
     [0.649, 1.731, 4.260],
@@ -41,7 +41,7 @@ pub fn paper_mean(scans: usize, noise: f64) -> Option<f64> {
 pub struct AccuracyParams {
     /// Scan counts per pose. Default 3, 4, 5.
     pub scans: Vec<usize>,
-    /// Range noise sigmas [m]. Default 0.01, 0.05, 0.10.
+    /// Range noise sigmas \[m\]. Default 0.01, 0.05, 0.10.
     pub noise: Vec<f64>,
     /// Estimators to compare. Default both.
     pub estimators: Vec<Estimator>,
@@ -49,21 +49,21 @@ pub struct AccuracyParams {
     pub poses_per_plan: usize,
     /// Seed of poses and noise. Default 1.
     pub seed: u64,
-    /// Elevation step between scans, centred on level [deg]. Default 5.
+    /// Elevation step between scans, centred on level \[deg\]. Default 5.
     pub step_deg: f64,
-    /// Roll and pitch uniform in +-tilt [deg]. Default 20.
+    /// Roll and pitch uniform in +-tilt \[deg\]. Default 20.
     pub tilt_deg: f64,
-    /// Smallest distance of a pose from every wall [m]. Default 0.6.
+    /// Smallest distance of a pose from every wall \[m\]. Default 0.6.
     pub clearance: f64,
-    /// Scanner height above the floor [m]. Default 0.45.
+    /// Scanner height above the floor \[m\]. Default 0.45.
     pub height: f64,
     /// Rays per scan. Default 181.
     pub rays: usize,
-    /// Field of view [deg]. Default 180.
+    /// Field of view \[deg\]. Default 180.
     pub fov_deg: f64,
-    /// Maximum range [m]. Default 30.
+    /// Maximum range \[m\]. Default 30.
     pub max_range: f64,
-    /// A pseudo-level point farther than this from every true wall is a phantom [m].
+    /// A pseudo-level point farther than this from every true wall is a phantom \[m\].
     /// Default 0.15.
     pub phantom_distance: f64,
     /// Take the scans with the adaptive robot, cleverRobot (sect. 7.2.2), as the paper's
@@ -104,12 +104,12 @@ pub struct PoseOutcome {
     /// Index of the pose's plan and of the pose in that plan's draw.
     pub plan: usize,
     pub pose: usize,
-    /// True theta_x and theta_y [deg].
+    /// True theta_x and theta_y \[deg\].
     pub truth_deg: [f64; 2],
-    /// Estimated theta_x and theta_y [deg], when leveled.
+    /// Estimated theta_x and theta_y \[deg\], when leveled.
     pub estimate_deg: Option<[f64; 2]>,
     pub failure: Option<FailReason>,
-    /// The paper's error `max(|dtheta_x|, |dtheta_y|)` [deg], when leveled.
+    /// The paper's error `max(|dtheta_x|, |dtheta_y|)` \[deg\], when leveled.
     pub error_deg: Option<f64>,
     /// True when leveled and both angle errors lie within 3 reported sigmas.
     pub within_3_sigma: bool,
@@ -119,13 +119,13 @@ pub struct PoseOutcome {
     pub phantoms: usize,
     /// Wall hits of the pose's best single scan (most wall hits).
     pub best_wall_hits: usize,
-    /// The larger reported attitude sigma [deg], when leveled.
+    /// The larger reported attitude sigma \[deg\], when leveled.
     pub sigma_deg: Option<f64>,
-    /// The larger of the pose's Cramér-Rao bounds on theta_x and theta_y [deg]
+    /// The larger of the pose's Cramér-Rao bounds on theta_x and theta_y \[deg\]
     /// ([`super::bound`]); infinite when its rays cannot fix the attitude, `None` when not
     /// computed (no noise).
     pub bound_deg: Option<f64>,
-    /// The larger sigma [deg] of up found from the true segmentation
+    /// The larger sigma \[deg\] of up found from the true segmentation
     /// ([`super::bound::segmented_solution`]); infinite when that cannot fix up, `None` when not
     /// computed (no noise).
     pub segmented_deg: Option<f64>,
@@ -140,7 +140,7 @@ pub struct CellStats {
     pub poses: usize,
     pub leveled: usize,
     pub leveled_fraction: f64,
-    /// Mean, median, 95th percentile and maximum error over leveled poses [deg].
+    /// Mean, median, 95th percentile and maximum error over leveled poses \[deg\].
     pub mean_deg: f64,
     pub median_deg: f64,
     pub p95_deg: f64,
@@ -153,9 +153,9 @@ pub struct CellStats {
     pub phantom_rate: f64,
     /// Valid pseudo-level points over wall hits of each pose's best scan (leveled poses).
     pub coverage: f64,
-    /// The paper's mean for this cell [deg], when it has one.
+    /// The paper's mean for this cell \[deg\], when it has one.
     pub paper_mean_deg: Option<f64>,
-    /// Median over all poses of the larger Cramér-Rao bound on the attitude [deg]: what no
+    /// Median over all poses of the larger Cramér-Rao bound on the attitude \[deg\]: what no
     /// leveler can beat ([`super::bound`]).
     pub bound_median_deg: f64,
     /// Poses whose bound lies within the leveling gate (`max_sigma`): the most a leveler with
@@ -169,7 +169,7 @@ pub struct CellStats {
     pub sigma_over_bound: f64,
     /// Failed poses by reason.
     pub failures: BTreeMap<String, usize>,
-    /// Every leveled pose's error [deg], in pose order (for histograms).
+    /// Every leveled pose's error \[deg\], in pose order (for histograms).
     pub errors_deg: Vec<f64>,
     /// Every pose's outcome, in pose order (written apart, as `poses.jsonl`).
     #[serde(skip)]

@@ -65,7 +65,7 @@ pub struct WallPlanes {
 
 /// Two segments share a line when their lines agree this closely [m, and rad].
 const SAME_LINE: f64 = 1e-9;
-/// A wall hit lies this close to its segment [m] (the ray caster's rounding is far smaller).
+/// A wall hit lies this close to its segment \[m\] (the ray caster's rounding is far smaller).
 const ON_SEGMENT: f64 = 1e-6;
 
 impl WallPlanes {
@@ -218,7 +218,7 @@ impl Linearization {
     }
 }
 
-/// 1-sigma bounds on `theta_x` and `theta_y` [rad] for range noise `sigma` [m]; `None` when
+/// 1-sigma bounds on `theta_x` and `theta_y` \[rad\] for range noise `sigma` \[m\]; `None` when
 /// the rays cannot fix the attitude (a corridor's parallel walls alone) or `sigma` is not
 /// positive.
 pub fn attitude_bound(rays: &[BoundRay], truth: &Pose, sigma: f64) -> Option<[f64; 2]> {
@@ -274,7 +274,7 @@ pub fn attitude_bound(rays: &[BoundRay], truth: &Pose, sigma: f64) -> Option<[f6
 const SEGMENTED_MIN_SHARE: f64 = 0.2;
 
 /// Up as the robust estimator finds it when told which surface every point met: each surface
-/// met by at least two scans in comparable numbers ([`SEGMENTED_MIN_SHARE`]) fitted as a plane
+/// met by at least two scans in comparable numbers (`SEGMENTED_MIN_SHARE`) fitted as a plane
 /// from the measured points, walls taken as vertical and the floor and ceiling as level, with
 /// no inflation ([`up::up_robust`]). Between the bound and a leveler's own sigma, its sigma tells
 /// how much is lost to finding the surfaces rather than to using them; `None` when those

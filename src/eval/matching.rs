@@ -31,7 +31,7 @@ pub struct ExperimentParams {
     pub seed: u64,
     /// The scanner (rays, field of view, range noise). Default `ScannerParams::default()`.
     pub scanner: ScannerParams,
-    /// Hinge elevations of the tilted run [rad]. Default -5, 0, 5 degrees.
+    /// Hinge elevations of the tilted run \[rad\]. Default -5, 0, 5 degrees.
     pub elevations: Vec<f64>,
     /// Odometry drift. Default `OdometryParams::default()`.
     pub odometry: OdometryParams,

@@ -10,9 +10,9 @@ use serde::Serialize;
 /// truth (closed form, least squares over positions).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
 pub struct Ate {
-    /// Root mean square position error [m].
+    /// Root mean square position error \[m\].
     pub rmse: f64,
-    /// Largest position error [m].
+    /// Largest position error \[m\].
     pub max: f64,
     /// The alignment applied to the estimate: `truth_from_estimate`.
     #[serde(skip)]
@@ -23,22 +23,22 @@ pub struct Ate {
 /// RPE over consecutive pairs: how far each estimated step is from the true step.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
 pub struct Rpe {
-    /// Median translation error of a step [m].
+    /// Median translation error of a step \[m\].
     pub median_translation: f64,
-    /// 95th percentile (nearest rank) of the translation error [m].
+    /// 95th percentile (nearest rank) of the translation error \[m\].
     pub p95_translation: f64,
-    /// Median heading error of a step [rad].
+    /// Median heading error of a step \[rad\].
     pub median_rotation: f64,
-    /// 95th percentile of the heading error [rad].
+    /// 95th percentile of the heading error \[rad\].
     pub p95_rotation: f64,
     /// Steps off by more than the bad-pair thresholds.
     pub bad_pairs: usize,
     pub pairs: usize,
 }
 
-/// A step is bad when off by more than this [m] (issue 4).
+/// A step is bad when off by more than this \[m\] (issue 4).
 pub const BAD_PAIR_TRANSLATION: f64 = 0.05;
-/// ... or by more than this [rad] (1 degree).
+/// ... or by more than this \[rad\] (1 degree).
 pub const BAD_PAIR_ROTATION: f64 = std::f64::consts::PI / 180.0;
 
 /// ATE of `estimate` against `truth` (same length, same order). `None` when empty or when the
@@ -81,7 +81,7 @@ pub fn ate(estimate: &[Pose2], truth: &[Pose2]) -> Option<Ate> {
     })
 }
 
-/// The error of each consecutive step: (translation [m], |heading| [rad]).
+/// The error of each consecutive step: (translation \[m\], |heading| \[rad\]).
 pub fn step_errors(estimate: &[Pose2], truth: &[Pose2]) -> Vec<(f64, f64)> {
     estimate
         .windows(2)

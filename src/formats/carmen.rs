@@ -26,7 +26,7 @@ use crate::scan::{Scan, Timestamp};
 use std::f64::consts::PI;
 use std::io::BufRead;
 
-/// Maximum range of `FLASER` scans when neither the caller nor the log says [m]. SICK scanners
+/// Maximum range of `FLASER` scans when neither the caller nor the log says \[m\]. SICK scanners
 /// of that era report no return as 50 m or as error codes at 81.83-81.91 m, and real logs
 /// (e.g. ACES) have no `PARAM` saying so: 50 m treats all of those as invalid.
 pub const DEFAULT_FLASER_MAX_RANGE: f64 = 50.0;
@@ -34,12 +34,12 @@ pub const DEFAULT_FLASER_MAX_RANGE: f64 = 50.0;
 /// Options of the CARMEN reader.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct CarmenParams {
-    /// Maximum range of `FLASER` scans [m]; readings at or beyond it are invalid. Default: the
+    /// Maximum range of `FLASER` scans \[m\]; readings at or beyond it are invalid. Default: the
     /// log's `PARAM robot_front_laser_max`, else [`DEFAULT_FLASER_MAX_RANGE`] (50 m).
     pub max_range: Option<f64>,
 }
 
-/// Bearings of an `n`-beam `FLASER` scan [rad], from -90 degrees.
+/// Bearings of an `n`-beam `FLASER` scan \[rad\], from -90 degrees.
 pub fn flaser_bearings(n: usize) -> Vec<f64> {
     let step = if n % 2 == 1 {
         PI / (n.max(2) - 1) as f64
@@ -106,7 +106,7 @@ fn is_message_name(w: &str) -> bool {
 }
 
 /// Parses one line. `Ok(None)` for lines that are not scans. `flaser_max_range` is the
-/// maximum range for `FLASER` lines [m].
+/// maximum range for `FLASER` lines \[m\].
 pub fn parse_carmen_line(line: &str, flaser_max_range: f64) -> Result<Option<Scan>, String> {
     let mut items = line.split_ascii_whitespace();
     let kind = match items.next() {

@@ -9,11 +9,11 @@ use std::sync::Arc;
 /// One valid reading placed in the robot frame.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct GridPoint {
-    /// The point in the robot frame [m].
+    /// The point in the robot frame \[m\].
     pub p: Point3<f64>,
     /// Unit direction of the ray that measured it, robot frame (range noise acts along it).
     pub dir: Vector3<f64>,
-    /// The measured range [m].
+    /// The measured range \[m\].
     pub range: f64,
 }
 
@@ -22,7 +22,7 @@ pub struct GridPoint {
 pub struct PoseGrid {
     /// Index into the pose's scan slice of each row.
     pub scan_index: Vec<usize>,
-    /// Elevation of each row [rad].
+    /// Elevation of each row \[rad\].
     pub elevation: Vec<f64>,
     /// Rays per row.
     pub cols: usize,
@@ -325,7 +325,7 @@ impl PlaneAccumulator {
         (c, raw)
     }
 
-    /// Fits the plane; `sigma` is the range noise [m] used for the bias correction (0 for none).
+    /// Fits the plane; `sigma` is the range noise \[m\] used for the bias correction (0 for none).
     pub fn fit(&self, sigma: f64) -> Option<PlaneFit> {
         if self.n < 3 || self.weight < 3.0 {
             return None;

@@ -59,7 +59,7 @@ pub enum SurfaceKind {
 /// Parameters of level estimation.
 #[derive(Clone, Debug, PartialEq)]
 pub struct LevelParams {
-    /// Range noise sigma [m]. `None` (default): the scans' `readings_sigma`, else estimated
+    /// Range noise sigma \[m\]. `None` (default): the scans' `readings_sigma`, else estimated
     /// from the data.
     pub sigma: Option<f64>,
     /// Up-vector estimator. Default: robust.
@@ -70,14 +70,14 @@ pub struct LevelParams {
     pub quad_cols: usize,
     /// Coplanarity tolerance of a quad, in range-noise sigmas. Default 3.5.
     pub coplanar_k: f64,
-    /// Floor on the noise sigma used for tolerances [m], so noise-free data still has one.
+    /// Floor on the noise sigma used for tolerances \[m\], so noise-free data still has one.
     /// Default 0.001.
     pub min_sigma: f64,
-    /// A plane is a wall when its normal is more than this from the robot's up [deg].
+    /// A plane is a wall when its normal is more than this from the robot's up \[deg\].
     /// Default 45 (the paper's bound on floor slopes).
     pub wall_min_angle_deg: f64,
     /// A quad whose opposite sides differ by more than this ratio is near a triangle and
-    /// dropped [1]. Default 0.3.
+    /// dropped \[1\]. Default 0.3.
     pub min_edge_ratio: f64,
     /// Region growing admits points within this many sigmas of a patch's plane. Default 3.
     pub grow_k: f64,
@@ -88,25 +88,25 @@ pub struct LevelParams {
     /// line at their foot only as a bend across rows, which `max_row_bend_sigmas` rejects;
     /// neither helps without the other.
     pub ray_tolerance: bool,
-    /// Smallest share of sigma used for that tolerance, `|d . n|` floor [1]. Default 0.1.
+    /// Smallest share of sigma used for that tolerance, `|d . n|` floor \[1\]. Default 0.1.
     pub min_ray_share: f64,
     /// Fit each patch's plane with its points weighted by their noise along the normal,
     /// `1 / (d . n)^2`. Default true: oblique points (on a floor, the grazing ones) are the
     /// precise ones.
     pub ray_weights: bool,
-    /// Floor on `|d . n|` in those weights [1]. Default 0.2.
+    /// Floor on `|d . n|` in those weights \[1\]. Default 0.2.
     pub ray_weight_floor: f64,
-    /// Region-growing seeds span about this many range-noise sigmas sideways [1]. Default 6.
+    /// Region-growing seeds span about this many range-noise sigmas sideways \[1\]. Default 6.
     pub seed_span_sigmas: f64,
-    /// Widest seed [columns]. Default 25.
+    /// Widest seed \[columns\]. Default 25.
     pub max_seed_cols: usize,
     /// Floors and ceilings also seed from the paper's narrow quads when the seeds are wider.
     /// Default true: along a level surface's normal the grazing rays carry little noise.
     pub narrow_level_seeds: bool,
     /// Patches whose residuals exceed this multiple of what the noise explains are tested for
-    /// being two planes [1]. Default 1.1.
+    /// being two planes \[1\]. Default 1.1.
     pub split_misfit: f64,
-    /// F statistic above which two planes replace one [1]. Default 20.
+    /// F statistic above which two planes replace one \[1\]. Default 20.
     pub split_f: f64,
     /// Nested splits allowed per patch. Default 3.
     pub split_depth: usize,
@@ -117,31 +117,31 @@ pub struct LevelParams {
     /// (it gave confident 20-degree errors); failing is better.
     pub two_row_seeds: bool,
     /// Patches spanning only two scans are used only when the others cannot fix up, and only
-    /// when their normal is at least this far from the robot's up [deg]. Default 60.
+    /// when their normal is at least this far from the robot's up \[deg\]. Default 60.
     pub two_row_min_angle_deg: f64,
     /// Robust reweighting passes of each patch's plane. Default 1.
     pub plane_iterations: usize,
-    /// Cauchy scale of those passes, in sigmas of each point's noise along the normal [1].
+    /// Cauchy scale of those passes, in sigmas of each point's noise along the normal \[1\].
     /// Default 2.5.
     pub plane_cauchy: f64,
     /// Grow the patches a second time without the points at the floor's or ceiling's height
     /// (robust estimator). Default false: it did not measurably help and costs a growth.
     pub flat_pass: bool,
     /// Height band around the floor and ceiling left out of walls in that pass, on top of
-    /// three sigmas of the range noise along the vertical [m]. Default 0.02.
+    /// three sigmas of the range noise along the vertical \[m\]. Default 0.02.
     pub flat_margin: f64,
-    /// Smallest patch kept [points]. Default 20.
+    /// Smallest patch kept \[points\]. Default 20.
     pub min_patch_points: usize,
     /// A patch too small to split is dropped when its residual variance exceeds the noise's by
-    /// more than this many standard deviations of a true plane's ratio [1]. Default 4; 0 keeps
+    /// more than this many standard deviations of a true plane's ratio \[1\]. Default 4; 0 keeps
     /// every patch.
     pub max_misfit_sigmas: f64,
     /// A patch needs at least this share of its points in columns where it holds two rows or
-    /// more [1]. Default 0.75; 0 accepts any patch over two rows.
+    /// more \[1\]. Default 0.75; 0 accepts any patch over two rows.
     pub min_stacked_share: f64,
     /// A patch over three or more rows is dropped when its rows' mean residuals bend away from
     /// its plane by more than this many standard deviations of a true plane's chi-square per
-    /// degree of freedom [1] (a wall line and a floor line at its foot). Default 4; 0 keeps
+    /// degree of freedom \[1\] (a wall line and a floor line at its foot). Default 4; 0 keeps
     /// every patch.
     pub max_row_bend_sigmas: f64,
     /// An edge row of a patch over four rows or more goes when its mean residual from the
@@ -159,13 +159,13 @@ pub struct LevelParams {
     /// facing_ceiling). Default 3.
     pub min_polygons: usize,
     /// The pose fails as parallel_walls when the smaller eigenvalue of up's information
-    /// matrix is below this fraction of the larger [1]. Default 0.01.
+    /// matrix is below this fraction of the larger \[1\]. Default 0.01.
     pub parallel_ratio: f64,
-    /// The pose fails as parallel_walls when either attitude sigma exceeds this [deg]: the
+    /// The pose fails as parallel_walls when either attitude sigma exceeds this \[deg\]: the
     /// walls seen do not pin the attitude down. Default 1.5, so that an accepted attitude is
     /// within 4.5 degrees at three sigmas (measured: no accepted pose off by more than 5).
     pub max_sigma_deg: f64,
-    /// Factor on the propagated attitude sigmas [1]: the noise model does not see
+    /// Factor on the propagated attitude sigmas \[1\]: the noise model does not see
     /// segmentation errors (a few floor points in a wall, a corner split a little off), which
     /// simulations show add about a fifth. Default 1.2.
     pub sigma_inflation: f64,
@@ -183,12 +183,12 @@ pub struct LevelParams {
     /// Default 30.
     pub min_level_points: usize,
     /// ... and only when its points fit one plane within this multiple of the residual the
-    /// noise explains [1]. Default 3. A patch that is no plane (a wall's strip seen through
+    /// noise explains \[1\]. Default 3. A patch that is no plane (a wall's strip seen through
     /// heavy noise, a wall foot) can fit a normal near the robot's own z axis; along that
     /// normal the grazing rays carry little noise, so its variance would claim a confidence
     /// it has not earned.
     pub max_level_misfit: f64,
-    /// Factor on a level plane's normal variance [1]. The noise model does not see what
+    /// Factor on a level plane's normal variance \[1\]. The noise model does not see what
     /// cleaning leaves of a wall's foot in a floor patch; simulations at 1-10 cm noise show its
     /// sigmas about this much too small. Default 2 (measured with `ray_tolerance`, which keeps
     /// the wall's foot out of floor patches; 4 without it).
@@ -201,34 +201,34 @@ pub struct LevelParams {
     /// 10 cm; a second pass changed nothing measurable).
     pub refine_passes: usize,
     /// Re-segment only poses whose first solution failed or has an attitude sigma above this
-    /// [deg]; 0 re-segments every pose. Default 0.6: re-segmenting a pose the first solution
+    /// \[deg\]; 0 re-segments every pose. Default 0.6: re-segmenting a pose the first solution
     /// already pins down to a few tenths of a degree changes its error by hundredths, and
     /// skipping it makes `level` a third faster at 1 cm (example plans, seeds 1-3 and five
     /// unseen plans: the same poses leveled and none ok off by more than 5 degrees; at 1.0,
     /// one was).
     pub refine_above_sigma_deg: f64,
-    /// Re-segmentation admits a point within this many sigmas of a model [1]. Default 3.
+    /// Re-segmentation admits a point within this many sigmas of a model \[1\]. Default 3.
     pub refine_k: f64,
     /// A re-segmented wall is used only when at least this many scans hold 15% of its points
     /// each. Default 2 (the floor's points are kept out of walls, so two scan lines on a wall
     /// are a wall).
     pub refine_min_rows: usize,
-    /// Walls whose level-frame normals are within this angle [deg] and whose lines coincide
+    /// Walls whose level-frame normals are within this angle \[deg\] and whose lines coincide
     /// within the tolerance are one wall. Default 10.
     pub refine_merge_deg: f64,
-    /// Factor on a re-segmented floor's or ceiling's normal variance [1]. Default 4 (with 2,
+    /// Factor on a re-segmented floor's or ceiling's normal variance \[1\]. Default 4 (with 2,
     /// 3-sigma coverage fell to 96.8% at 3 scans and 10 cm, from 99.4%).
     pub refine_level_inflation: f64,
-    /// Smallest up uncertainty assumed while assigning points [deg]. Default 0.2.
+    /// Smallest up uncertainty assumed while assigning points \[deg\]. Default 0.2.
     pub refine_min_sigma_deg: f64,
-    /// A re-segmented floor or ceiling must be within this angle of up [deg]. Default 10.
+    /// A re-segmented floor or ceiling must be within this angle of up \[deg\]. Default 10.
     pub refine_level_max_deg: f64,
     /// A point whose range steps to its neighbours in the adjacent scans like a level
     /// surface's (by more than `r de`, plus this many sigmas of the step's noise) joins no
-    /// re-segmented wall [1]. Default 1.
+    /// re-segmented wall \[1\]. Default 1.
     pub refine_step_k: f64,
     /// A re-segmented floor or ceiling is used only when its points fit one plane within this
-    /// multiple of the residual the noise explains [1]. Default 1.5 (2 or 3 leveled a few more
+    /// multiple of the residual the noise explains \[1\]. Default 1.5 (2 or 3 leveled a few more
     /// poses at 10 cm, but 3-sigma coverage fell to 92-94%: the extra floors were biased).
     pub refine_level_misfit: f64,
     /// Also look for walls the region growing missed, as lines in each leveled scan.
@@ -246,13 +246,13 @@ pub struct LevelParams {
     /// Fewest points of a scan's floor or ceiling line. Default 10.
     pub level_line_min_points: usize,
     /// A floor or ceiling line's points must fit it within this multiple of the residual the
-    /// noise explains [1]. Default 1.5.
+    /// noise explains \[1\]. Default 1.5.
     pub level_line_misfit: f64,
-    /// Factor on a floor or ceiling line's slope variance [1]. Default 4 (as
+    /// Factor on a floor or ceiling line's slope variance \[1\]. Default 4 (as
     /// `refine_level_inflation`).
     pub level_line_inflation: f64,
     /// A refined solution that uses floor or ceiling lines passes the gate only with both
-    /// attitude sigmas below this [deg] (and `max_sigma_deg`). Default 1.0.
+    /// attitude sigmas below this \[deg\] (and `max_sigma_deg`). Default 1.0.
     pub level_line_max_sigma_deg: f64,
     /// A floor or ceiling patch is not used as level when it only spans two scans thanks to
     /// points whose range hardly changes to a neighbouring scan's point (member of the patch
@@ -260,7 +260,7 @@ pub struct LevelParams {
     /// a wall's line at its foot, coplanar within high noise, gave planes 10 degrees off with
     /// sigmas under 1 degree (a box room and an angled room at 10 cm). Default true.
     pub level_steep_veto: bool,
-    /// ... only at range noise from this sigma [m]. Default 0.03: at 1 cm noise the misfit
+    /// ... only at range noise from this sigma \[m\]. Default 0.03: at 1 cm noise the misfit
     /// test already refuses such planes, and the veto cost a thousandth of a degree in the
     /// 1 cm means (floor points just in front of a wall's foot).
     pub level_steep_min_sigma: f64,
@@ -380,13 +380,13 @@ impl fmt::Display for FailReason {
 pub struct LevelEstimate {
     /// `None` when leveled, else why not.
     pub failure: Option<FailReason>,
-    /// The attitude (theta_x, theta_y) [rad]; `None` on failure.
+    /// The attitude (theta_x, theta_y) \[rad\]; `None` on failure.
     pub attitude: Option<Attitude>,
-    /// 1-sigma of theta_x and theta_y [rad]; `None` on failure.
+    /// 1-sigma of theta_x and theta_y \[rad\]; `None` on failure.
     pub sigmas: Option<[f64; 2]>,
     /// The up vector in the robot frame; `None` on failure.
     pub up: Option<Vector3<f64>>,
-    /// The range noise used [m].
+    /// The range noise used \[m\].
     pub range_sigma: f64,
     /// The grid of robot-frame points (absent when the scans could not form one).
     pub grid: Option<PoseGrid>,
@@ -623,7 +623,7 @@ pub fn level_pose_with(
     est
 }
 
-/// Largest attitude sigma of any start of re-segmentation [rad] (11.5 degrees): at 0.2 it
+/// Largest attitude sigma of any start of re-segmentation \[rad\] (11.5 degrees): at 0.2 it
 /// leveled 0.3 points fewer poses at 10 cm (3 scans), at 0.1 up to 0.7 points fewer.
 const START_MAX_SIGMA: f64 = 0.2;
 
@@ -637,7 +637,7 @@ pub struct Resegmented {
 
 /// Re-segmentation in the provisional level frame ([`refine`]), started from the solution
 /// found (`first`), or, when the gate refused it, from every start found without a level frame
-/// ([`blind_starts`]): of their refined models, the one that pins up down best is kept, and
+/// (`blind_starts`): of their refined models, the one that pins up down best is kept, and
 /// the others that pass the gate are its rivals. `None` when there is nothing to start from or
 /// no refined model fixes up.
 ///
@@ -1078,7 +1078,7 @@ const LEVEL_MIN_ROWS_NOISY: usize = 3;
 /// neighbouring scan, in the patch's prevailing direction, are kept. A patch mostly in one scan
 /// line is dropped: it fits that scan's own plane, whose normal is near the robot's z axis
 /// whatever the surface. From `level_steep_min_sigma` of noise up, so is a patch on two scan
-/// lines only ([`LEVEL_MIN_ROWS_NOISY`]).
+/// lines only (`LEVEL_MIN_ROWS_NOISY`).
 pub fn level_fits(est: &LevelEstimate, params: &LevelParams) -> Vec<PlaneFit> {
     let (Some(grid), true) = (
         est.grid.as_ref(),
@@ -1240,7 +1240,7 @@ fn grid_rows(est: &LevelEstimate) -> usize {
     )
 }
 
-/// The reported 1-sigma of theta_x and theta_y [rad]: the propagated covariance, scaled by
+/// The reported 1-sigma of theta_x and theta_y \[rad\]: the propagated covariance, scaled by
 /// `sigma_inflation`.
 fn attitude_sigmas(sol: &UpSolution, params: &LevelParams) -> [f64; 2] {
     sol.attitude_sigmas().map(|s| s * params.sigma_inflation)
@@ -1314,7 +1314,7 @@ mod tests {
         }
     }
 
-    /// How far `widened`'s covariance reaches beyond `kept`'s [deg], for a widening by a
+    /// How far `widened`'s covariance reaches beyond `kept`'s \[deg\], for a widening by a
     /// distance along one direction.
     fn added_deg(widened: &UpSolution, kept: &UpSolution) -> f64 {
         (widened.cov - kept.cov).norm().sqrt().to_degrees()

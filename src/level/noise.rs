@@ -16,7 +16,7 @@ use crate::scan::Scan;
 /// Median absolute deviation to standard deviation for a Gaussian.
 const MAD_TO_SIGMA: f64 = 1.482_602_218_505_602;
 
-/// Estimates the range noise sigma [m] from the scans of one or more poses; `None` when
+/// Estimates the range noise sigma \[m\] from the scans of one or more poses; `None` when
 /// there are too few triples of consecutive valid rays (fewer than 20).
 pub fn estimate_range_sigma(scans: &[Scan]) -> Option<f64> {
     estimate_range_sigma_with(scans, None)

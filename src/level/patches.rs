@@ -43,7 +43,7 @@ pub fn level_height(
     Some(*m)
 }
 
-/// Seed width [columns]: the paper's quad width, or wider where the range noise would leave a
+/// Seed width \[columns\]: the paper's quad width, or wider where the range noise would leave a
 /// quad's plane undetermined. A seed should span about `seed_span_sigmas` noise sigmas sideways
 /// at the grid's median range, so its normal is good to a few degrees and growth follows the
 /// true surface instead of wandering across a corner.

@@ -14,7 +14,7 @@ pub struct Polygon {
     /// Rows and columns spanned.
     pub rows: usize,
     pub cols: usize,
-    /// Corners in order around the quad, robot frame [m].
+    /// Corners in order around the quad, robot frame \[m\].
     pub corners: [Point3<f64>; 4],
     /// Area [m^2] (half the cross product of the diagonals).
     pub area: f64,

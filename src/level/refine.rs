@@ -11,9 +11,9 @@
 //! 2. assigns points to the floor and the ceiling by their distance from those planes, and the
 //!    others to walls by their horizontal distance from each wall's vertical plane; a point in
 //!    reach of two models (a corner, a wall's foot or top) is left out;
-//! 3. refits each model's plane from its points (bias-corrected TLS, [`PlaneAccumulator`]) and
-//!    re-estimates up from them with the robust estimator ([`up::up_robust`]), whose information
-//!    matrix gives the sigmas;
+//! 3. refits each model's plane from its points (bias-corrected TLS,
+//!    [`PlaneAccumulator`](super::grid::PlaneAccumulator)) and re-estimates up from them with the
+//!    robust estimator ([`up::up_robust`]), whose information matrix gives the sigmas;
 //!
 //! until up moves by a small fraction of its uncertainty (one pass by default: more did not
 //! measurably help). The walls' planes are refitted free (not forced vertical): their tilt
@@ -103,7 +103,7 @@ impl Leveled {
 
 /// Squared distance of a leveled point `q` (ray direction `d`) from a wall's vertical plane,
 /// in variances: its range noise along the wall's normal, and the error in up
-/// (`sigma_up` [rad]) at its height above the wall's pivot; `None` when it exceeds `k2`.
+/// (`sigma_up` \[rad\]) at its height above the wall's pivot; `None` when it exceeds `k2`.
 fn line_z2(
     l: &Line,
     q: &Vector3<f64>,
@@ -439,7 +439,7 @@ pub(crate) fn opaque(grid: &PoseGrid, fit: &PlaneFit, s: f64, params: &LevelPara
 const MAX_BEYOND: usize = 5;
 
 /// Squared angle between a level model's normal and up, in variances: the model's normal
-/// noise, inflated by its misfit, and up's own (`sigma_up` [rad]).
+/// noise, inflated by its misfit, and up's own (`sigma_up` \[rad\]).
 fn level_z2(fit: &PlaneFit, up: &Vector3<f64>, s: f64, sigma_up: f64) -> f64 {
     let n = fit.normal * fit.normal.dot(up).signum();
     let off = up - n * n.dot(up);
@@ -780,7 +780,7 @@ fn fit_line(
 /// A level plane with what assigning points to it needs.
 struct LevelModel<'a> {
     fit: &'a PlaneFit,
-    /// The plane's own tilt uncertainty [rad].
+    /// The plane's own tilt uncertainty \[rad\].
     tilt: f64,
 }
 
@@ -975,13 +975,13 @@ fn coplanar(a: &LevelLine, b: &LevelLine, s: f64, params: &LevelParams) -> bool 
 /// Point triples tried by [`level_start`].
 const START_HYPOTHESES: usize = 48;
 
-/// Largest tilt of a [`level_start`] plane from the robot's own up [deg].
+/// Largest tilt of a [`level_start`] plane from the robot's own up \[deg\].
 const START_MAX_TILT_DEG: f64 = 50.0;
 
 /// Passes stop when up moves by less than this fraction of its uncertainty.
 const CONVERGED: f64 = 0.05;
 
-/// Largest up uncertainty used for assignment tolerances [rad].
+/// Largest up uncertainty used for assignment tolerances \[rad\].
 const MAX_SIGMA_UP: f64 = 0.06;
 
 fn start_sigma(start: &UpSolution, params: &LevelParams) -> f64 {
@@ -1124,14 +1124,14 @@ pub struct LevelSteps {
     /// Every neighbouring row's step has the ceiling's sign and size.
     pub ceiling: Vec<bool>,
     /// Every neighbouring row's step has the floor's sign, and the floor's size or a size beyond
-    /// [`LINE_STEP_SIGMAS`] of the noise of two ranges: looser than `floor`, for floor lines
-    /// ([`level_lines`]), which must also lie at the floor's height and run level. The floor
+    /// `LINE_STEP_SIGMAS` of the noise of two ranges: looser than `floor`, for floor lines
+    /// (`level_lines`), which must also lie at the floor's height and run level. The floor
     /// just in front of a wall's foot steps less than `r de` to the wall above it, since the
     /// wall stops the scan above short of where it would meet the floor; traced, a scan's 19
     /// floor points 0.1-0.6 m in front of a wall were no candidates, and the pose, whose
     /// Cramér-Rao bound was 0.03 degrees, failed with walls alone (1.7 degrees of sigma).
     /// Ceiling lines keep `ceiling`: the same for them changed nothing measurable (74.38
-    /// against 74.36% leveled over the poses of [`LINE_STEP_SIGMAS`]) and leveled a traced
+    /// against 74.36% leveled over the poses of `LINE_STEP_SIGMAS`) and leveled a traced
     /// ceiling-room pose (`tests/level_refine.rs`, seed 6) 4 degrees off at 3.4 of its sigmas.
     pub floor_line: Vec<bool>,
 }
@@ -1280,7 +1280,7 @@ fn lowest_height(lv: &Leveled) -> Option<f64> {
     (*m < -MIN_LEVEL_DISTANCE).then_some(*m)
 }
 
-/// Lines closer in direction than this [deg] are pieces of one wall when both reach a point.
+/// Lines closer in direction than this \[deg\] are pieces of one wall when both reach a point.
 const SIMILAR_LINES_DEG: f64 = 20.0;
 
 /// New walls in the level frame, found scan by scan: a run of consecutive rays whose points
@@ -1371,7 +1371,7 @@ fn discover_lines(
 }
 
 /// A seed's points must fit its line within this multiple of the residual their noise
-/// explains [1].
+/// explains \[1\].
 const SEED_MISFIT: f64 = 2.0;
 
 /// Rays without a usable point that a growing line may step over.
@@ -1453,7 +1453,7 @@ impl Line2 {
 /// Refit-and-reassign rounds when a floor or ceiling is first found.
 const LEVEL_ROUNDS: usize = 3;
 
-/// Floor or ceiling candidates must be this far from the scanner's height [m]: a level plane
+/// Floor or ceiling candidates must be this far from the scanner's height \[m\]: a level plane
 /// through the scanner is seen edge-on.
 const MIN_LEVEL_DISTANCE: f64 = 0.1;
 

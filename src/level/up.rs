@@ -21,7 +21,7 @@ use nalgebra::{Matrix2, Matrix3, Vector2, Vector3};
 pub struct LevelLine {
     /// Unit direction in the robot frame (sign arbitrary).
     pub dir: Vector3<f64>,
-    /// Mean of the points [m], robot frame.
+    /// Mean of the points \[m\], robot frame.
     pub centroid: nalgebra::Point3<f64>,
     /// Points behind it.
     pub n: usize,
@@ -30,7 +30,7 @@ pub struct LevelLine {
     spread_dd: Matrix3<f64>,
     /// `sum_i t_i^2` [m^2].
     spread: f64,
-    /// Noise floor of a point [m] (`min_sigma`).
+    /// Noise floor of a point \[m\] (`min_sigma`).
     min_sigma: f64,
 }
 
@@ -253,12 +253,12 @@ impl UpSolution {
         j * self.cov * j.transpose()
     }
 
-    /// The larger of [`Self::attitude_sigmas`] [rad].
+    /// The larger of [`Self::attitude_sigmas`] \[rad\].
     pub fn max_attitude_sigma(&self) -> f64 {
         self.attitude_sigmas().iter().fold(0f64, |a, &b| a.max(b))
     }
 
-    /// 1-sigma of theta_x and theta_y [rad], propagating `cov` through `Attitude::from_up`.
+    /// 1-sigma of theta_x and theta_y \[rad\], propagating `cov` through `Attitude::from_up`.
     pub fn attitude_sigmas(&self) -> [f64; 2] {
         let h = 1e-6;
         let mut j = nalgebra::Matrix2::zeros();
@@ -300,11 +300,11 @@ fn tangent_basis(up: &Vector3<f64>) -> [Vector3<f64>; 2] {
 /// Cauchy scale for the robust weights, in standard deviations.
 const CAUCHY_C: f64 = 2.385;
 
-/// Largest tilt of the robot considered [rad]: the paper assumes floors below 45 degrees. The
+/// Largest tilt of the robot considered \[rad\]: the paper assumes floors below 45 degrees. The
 /// search keeps a margin beyond that; the gate refuses an up past `wall_min_angle_deg`.
 const MAX_TILT: f64 = 50.0 * std::f64::consts::PI / 180.0;
 
-/// Iteratively reweighted least squares for up over plane fits with range noise `sigma` [m].
+/// Iteratively reweighted least squares for up over plane fits with range noise `sigma` \[m\].
 ///
 /// A wrongly extracted plane (a seed across a wall's foot, clutter) can outweigh the good ones
 /// in a plain weighted fit, and reweighting from a bad start only confirms it. So the start is
@@ -406,7 +406,7 @@ const CHI2_PRIOR_DOF: f64 = 5.0;
 
 /// The information matrix and covariance of `up` given the planes. With `robust`, the
 /// Cauchy weights of the fit are applied. The covariance is inflated by the weighted
-/// chi-square per degree of freedom (with [`CHI2_PRIOR_DOF`] pseudo degrees of freedom at
+/// chi-square per degree of freedom (with `CHI2_PRIOR_DOF` pseudo degrees of freedom at
 /// one) when that exceeds one, so that a model that explains the normals worse than their
 /// noise predicts reports a larger, honest sigma.
 pub fn solution_at(up: Vector3<f64>, planes: &[PlaneObs], sigma: f64, robust: bool) -> UpSolution {

@@ -15,20 +15,20 @@ use nalgebra::Point2;
 /// Settings of the coarse search. Units in brackets.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct CorrelativeParams {
-    /// Half-width of the translation window around the guess [m]. Default 0.4.
+    /// Half-width of the translation window around the guess \[m\]. Default 0.4.
     pub window_xy: f64,
-    /// Half-width of the heading window around the guess [rad]. Default 20 deg.
+    /// Half-width of the heading window around the guess \[rad\]. Default 20 deg.
     pub window_theta: f64,
-    /// Heading step [rad]. Default 1 deg.
+    /// Heading step \[rad\]. Default 1 deg.
     pub step_theta: f64,
-    /// Fine table cell size [m]. Default 0.05.
+    /// Fine table cell size \[m\]. Default 0.05.
     pub resolution: f64,
     /// Fine cells per low-resolution cell, per axis [-]. Default 4.
     pub coarse_factor: usize,
     /// Source points used (spread evenly over the scan) [-]. Default 90.
     pub max_points: usize,
     /// Reference points farther than this from the reference scanner are left out of the
-    /// table, which keeps it small on long-range scans [m]. Default 15.
+    /// table, which keeps it small on long-range scans \[m\]. Default 15.
     pub max_range: f64,
 }
 

@@ -40,11 +40,11 @@ pub struct IcpParams {
     pub metric: Metric,
     /// Iteration limit. Default 50.
     pub max_iterations: usize,
-    /// Converged when the translation changes by less than this [m]. Default 1e-5.
+    /// Converged when the translation changes by less than this \[m\]. Default 1e-5.
     pub epsilon_xy: f64,
-    /// Converged when the heading changes by less than this [rad]. Default 1e-5.
+    /// Converged when the heading changes by less than this \[rad\]. Default 1e-5.
     pub epsilon_theta: f64,
-    /// Pairs farther apart than this are never associated [m]. Default 0.5.
+    /// Pairs farther apart than this are never associated \[m\]. Default 0.5.
     pub max_correspondence_distance: f64,
     /// Smallest fraction of associated pairs kept by trimming (FTrICP's lower bound on the
     /// overlap) [-]. Default 0.6. Set to 1 to switch trimming off.
@@ -56,7 +56,7 @@ pub struct IcpParams {
     pub overlap_lambda: f64,
     /// Robust kernel. Default Huber.
     pub kernel: Kernel,
-    /// Kernel scale [m]. Default 0.03.
+    /// Kernel scale \[m\]. Default 0.03.
     pub kernel_scale: f64,
     /// Point-to-line pairs are weighted by `1 / (cos² α + floor)`, α the angle between the
     /// source ray and the reference normal; `None` weighs all pairs alike [-]. Default 0.2.
@@ -94,7 +94,7 @@ pub struct IcpResult {
     pub associated: usize,
     /// Associated pairs with a residual within the kernel scale: the support of the result.
     pub inliers: usize,
-    /// RMS of the kept residuals in the last iteration [m].
+    /// RMS of the kept residuals in the last iteration \[m\].
     pub residual: f64,
     /// How well the kept pairs pin the translation: λ_min / λ_max of `Σ n nᵀ` over their
     /// reference normals (0 in a corridor, 0.5 at best) [-]; `None` when no pair had a normal.

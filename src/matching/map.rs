@@ -14,7 +14,7 @@ use std::collections::HashMap;
 /// Metascan map settings.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct MapParams {
-    /// Voxel edge [m]. Default 0.05.
+    /// Voxel edge \[m\]. Default 0.05.
     pub voxel_size: f64,
     /// A voxel stops averaging after this many points, so old well-seen places stay fixed
     /// and the update cost stays constant [-]. Default 20.

@@ -86,7 +86,7 @@ pub struct MatchReport {
     pub status: MatchStatus,
     pub iterations: usize,
     pub correspondences: usize,
-    /// RMS residual of the kept pairs [m]; `None` when no match ran.
+    /// RMS residual of the kept pairs \[m\]; `None` when no match ran.
     pub residual: Option<f64>,
     /// Whether the coarse correlative search ran for this scan.
     pub coarse: bool,
@@ -134,13 +134,13 @@ impl Default for MatcherParams {
 pub struct OdometryPrior {
     /// Translation sigma per metre of the step, x and y each [m/m].
     pub trans_per_m: f64,
-    /// Translation sigma added to every step [m].
+    /// Translation sigma added to every step \[m\].
     pub trans_const: f64,
     /// Heading sigma per radian of the step [rad/rad].
     pub rot_per_rad: f64,
-    /// Heading sigma added to every step [rad].
+    /// Heading sigma added to every step \[rad\].
     pub rot_const: f64,
-    /// Sigma of one weighted ICP residual, which sets the scale between the two [m].
+    /// Sigma of one weighted ICP residual, which sets the scale between the two \[m\].
     pub residual_sigma: f64,
 }
 
@@ -173,10 +173,10 @@ impl OdometryPrior {
 /// Which readings are used. Units in brackets.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct RangeParams {
-    /// Shorter readings are ignored (the robot's own body) [m]. Default 0.05.
+    /// Shorter readings are ignored (the robot's own body) \[m\]. Default 0.05.
     pub min_range: f64,
     /// Readings at or beyond this are ignored (CARMEN writes the maximum range for "no
-    /// return") [m]. Default 40.
+    /// return") \[m\]. Default 40.
     pub max_range: f64,
 }
 
@@ -194,7 +194,7 @@ impl Default for RangeParams {
 pub struct CheckParams {
     /// Fewest kept pairs for a trusted match [-]. Default 20.
     pub min_correspondences: usize,
-    /// Largest RMS residual of the kept pairs [m]. Default 0.08.
+    /// Largest RMS residual of the kept pairs \[m\]. Default 0.08.
     pub max_residual: f64,
     /// Smallest λ_min/λ_max of the kept pairs' normal scatter; below it the geometry is a
     /// corridor [-]. Default 0.02.
@@ -202,12 +202,12 @@ pub struct CheckParams {
     /// With `Coarse::Auto`, the coarse search runs when fewer than this fraction of the
     /// source points are inliers (residual within the kernel scale) [-]. Default 0.8.
     pub coarse_trigger_fraction: f64,
-    /// Largest accepted distance between the match and the odometry guess [m]. Default 0.6
+    /// Largest accepted distance between the match and the odometry guess \[m\]. Default 0.6
     /// (the coarse search's 0.4 m window and ICP's reach beyond it).
     pub max_correction_xy: f64,
-    /// Largest accepted heading change from the odometry guess [rad]. Default 30 deg.
+    /// Largest accepted heading change from the odometry guess \[rad\]. Default 30 deg.
     pub max_correction_theta: f64,
-    /// Metascan: the largest move the map may make to the pairwise stage's answer [m].
+    /// Metascan: the largest move the map may make to the pairwise stage's answer \[m\].
     /// Default 0.1.
     pub max_map_correction_xy: f64,
 }

@@ -2,8 +2,8 @@
 //! against a growing map (metascan).
 //!
 //! - [`solve`]: the exact closed-form least-squares motion for both metrics (Censi 2008).
-//! - [`reference`]: match targets: a scan with line normals and a kd-tree.
-//! - [`icp`]: the ICP loop with trimming (Chetverikov et al. 2002) and a robust kernel.
+//! - [`reference`](mod@reference): match targets: a scan with line normals and a kd-tree.
+//! - [`icp`](mod@icp): the ICP loop with trimming (Chetverikov et al. 2002) and a robust kernel.
 //! - [`correlative`]: the coarse correlative search (Olson 2009) that widens the basin.
 //! - [`map`]: the bounded voxel map for metascan matching.
 //! - [`matcher`]: a run of scans, one at a time, with fallback to odometry.

@@ -16,7 +16,7 @@ pub struct Neighbour {
     /// The reference surface there, when its neighbourhood is a line (not a corner, clutter
     /// or a lone point).
     pub line: Option<Line>,
-    /// Squared distance from the query [m²].
+    /// Squared distance from the query \[m²\].
     pub dist2: f64,
 }
 
@@ -44,9 +44,9 @@ pub struct Line {
 /// Normal estimation settings.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct NormalParams {
-    /// Neighbours on each side (in ray order) used for the line fit [rays]. Default 4.
+    /// Neighbours on each side (in ray order) used for the line fit \[rays\]. Default 4.
     pub window: usize,
-    /// A larger step between consecutive points ends the neighbourhood [m]. Default 0.3.
+    /// A larger step between consecutive points ends the neighbourhood \[m\]. Default 0.3.
     pub max_gap: f64,
     /// Largest accepted thickness of the fit, sqrt(λ_min / λ_max) of the scatter [-].
     /// Default 0.15.

@@ -20,7 +20,7 @@ use serde_json::json;
 pub struct AdaptiveParams {
     /// Retakes allowed per pose after the first set of scans. Default 2.
     pub max_retakes: usize,
-    /// How far each retake shifts the elevations [rad]; the direction comes from the failure
+    /// How far each retake shifts the elevations \[rad\]; the direction comes from the failure
     /// (facing the floor: tilt up, i.e. negative; facing the ceiling: positive). Default 0:
     /// the span of the elevation set plus one step, so a retake adds new elevations next to
     /// the old ones.
@@ -208,7 +208,7 @@ mod tests {
         (plain, adaptive)
     }
 
-    /// The attitude error of leveling `scans` [deg]; the pose must level.
+    /// The attitude error of leveling `scans` \[deg\]; the pose must level.
     fn leveled_error_deg(scans: &[Scan], pose: &Pose) -> f64 {
         let est = level_pose(scans, &LevelParams::default());
         assert!(est.is_ok(), "{:?}", est.failure);

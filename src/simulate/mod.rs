@@ -3,8 +3,8 @@
 //! - [`raycast`]: the scene ([`World`]) and its ray caster, with the hit conventions;
 //! - `grid`: the uniform grid that keeps ray casting fast on big plans;
 //! - [`scanner`]: the tilting scanner ([`ScannerParams`], [`simulate_pose`]);
-//! - [`random_poses`]: poses in a plan's free space;
-//! - [`odometry`]: drifting planar dead reckoning.
+//! - [`random_poses`](mod@random_poses): poses in a plan's free space;
+//! - [`odometry`](mod@odometry): drifting planar dead reckoning.
 //!
 //! Everything here is pure; randomness comes from [`stream_rng`], one stream per pose, so a
 //! run's output depends on its seed only, never on the thread count.

@@ -16,11 +16,11 @@ use rand_distr::{Distribution, StandardNormal};
 pub struct OdometryParams {
     /// Translation sigma per metre travelled, for x and y each [m/m]. Default 0.02.
     pub trans_per_m: f64,
-    /// Translation sigma added to every step, for x and y each [m]. Default 0.005.
+    /// Translation sigma added to every step, for x and y each \[m\]. Default 0.005.
     pub trans_const: f64,
     /// Heading sigma per radian turned [rad/rad]. Default 0.02.
     pub rot_per_rad: f64,
-    /// Heading sigma added to every step [rad]. Default 0.5 deg.
+    /// Heading sigma added to every step \[rad\]. Default 0.5 deg.
     pub rot_const: f64,
 }
 

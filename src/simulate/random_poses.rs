@@ -24,13 +24,13 @@ const ENCLOSURE_RAYS: usize = 16;
 /// How random poses are drawn.
 #[derive(Clone, Debug, PartialEq)]
 pub struct RandomPoseParams {
-    /// Largest roll and pitch; both are uniform in [-tilt, +tilt] [rad]. Default 20 deg.
+    /// Largest roll and pitch; both are uniform in [-tilt, +tilt] \[rad\]. Default 20 deg.
     pub tilt: f64,
-    /// Smallest distance from the robot's position to every wall segment [m]. Default 0.5.
+    /// Smallest distance from the robot's position to every wall segment \[m\]. Default 0.5.
     pub clearance: f64,
-    /// Scanner height above the floor, the pose's z [m]. Default 0.45.
+    /// Scanner height above the floor, the pose's z \[m\]. Default 0.45.
     pub height: f64,
-    /// Range within which all 16 enclosure rays must meet a wall [m]. Default 30 (the
+    /// Range within which all 16 enclosure rays must meet a wall \[m\]. Default 30 (the
     /// scanner's default maximum range).
     pub enclosure_range: f64,
     /// Positions tried per pose before giving up. Default 10,000.

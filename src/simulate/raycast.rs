@@ -22,13 +22,13 @@ use nalgebra::{Point2, Point3, Vector2, Vector3};
 
 /// Relative extension of each segment at both ends (fraction of its length).
 pub(crate) const END_SLACK: f64 = 1e-9;
-/// Smallest range that counts as a hit [m]: a ray starting on a surface does not hit it.
+/// Smallest range that counts as a hit \[m\]: a ray starting on a surface does not hit it.
 pub(crate) const MIN_RANGE: f64 = 1e-9;
 
 /// What a ray met first, and how far along it.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct RayHit {
-    /// Distance from the ray's origin to the hit point [m].
+    /// Distance from the ray's origin to the hit point \[m\].
     pub range: f64,
     /// The surface hit; never `Hit::Nothing`.
     pub hit: Hit,

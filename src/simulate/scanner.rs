@@ -13,14 +13,14 @@ use rand_distr::{Distribution, StandardNormal};
 pub struct ScannerParams {
     /// Rays per scan, spread evenly over the field of view, both ends included. Default 181.
     pub rays: usize,
-    /// Field of view, centred on the robot's forward axis [rad]. Default pi (180 deg).
+    /// Field of view, centred on the robot's forward axis \[rad\]. Default pi (180 deg).
     pub fov: f64,
-    /// Longest range that still returns [m]; farther surfaces give no reading. Default 30.
+    /// Longest range that still returns \[m\]; farther surfaces give no reading. Default 30.
     pub max_range: f64,
-    /// Standard deviation of the Gaussian noise added to each range [m]. Default 0.01
+    /// Standard deviation of the Gaussian noise added to each range \[m\]. Default 0.01
     /// (a SICK LMS 200, the paper's appendix C).
     pub noise_sigma: f64,
-    /// Hinge offset `o` [m]: the scanner's origin seen from the hinge axis point, in the
+    /// Hinge offset `o` \[m\]: the scanner's origin seen from the hinge axis point, in the
     /// scanner's tilted frame (contract). Default none (the hinge passes through the origin).
     pub hinge_offset: Option<[f64; 3]>,
     /// Write `readings_sigma` (the noise sigma for every ray) into the scans. Default false:
@@ -42,7 +42,7 @@ impl Default for ScannerParams {
 }
 
 impl ScannerParams {
-    /// The bearing of every ray [rad], from `-fov/2` to `+fov/2`.
+    /// The bearing of every ray \[rad\], from `-fov/2` to `+fov/2`.
     pub fn bearings(&self) -> Vec<f64> {
         even_bearings(self.rays, -self.fov / 2.0, self.fov / 2.0)
     }
@@ -71,7 +71,7 @@ impl ScannerParams {
     }
 }
 
-/// `n` hinge elevations `step` apart, centred on level [rad], in increasing order: 3 scans
+/// `n` hinge elevations `step` apart, centred on level \[rad\], in increasing order: 3 scans
 /// 5 degrees apart give -5, 0, +5 degrees (positive tilts the beams down).
 pub fn elevations_centred(n: usize, step: f64) -> Vec<f64> {
     let mid = (n as f64 - 1.0) / 2.0;

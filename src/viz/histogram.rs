@@ -5,7 +5,7 @@ use plotters::coord::Shift;
 use plotters::prelude::*;
 use std::path::Path;
 
-/// Bucket width [deg] and count of the paper's Fig. 6.
+/// Bucket width \[deg\] and count of the paper's Fig. 6.
 pub const BUCKET_DEG: f64 = 0.5;
 pub const BUCKETS: usize = 10;
 
@@ -24,7 +24,7 @@ pub fn bucket_percentages(errors_deg: &[f64]) -> [f64; BUCKETS] {
     counts.map(|c| 100.0 * c as f64 / n)
 }
 
-/// One bar series: its label and its errors [deg].
+/// One bar series: its label and its errors \[deg\].
 pub struct Series {
     pub label: String,
     pub errors_deg: Vec<f64>,

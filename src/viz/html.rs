@@ -34,7 +34,7 @@ pub struct ViewParams {
     /// Largest number of scan points embedded in a page; beyond it whole poses are skipped
     /// evenly (every k-th pose kept) so the page stays small and fluid. Default 250,000.
     pub max_points: usize,
-    /// Scanner height above the floor [m] used to place `level` output when no 6-DOF pose of
+    /// Scanner height above the floor \[m\] used to place `level` output when no 6-DOF pose of
     /// the same sequence is loaded (level output carries only `[x, y, rz]`). Default 0.45, the
     /// height of the paper's protocol (issue 3).
     pub default_height: f64,
@@ -220,9 +220,9 @@ fn wall_polygons(scan: &Scan, key: &str) -> Vec<Vec<Point3<f64>>> {
 }
 
 /// Consecutive points farther apart than this plus [`JUMP_FRACTION`] of the nearer range are
-/// not joined: they lie on different surfaces (a depth discontinuity) [m].
+/// not joined: they lie on different surfaces (a depth discontinuity) \[m\].
 const JUMP_MIN: f64 = 0.3;
-/// See [`JUMP_MIN`] [1].
+/// See [`JUMP_MIN`] \[1\].
 const JUMP_FRACTION: f64 = 0.15;
 
 /// Splits a scan into polylines of consecutive valid rays, mapped by `f`; an invalid ray or a

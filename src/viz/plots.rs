@@ -61,11 +61,11 @@ impl GroupedBars {
 /// One cell of a Table I run: mean attitude error at a noise level and number of scans.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct AccuracyCell {
-    /// Range noise sigma [m].
+    /// Range noise sigma \[m\].
     pub noise: f64,
     /// Scans per pose.
     pub scans: usize,
-    /// Mean of max(|dx|, |dy|) over leveled poses [deg].
+    /// Mean of max(|dx|, |dy|) over leveled poses \[deg\].
     pub mean_deg: f64,
 }
 
@@ -212,13 +212,13 @@ pub fn grouped_bars_png(
 #[derive(Clone, Debug, PartialEq, Default)]
 pub struct MapPanel {
     pub title: String,
-    /// Wall segments of the true floor plan, `[x0, y0, x1, y1]` [m].
+    /// Wall segments of the true floor plan, `[x0, y0, x1, y1]` \[m\].
     pub walls: Vec<[f64; 4]>,
-    /// Scan points in the world [m].
+    /// Scan points in the world \[m\].
     pub points: Vec<[f64; 2]>,
-    /// True positions in time order [m].
+    /// True positions in time order \[m\].
     pub truth: Vec<[f64; 2]>,
-    /// Estimated positions in time order [m].
+    /// Estimated positions in time order \[m\].
     pub estimate: Vec<[f64; 2]>,
 }
 
