@@ -543,7 +543,10 @@ fn level_lines(ctx: &LineContext, kind: SurfaceKind, params: &LevelParams) -> Le
         .filter_map(|row| fit_line(grid, row, ctx.up, Some(ctx.sigma_up), s, params, short))
         .collect();
     let full = |(l, _): &(LevelLine, Vec<usize>)| l.n >= min_points;
-    if found.len() >= 2 && found.iter().any(full) && one_plane(grid, &found, s, params) {
+    // Short lines count only in a plane with a full one; without short lines, the full lines
+    // alone are tried below.
+    let full_lines = found.iter().filter(|l| full(l)).count();
+    if full_lines > 0 && full_lines < found.len() && one_plane(grid, &found, s, params) {
         if let Some(plane) = level_plane(ctx, &found, params) {
             return plane;
         }
