@@ -884,7 +884,8 @@ fn sampled_plane(
                 .is_some_and(|g| on_plane(g, &p0, &normal))
         })
     };
-    // Counted per hypothesis; only the best one's points are gathered.
+    // Counted per hypothesis (most lose by far, and are given up early); only the best one's
+    // points are gathered.
     let mut best: Option<(usize, Point3<f64>, Vector3<f64>)> = None;
     for h in 0..START_HYPOTHESES {
         // Three points spread over the candidates: a fixed stride walk, no random state.
@@ -906,13 +907,31 @@ fn sampled_plane(
         if !accept(&normal) || !clear_of_scanner(&normal, &pa.p) {
             continue;
         }
-        let count = inliers(pa.p, normal).count();
-        if best.is_none_or(|b| count > b.0) {
+        let on = |i: usize| {
+            grid.points[i]
+                .as_ref()
+                .is_some_and(|g| on_plane(g, &pa.p, &normal))
+        };
+        if let Some(count) = count_beating(idx, on, best.map(|b| b.0)) {
             best = Some((count, pa.p, normal));
         }
     }
     let (_, p0, normal) = best?;
     Some(inliers(p0, normal).collect())
+}
+
+/// How many of `idx` satisfy `on`, when that beats `best` (more than it; anything beats
+/// `None`); `None` as soon as the points left cannot beat it.
+fn count_beating(idx: &[usize], on: impl Fn(usize) -> bool, best: Option<usize>) -> Option<usize> {
+    let mut count = 0;
+    for (j, &i) in idx.iter().enumerate() {
+        if on(i) {
+            count += 1;
+        } else if best.is_some_and(|b| count + (idx.len() - j - 1) <= b) {
+            return None;
+        }
+    }
+    best.is_none_or(|b| count > b).then_some(count)
 }
 
 /// Floor and ceiling lines found without a level frame, for a start where neither the walls
@@ -1805,6 +1824,21 @@ mod tests {
         let clear = |f: PlaneFit| clear_of_scanner(&f.normal, &f.centroid);
         assert!(clear(fit_of(&floor)));
         assert!(!clear(fit_of(&through)));
+    }
+
+    proptest::proptest! {
+        /// The early exit changes nothing: a count beats `best` exactly when the full count
+        /// does, and is then the full count.
+        #[test]
+        fn counting_with_an_early_exit_agrees_with_a_full_count(
+            on in proptest::collection::vec(proptest::bool::ANY, 0..80),
+            best in proptest::option::of(0usize..90),
+        ) {
+            let idx: Vec<usize> = (0..on.len()).collect();
+            let full = on.iter().filter(|&&b| b).count();
+            let expected = best.is_none_or(|b| full > b).then_some(full);
+            proptest::prop_assert_eq!(count_beating(&idx, |i| on[i], best), expected);
+        }
     }
 
     /// The sample finds the plane of most points among those it samples from, passing clear
