@@ -562,6 +562,9 @@ fn level_lines(ctx: &LineContext, kind: SurfaceKind, params: &LevelParams) -> Le
         if let Some(plane) = level_plane(ctx, &found, params) {
             return plane;
         }
+        if !fit_one_plane(grid, &found, s) {
+            return LevelEvidence::None;
+        }
     }
     LevelEvidence::Lines(found.into_iter().map(|(l, _)| l).collect())
 }
@@ -597,6 +600,20 @@ fn level_plane(
         && opaque(grid, &fit, s, params))
     .then_some(LevelEvidence::Plane(fit, members))
 }
+
+/// Whether the points of two or more level lines fit one plane within
+/// [`LINES_PLANE_MISFIT`] of their noise. One floor's lines always do; a wall's line just
+/// above its foot and a floor line at another bearing are skew (traced: a zigzag wall's foot
+/// 10 cm up, taken with a floor line, pulled a pose 8 degrees off with a sigma of 0.4).
+fn fit_one_plane(grid: &PoseGrid, lines: &[(LevelLine, Vec<usize>)], s: f64) -> bool {
+    let mut members: Vec<usize> = lines.iter().flat_map(|(_, m)| m.iter().copied()).collect();
+    members.sort_unstable();
+    fit_members(grid, &members, s).is_some_and(|fit| fit.misfit_ratio(s) <= LINES_PLANE_MISFIT)
+}
+
+/// Largest misfit ratio of the plane through level lines' points for the lines to stand as
+/// one floor or ceiling ([`fit_one_plane`]).
+const LINES_PLANE_MISFIT: f64 = 3.0;
 
 /// Whether level lines (each with its points) can all lie in one plane: with three or more,
 /// each must lie in the plane of the others' points. Any two lines pass, as do lines of one
@@ -1607,6 +1624,11 @@ mod tests {
     }
 
     fn floor_evidence(grid: &PoseGrid) -> LevelEvidence {
+        floor_evidence_within(grid, 0.2f64.to_radians())
+    }
+
+    /// [`level_lines`]' floor in the robot frame taken as level, up known within `sigma_up`.
+    fn floor_evidence_within(grid: &PoseGrid, sigma_up: f64) -> LevelEvidence {
         let lv = Leveled::new(grid, &Rotation3::identity());
         let all = vec![true; grid.points.len()];
         let none = vec![false; grid.points.len()];
@@ -1617,9 +1639,29 @@ mod tests {
             taken: &none,
             up: &Vector3::z(),
             s: 0.01,
-            sigma_up: 0.2f64.to_radians(),
+            sigma_up,
         };
         level_lines(&ctx, SurfaceKind::Floor, &LevelParams::default())
+    }
+
+    /// Two scans' floor lines stand only when their points fit one plane. From a loose start
+    /// (up known within `MAX_SIGMA_UP`) a wall's foot 10 cm up at another bearing passes for
+    /// floor by its height, but is skew to the floor line ahead (traced on a zigzag wall,
+    /// where such a pair leveled a pose 8 degrees off with a sigma of 0.4); one floor's two
+    /// lines make a plane.
+    #[test]
+    fn two_floor_lines_must_fit_one_plane() {
+        let evidence = |side_z: f64| {
+            let side = run(
+                Vector3::new(0.5, -2.5, side_z),
+                Vector3::new(2.5, -1.5, side_z),
+                20,
+            );
+            let grid = grid_of([Vec::new(), across(2.0, -0.45, 20), side]);
+            floor_evidence_within(&grid, MAX_SIGMA_UP)
+        };
+        assert!(matches!(evidence(-0.35), LevelEvidence::None));
+        assert!(matches!(evidence(-0.45), LevelEvidence::Plane(..)));
     }
 
     /// A level plane's lean from up counts against the plane's own noise and up's: many
