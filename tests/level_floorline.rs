@@ -146,9 +146,11 @@ fn a_floor_line_and_a_wall_line_at_its_foot_are_no_floor() {
             .map(|f| f.normal.dot(&up).abs().min(1.0).acos().to_degrees())
             .fold(0f64, f64::max)
     };
-    // Both rules start at `level_steep_min_sigma` of noise.
+    // Both rules start at `level_steep_min_sigma` of noise; the steep veto also holds below
+    // it for a patch on two scan lines, as this one is.
     let without = LevelParams {
         level_steep_min_sigma: f64::INFINITY,
+        level_steep_veto: false,
         ..LevelParams::default()
     };
     assert!(

@@ -1,7 +1,7 @@
-//! Poses traced in rooms the leveler was not tuned on (a room with a zigzag wall), each once
-//! reported ok while many degrees off. Each test takes the protocol's scans of the traced pose
-//! (`eval accuracy`'s random streams) and asks that the pose fails or comes out honest: each
-//! angle within three of its reported sigmas.
+//! Poses traced in rooms the leveler was not tuned on (an L-shaped room facing a corner, a
+//! room with a zigzag wall), each once reported ok while many degrees off. Each test takes the
+//! protocol's scans of the traced pose (`eval accuracy`'s random streams) and asks that the
+//! pose fails or comes out honest: each angle within three of its reported sigmas.
 
 use levelscan::geometry::Pose;
 use levelscan::level::{LevelParams, level_pose};
@@ -21,6 +21,38 @@ fn plan(wall_height: f64, walls: &[&[[f64; 2]]]) -> Plan {
         ceiling: false,
         poses: Vec::new(),
     }
+}
+
+/// A 12 x 10 m L-shaped room with a square pillar and a slanted one.
+fn l_room() -> Plan {
+    plan(
+        3.0,
+        &[
+            &[
+                [0.0, 0.0],
+                [12.0, 0.0],
+                [12.0, 5.0],
+                [5.0, 5.0],
+                [5.0, 10.0],
+                [0.0, 10.0],
+                [0.0, 0.0],
+            ],
+            &[
+                [2.25, 2.25],
+                [2.75, 2.25],
+                [2.75, 2.75],
+                [2.25, 2.75],
+                [2.25, 2.25],
+            ],
+            &[
+                [9.1156, 1.7439],
+                [9.3975, 1.8465],
+                [8.8844, 3.2561],
+                [8.6025, 3.1535],
+                [9.1156, 1.7439],
+            ],
+        ],
+    )
 }
 
 /// A 10 x 6 m room whose south wall zigzags in 1 m segments, 0.4 m deep, with two partitions.
@@ -68,6 +100,23 @@ fn fails_or_is_honest(plan: &Plan, pose: Pose, stream: u64, k: u64, nscans: usiz
 /// and the scan count.
 fn stream(seed: u64, plan_index: u64, nscans: usize) -> u64 {
     seed + (plan_index << 32) + ((nscans as u64) << 48)
+}
+
+/// At 1 cm, pitched 18 degrees down towards a corner: two scan lines at the foot of a wall
+/// not grown as a patch, a wall's line parallel to the floor line below it, made a "floor"
+/// 15 degrees off that fits its plane within the noise; with the one wall seen it leveled the
+/// pose 13 degrees off with a sigma of 0.5 (`level_steep_min_sigma`).
+#[test]
+fn l_room_corner_at_1cm_a_wall_line_over_a_floor_line_is_no_floor() {
+    let pose = Pose::new(
+        10.7613456762732,
+        3.6010795479709587,
+        0.45,
+        0.4857693270488581,
+        0.31910215006206416,
+        0.16223675554394157,
+    );
+    fails_or_is_honest(&l_room(), pose, stream(140, 0, 4), 55, 4, 0.01);
 }
 
 /// At 5 cm with three scans, from a start whose sigma was 3.5 degrees: a zigzag wall's foot

@@ -260,9 +260,13 @@ pub struct LevelParams {
     /// a wall's line at its foot, coplanar within high noise, gave planes 10 degrees off with
     /// sigmas under 1 degree (a box room and an angled room at 10 cm). Default true.
     pub level_steep_veto: bool,
-    /// ... only at range noise from this sigma \[m\]. Default 0.03: at 1 cm noise the misfit
-    /// test already refuses such planes, and the veto cost a thousandth of a degree in the
-    /// 1 cm means (floor points just in front of a wall's foot).
+    /// ... for every patch from range noise of this sigma \[m\], and below it for a patch on
+    /// fewer than `LEVEL_MIN_ROWS_NOISY` scan lines. Default 0.03: at 1 cm noise the misfit
+    /// test refuses most such planes, and the veto on every patch cost a thousandth of a
+    /// degree in the 1 cm means (floor points just in front of a wall's foot). On two scan
+    /// lines it does not: a wall's line parallel to the floor line below it always fits a
+    /// plane, and one such "floor", 15 degrees off with a misfit of 0.9, leveled a 1 cm pose
+    /// (an L-shaped room, facing a corner) 13 degrees off with a sigma of 0.5.
     pub level_steep_min_sigma: f64,
 }
 
@@ -1157,10 +1161,8 @@ fn clean_level_fit(
         let from_below = i >= cols && member(i - cols) && levelish(i - cols);
         levelish(i) || from_below
     };
-    // From this noise up a wall's line and a floor line can pass for one plane.
     let noisy = sigma >= params.level_steep_min_sigma;
-    let veto = params.level_steep_veto && noisy;
-    // The fit with every kept point, and without those on a steep surface.
+    // The fit with every kept point, and without those on a steep surface (`on_steep`).
     let mut all = grid::PlaneAccumulator::default();
     let mut flat = grid::PlaneAccumulator::default();
     let mut rows_all = vec![0usize; grid.rows()];
@@ -1169,7 +1171,7 @@ fn clean_level_fit(
         let Some(g) = &grid.points[i] else { continue };
         all.add(g);
         rows_all[rc.row(i)] += 1;
-        if !(veto && on_steep(i)) {
+        if !(params.level_steep_veto && on_steep(i)) {
             flat.add(g);
             rows_flat[rc.row(i)] += 1;
         }
@@ -1183,7 +1185,11 @@ fn clean_level_fit(
         acc.fit(sigma)
     };
     let fit_all = usable(&all, &rows_all);
-    let steep = all.n - flat.n;
+    // From `level_steep_min_sigma` of noise a wall's line and a floor line can pass for one
+    // plane; below it, on two scan lines only they still can, when they are parallel.
+    let veto = params.level_steep_veto
+        && (noisy || refine::supported_rows(&rows_all, 0.2) < LEVEL_MIN_ROWS_NOISY);
+    let steep = if veto { all.n - flat.n } else { 0 };
     // A plane that only the steep points make (a floor line and a wall's line at its foot,
     // coplanar within the noise) is no floor.
     let fit = fit_all?;
