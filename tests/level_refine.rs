@@ -264,8 +264,10 @@ impl ProtocolPose {
 /// solution that failed, and a refined one 5 degrees off with a sigma of 1.4 degrees, far from
 /// the start it grew from (two rooms seed 28). At 5-10 cm with three scans, a "floor" on two
 /// scan lines, a wall's and the floor's below it, 7 and 6 degrees off with sigmas of 0.4 and
-/// 1.5 degrees (angled seed 15, office seed 14). Each now fails or lies within three of its
-/// sigmas.
+/// 1.5 degrees (angled seed 15, office seed 14). At 1 cm with four scans, pitched 19 degrees
+/// up, a far wall's plane through its corner with the ceiling, 7 degrees off vertical, 7
+/// degrees off with a sigma of 1.4 (ceiling seed 108). Each now fails or lies within three of
+/// its sigmas.
 #[test]
 fn traced_poses_reported_ok_and_wrong_now_fail_or_are_right() {
     // (plan, seed, poses drawn, pose, scans, noise)
@@ -283,6 +285,7 @@ fn traced_poses_reported_ok_and_wrong_now_fail_or_are_right() {
         ("two_rooms", 28, 150, 115, 5, 0.05),
         ("angled", 15, 100, 75, 3, 0.05),
         ("office", 14, 100, 58, 3, 0.10),
+        ("ceiling", 108, 100, 24, 4, 0.01),
     ] {
         let protocol = ProtocolPose {
             name,
