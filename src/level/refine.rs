@@ -228,7 +228,8 @@ pub fn refine(
         // steps the highest points are the tops of walls, which keep them.
         if !level_fits.iter().any(|f| f.centroid.coords.dot(&up) > 0.0) {
             if let Some(high) = extreme_height(&lv, false) {
-                let band = level_band(&lv, high, false, sigma_up, k, s, params);
+                let band: Vec<usize> =
+                    level_band(&lv, high, false, sigma_up, k, s, params).collect();
                 if band.iter().filter(|&&i| steps.ceiling[i]).count() >= CEILING_BAND_MIN_STEPS {
                     for i in band {
                         near_level[i] = true;
@@ -1335,25 +1336,22 @@ fn extreme_height(lv: &Leveled, lowest: bool) -> Option<f64> {
 /// The points within `refine_k` of their vertical tolerance (range noise along the vertical,
 /// and an error of up `sigma_up` at their horizontal distance) above `height` (`above`) or
 /// below it.
-fn level_band(
-    lv: &Leveled,
+fn level_band<'a>(
+    lv: &'a Leveled,
     height: f64,
     above: bool,
     sigma_up: f64,
     k: f64,
     s: f64,
-    params: &LevelParams,
-) -> Vec<usize> {
-    lv.q.iter()
-        .enumerate()
-        .filter_map(|(i, q)| {
-            let (q, d) = q.as_ref()?;
-            let lever = q.xy().norm() * sigma_up;
-            let band = k * (s * s * d.z * d.z + lever * lever).sqrt() + params.flat_margin;
-            let into = if above { q.z - height } else { height - q.z };
-            (into < band).then_some(i)
-        })
-        .collect()
+    params: &'a LevelParams,
+) -> impl Iterator<Item = usize> + 'a {
+    lv.q.iter().enumerate().filter_map(move |(i, q)| {
+        let (q, d) = q.as_ref()?;
+        let lever = q.xy().norm() * sigma_up;
+        let band = k * (s * s * d.z * d.z + lever * lever).sqrt() + params.flat_margin;
+        let into = if above { q.z - height } else { height - q.z };
+        (into < band).then_some(i)
+    })
 }
 
 /// Fewest points stepping as a ceiling does ([`LevelSteps::ceiling`]) among the highest
