@@ -5,7 +5,13 @@ use levelscan::formats::wall::parse_plan;
 
 #[test]
 fn example_plans_are_strict_json_and_valid_plans() {
-    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/plans");
+    for dir in ["examples/plans", "examples/plans/holdout"] {
+        assert_plans_in(dir);
+    }
+}
+
+fn assert_plans_in(dir: &str) {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join(dir);
     let mut seen = 0;
     for entry in std::fs::read_dir(&dir).unwrap() {
         let path = entry.unwrap().path();
@@ -19,5 +25,5 @@ fn example_plans_are_strict_json_and_valid_plans() {
         assert!(!plan.walls.is_empty());
         seen += 1;
     }
-    assert!(seen >= 5, "only {seen} plans");
+    assert!(seen >= 5, "only {seen} plans in {}", dir.display());
 }
