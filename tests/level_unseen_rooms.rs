@@ -1,7 +1,8 @@
-//! Poses traced in rooms the leveler was not tuned on (an L-shaped room facing a corner, a
-//! room with a zigzag wall), each once reported ok while many degrees off. Each test takes the
-//! protocol's scans of the traced pose (`eval accuracy`'s random streams) and asks that the
-//! pose fails or comes out honest: each angle within three of its reported sigmas.
+//! Poses traced in rooms the leveler was not tuned on (`examples/plans/holdout/`: an L-shaped
+//! room facing a corner, a room with a zigzag wall), each once reported ok while many degrees
+//! off. Each test takes the protocol's scans of the traced pose (`eval accuracy`'s random
+//! streams) and asks that the pose fails or comes out honest: each angle within three of its
+//! reported sigmas.
 
 use levelscan::geometry::Pose;
 use levelscan::level::{LevelParams, level_pose};
@@ -9,61 +10,14 @@ use levelscan::plan::Plan;
 use levelscan::simulate::{
     ScannerParams, Stream, World, elevations_centred, simulate_pose, stream_rng,
 };
-use nalgebra::Point2;
 
-fn plan(wall_height: f64, walls: &[&[[f64; 2]]]) -> Plan {
-    Plan {
-        wall_height,
-        walls: walls
-            .iter()
-            .map(|w| w.iter().map(|&[x, y]| Point2::new(x, y)).collect())
-            .collect(),
-        ceiling: false,
-        poses: Vec::new(),
-    }
-}
-
-/// A 12 x 10 m L-shaped room with a square pillar and a slanted one.
-fn l_room() -> Plan {
-    plan(
-        3.0,
-        &[
-            &[
-                [0.0, 0.0],
-                [12.0, 0.0],
-                [12.0, 5.0],
-                [5.0, 5.0],
-                [5.0, 10.0],
-                [0.0, 10.0],
-                [0.0, 0.0],
-            ],
-            &[
-                [2.25, 2.25],
-                [2.75, 2.25],
-                [2.75, 2.75],
-                [2.25, 2.75],
-                [2.25, 2.25],
-            ],
-            &[
-                [9.1156, 1.7439],
-                [9.3975, 1.8465],
-                [8.8844, 3.2561],
-                [8.6025, 3.1535],
-                [9.1156, 1.7439],
-            ],
-        ],
-    )
-}
-
-/// A 10 x 6 m room whose south wall zigzags in 1 m segments, 0.4 m deep, with two partitions.
-fn zigzag_room() -> Plan {
-    let mut south = vec![[0.0, 0.0]];
-    south.extend((1..=10).map(|k| [k as f64, if k % 2 == 1 { 0.4 } else { 0.0 }]));
-    south.extend([[10.0, 6.0], [0.0, 6.0], [0.0, 0.0]]);
-    plan(
-        2.5,
-        &[&south, &[[3.0, 3.0], [6.0, 3.0]], &[[7.0, 2.0], [7.0, 4.5]]],
-    )
+/// A plan of `examples/plans/holdout/`.
+fn holdout(name: &str) -> Plan {
+    let path = format!(
+        "{}/examples/plans/holdout/{name}.wall",
+        env!("CARGO_MANIFEST_DIR")
+    );
+    levelscan::formats::read_plan(path.as_ref()).unwrap()
 }
 
 /// The scans of pose `k` of the protocol's stream `stream` (scanner 0.45 m up, 181 rays,
@@ -116,7 +70,7 @@ fn l_room_corner_at_1cm_a_wall_line_over_a_floor_line_is_no_floor() {
         0.31910215006206416,
         0.16223675554394157,
     );
-    fails_or_is_honest(&l_room(), pose, stream(140, 0, 4), 55, 4, 0.01);
+    fails_or_is_honest(&holdout("l_room"), pose, stream(140, 0, 4), 55, 4, 0.01);
 }
 
 /// At 5 cm with three scans, from a start whose sigma was 3.5 degrees: a zigzag wall's foot
@@ -132,7 +86,7 @@ fn zigzag_wall_foot_and_a_floor_line_are_no_floor() {
         0.21751968611305547,
         -0.014476514063823906,
     );
-    fails_or_is_honest(&zigzag_room(), pose, stream(101, 3, 3), 61, 3, 0.05);
+    fails_or_is_honest(&holdout("zigzag"), pose, stream(101, 3, 3), 61, 3, 0.05);
 }
 
 /// At 10 cm with three scans: re-segmented from a start 6 degrees off (sigma 3.9), no wall
@@ -149,5 +103,5 @@ fn zigzag_room_floor_lines_alone_do_not_level() {
         0.26161713676849896,
         0.019431240125435994,
     );
-    fails_or_is_honest(&zigzag_room(), pose, stream(107, 3, 3), 83, 3, 0.10);
+    fails_or_is_honest(&holdout("zigzag"), pose, stream(107, 3, 3), 83, 3, 0.10);
 }
