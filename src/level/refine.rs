@@ -1216,13 +1216,13 @@ pub fn level_steps(grid: &PoseGrid, params: &LevelParams, sigma: f64) -> LevelSt
         (side(bound), side(bound.min(LINE_STEP_SIGMAS * two_ranges)))
     });
     // A wall point above or below a floor point steps far to it, but not to its other
-    // neighbour on the wall: every neighbour must agree.
-    let every = |accept: fn((i8, i8)) -> bool| every_row_neighbour(grid, &pairs, accept);
+    // neighbour on the wall: every neighbour must agree. (Each test is its own closure, so
+    // that it is inlined rather than called through a pointer per point.)
     LevelSteps {
-        levelish: every(|(x, _)| x != 0),
-        floor: every(|(x, _)| x == 1),
-        ceiling: every(|(x, _)| x == -1),
-        floor_line: every(|(_, x)| x == 1),
+        levelish: every_row_neighbour(grid, &pairs, |(x, _)| x != 0),
+        floor: every_row_neighbour(grid, &pairs, |(x, _)| x == 1),
+        ceiling: every_row_neighbour(grid, &pairs, |(x, _)| x == -1),
+        floor_line: every_row_neighbour(grid, &pairs, |(_, x)| x == 1),
     }
 }
 
