@@ -470,16 +470,32 @@ fn range_sigma_with(scans: &[Scan], params: &LevelParams, trig: Option<&[(f64, f
     if let Some(s) = params.sigma {
         return s;
     }
-    let mut given: Vec<f64> = scans
-        .iter()
-        .filter_map(|s| s.readings_sigma.as_ref())
-        .flatten()
-        .filter_map(|v| v.filter(|x| x.is_finite() && *x >= 0.0))
-        .collect();
+    // The given sigmas' median; when they grow with range, the farther half's
+    // (`noise::far_if_noisier`).
+    let (mut given, mut ranged, mut ranges) = (Vec::new(), Vec::new(), Vec::new());
+    for s in scans {
+        let Some(sigmas) = s.readings_sigma.as_ref() else {
+            continue;
+        };
+        for (i, v) in sigmas.iter().enumerate() {
+            let Some(x) = v.filter(|x| x.is_finite() && *x >= 0.0) else {
+                continue;
+            };
+            given.push(x);
+            if let Some(r) = s.range(i) {
+                ranged.push(x);
+                ranges.push(r);
+            }
+        }
+    }
     if !given.is_empty() {
-        let mid = given.len() / 2;
-        let (_, m, _) = given.select_nth_unstable_by(mid, f64::total_cmp);
-        return *m;
+        let median = |v: &mut [f64]| {
+            let mid = v.len() / 2;
+            *v.select_nth_unstable_by(mid, f64::total_cmp).1
+        };
+        let halves = noise::split_at_median_range(&ranged, &ranges)
+            .map(|(mut near, mut far)| (median(&mut near), median(&mut far)));
+        return noise::far_if_noisier(median(&mut given), halves);
     }
     noise::estimate_range_sigma_with(scans, trig).unwrap_or(params.min_sigma)
 }
