@@ -75,7 +75,7 @@ fn l_room_corner_at_1cm_a_wall_line_over_a_floor_line_is_no_floor() {
 
 /// At 5 cm with three scans, from a start whose sigma was 3.5 degrees: a zigzag wall's foot
 /// 10 cm up and a floor line, taken as two floor lines, pulled the pose from 0.7 to 8 degrees
-/// off with a sigma of 0.4; their points fit no one plane (`fit_one_plane`).
+/// off with a sigma of 0.4; their points fit no one plane (`level_lines`, `LINES_PLANE_MISFIT`).
 #[test]
 fn zigzag_wall_foot_and_a_floor_line_are_no_floor() {
     let pose = Pose::new(

@@ -1185,16 +1185,27 @@ fn clean_level_fit(
         levelish(i) || from_below
     };
     let noisy = sigma >= params.level_steep_min_sigma;
-    // The fit with every kept point, and without those on a steep surface (`on_steep`).
+    let kept_points = || {
+        p.members
+            .iter()
+            .filter(|&&i| kept(i))
+            .filter_map(|&i| Some((i, grid.points[i].as_ref()?)))
+    };
+    let mut rows_all = vec![0usize; grid.rows()];
+    for (i, _) in kept_points() {
+        rows_all[rc.row(i)] += 1;
+    }
+    // From `level_steep_min_sigma` of noise a wall's line and a floor line can pass for one
+    // plane; below it, on two scan lines only they still can, when they are parallel.
+    let veto = params.level_steep_veto
+        && (noisy || refine::supported_rows(&rows_all, 0.2) < LEVEL_MIN_ROWS_NOISY);
+    // The fit with every kept point, and (for the veto) without those on a steep surface.
     let mut all = grid::PlaneAccumulator::default();
     let mut flat = grid::PlaneAccumulator::default();
-    let mut rows_all = vec![0usize; grid.rows()];
     let mut rows_flat = vec![0usize; grid.rows()];
-    for &i in p.members.iter().filter(|&&i| kept(i)) {
-        let Some(g) = &grid.points[i] else { continue };
+    for (i, g) in kept_points() {
         all.add(g);
-        rows_all[rc.row(i)] += 1;
-        if !(params.level_steep_veto && on_steep(i)) {
+        if veto && !on_steep(i) {
             flat.add(g);
             rows_flat[rc.row(i)] += 1;
         }
@@ -1208,10 +1219,6 @@ fn clean_level_fit(
         acc.fit(sigma)
     };
     let fit_all = usable(&all, &rows_all);
-    // From `level_steep_min_sigma` of noise a wall's line and a floor line can pass for one
-    // plane; below it, on two scan lines only they still can, when they are parallel.
-    let veto = params.level_steep_veto
-        && (noisy || refine::supported_rows(&rows_all, 0.2) < LEVEL_MIN_ROWS_NOISY);
     let steep = if veto { all.n - flat.n } else { 0 };
     // A plane that only the steep points make (a floor line and a wall's line at its foot,
     // coplanar within the noise) is no floor.

@@ -558,7 +558,9 @@ fn level_lines(ctx: &LineContext, kind: SurfaceKind, params: &LevelParams) -> Le
     // alone are tried below.
     let full_lines = found.iter().filter(|l| full(l)).count();
     if full_lines > 0 && full_lines < found.len() && one_plane(grid, &found, s, params) {
-        if let Some(plane) = level_plane(ctx, &found, params) {
+        if let Some(plane) = lines_plane(grid, &found, s)
+            .and_then(|(fit, members)| level_plane(ctx, fit, members, params))
+        {
             return plane;
         }
     }
@@ -570,10 +572,17 @@ fn level_lines(ctx: &LineContext, kind: SurfaceKind, params: &LevelParams) -> Le
         return LevelEvidence::None;
     }
     if found.len() >= 2 {
-        if let Some(plane) = level_plane(ctx, &found, params) {
+        // One floor's lines always fit one plane; a wall's line just above its foot and a
+        // floor line at another bearing are skew (traced: a zigzag wall's foot 10 cm up,
+        // taken with a floor line, pulled a pose 8 degrees off with a sigma of 0.4).
+        let Some((fit, members)) = lines_plane(grid, &found, s) else {
+            return LevelEvidence::None;
+        };
+        let misfit = fit.misfit_ratio(s);
+        if let Some(plane) = level_plane(ctx, fit, members, params) {
             return plane;
         }
-        if !fit_one_plane(grid, &found, s) {
+        if misfit > LINES_PLANE_MISFIT {
             return LevelEvidence::None;
         }
     }
@@ -590,40 +599,37 @@ fn level_lines(ctx: &LineContext, kind: SurfaceKind, params: &LevelParams) -> Le
 /// (seeds 1-8, 11-14, 21-32), 74.32 -> 74.64% with 4 and 4; at 1 cm, 99.09 -> 99.12%.
 const PLANE_LINE_MIN_POINTS: usize = 3;
 
-/// The plane through level lines' points when they fit one (`level_line_plane`): within
-/// `refine_level_misfit` of the noise, near up, clear of the scanner, and with nothing seen
-/// through it.
-fn level_plane(
-    ctx: &LineContext,
+/// The plane through level lines' points, with those points (ascending).
+fn lines_plane(
+    grid: &PoseGrid,
     lines: &[(LevelLine, Vec<usize>)],
-    params: &LevelParams,
-) -> Option<LevelEvidence> {
-    if !params.level_line_plane {
-        return None;
-    }
-    let (grid, s) = (ctx.grid, ctx.s);
+    s: f64,
+) -> Option<(PlaneFit, Vec<usize>)> {
     let mut members: Vec<usize> = lines.iter().flat_map(|(_, m)| m.iter().copied()).collect();
     members.sort_unstable();
-    let fit = fit_members(grid, &members, s)?;
-    (fit.misfit_ratio(s) <= params.refine_level_misfit
+    Some((fit_members(grid, &members, s)?, members))
+}
+
+/// The plane `fit` through level lines' points `members` ([`lines_plane`]) as the floor or
+/// ceiling, when it fits them (`level_line_plane`): within `refine_level_misfit` of the noise,
+/// near up, clear of the scanner, and with nothing seen through it.
+fn level_plane(
+    ctx: &LineContext,
+    fit: PlaneFit,
+    members: Vec<usize>,
+    params: &LevelParams,
+) -> Option<LevelEvidence> {
+    let s = ctx.s;
+    (params.level_line_plane
+        && fit.misfit_ratio(s) <= params.refine_level_misfit
         && fit.normal.dot(ctx.up).abs() >= params.refine_level_cos()
         && clear_of_scanner(&fit.normal, &fit.centroid)
-        && opaque(grid, &fit, s, params))
+        && opaque(ctx.grid, &fit, s, params))
     .then_some(LevelEvidence::Plane(fit, members))
 }
 
-/// Whether the points of two or more level lines fit one plane within
-/// [`LINES_PLANE_MISFIT`] of their noise. One floor's lines always do; a wall's line just
-/// above its foot and a floor line at another bearing are skew (traced: a zigzag wall's foot
-/// 10 cm up, taken with a floor line, pulled a pose 8 degrees off with a sigma of 0.4).
-fn fit_one_plane(grid: &PoseGrid, lines: &[(LevelLine, Vec<usize>)], s: f64) -> bool {
-    let mut members: Vec<usize> = lines.iter().flat_map(|(_, m)| m.iter().copied()).collect();
-    members.sort_unstable();
-    fit_members(grid, &members, s).is_some_and(|fit| fit.misfit_ratio(s) <= LINES_PLANE_MISFIT)
-}
-
-/// Largest misfit ratio of the plane through level lines' points for the lines to stand as
-/// one floor or ceiling ([`fit_one_plane`]).
+/// Largest misfit ratio of the plane through two or more level lines' points for the lines to
+/// stand as one floor or ceiling ([`level_lines`]).
 const LINES_PLANE_MISFIT: f64 = 3.0;
 
 /// Whether level lines (each with its points) can all lie in one plane: with three or more,
@@ -1318,8 +1324,6 @@ fn flat_points(
         .collect()
 }
 
-/// The 2nd percentile of the leveled heights when it lies below the scanner (a floor may be in
-/// view), else `None`.
 /// The height in the level frame that a fiftieth of the points lie below (`lowest`) or
 /// above, when it lies beyond `MIN_LEVEL_DISTANCE` from the scanner on that side.
 fn extreme_height(lv: &Leveled, lowest: bool) -> Option<f64> {
