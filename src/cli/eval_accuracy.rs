@@ -5,6 +5,7 @@ use anyhow::Context;
 use levelscan::eval::accuracy::{AccuracyParams, CellStats, run_accuracy};
 use levelscan::formats::read_plan;
 use levelscan::level::{Estimator, LevelParams};
+use levelscan::simulate::NoiseModel;
 use levelscan::viz::histogram::{Series, write_histogram};
 use std::fmt::Write as _;
 use std::path::PathBuf;
@@ -17,9 +18,18 @@ pub struct Args {
     /// Scan counts per pose.
     #[arg(long, value_delimiter = ',', default_value = "3,4,5")]
     pub scans: Vec<usize>,
-    /// Range noise sigmas \[m\].
+    /// Range noise \[m\]: Gaussian sigmas, or with `--noise-model uniform` the full widths of
+    /// uniform noise.
     #[arg(long, value_delimiter = ',', default_value = "0.01,0.05,0.10")]
     pub noise: Vec<f64>,
+    /// What --noise means: `gaussian` (a standard deviation) or `uniform` (alias `paper`: a
+    /// peak-to-peak width, the paper's "range of about 1 cm", appendix C).
+    #[arg(long, value_enum, default_value_t = NoiseModel::Gaussian)]
+    pub noise_model: NoiseModel,
+    /// Coplanarity tolerance of the paper's quads (sect. 5.2), in sigmas of the range noise
+    /// (estimated from the data).
+    #[arg(long, default_value_t = LevelParams::default().coplanar_k)]
+    pub quad_tolerance: f64,
     /// Estimators to compare.
     #[arg(
         long,
@@ -60,6 +70,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         args.noise.iter().all(|n| n.is_finite() && *n >= 0.0),
         "--noise must list non-negative sigmas in metres"
     );
+    anyhow::ensure!(
+        args.quad_tolerance.is_finite() && args.quad_tolerance > 0.0,
+        "--quad-tolerance must be a positive number of sigmas"
+    );
     let plans = args
         .plans
         .iter()
@@ -68,13 +82,17 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let params = AccuracyParams {
         scans: args.scans.clone(),
         noise: args.noise.clone(),
+        noise_model: args.noise_model,
         estimators: args.estimators.clone(),
         poses_per_plan: args.poses,
         seed: args.seed,
         step_deg: args.step,
         tilt_deg: args.tilt,
         adaptive: args.adaptive,
-        level: args.leveling.apply(LevelParams::default()),
+        level: LevelParams {
+            coplanar_k: args.quad_tolerance,
+            ..args.leveling.apply(LevelParams::default())
+        },
         ..AccuracyParams::default()
     };
     let stats = run_accuracy(&plans, &params)?;
@@ -89,6 +107,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             "seed": args.seed,
             "step_deg": args.step,
             "tilt_deg": args.tilt,
+            "noise_model": args.noise_model.to_string(),
+            "quad_tolerance": args.quad_tolerance,
             "adaptive": args.adaptive,
             "cells": stats,
         });

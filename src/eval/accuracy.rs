@@ -13,7 +13,7 @@ use crate::plan::{Plan, Segment};
 use crate::pseudo_level::{PseudoLevelParams, pseudo_level_scan};
 use crate::scan::{Hit, Scan};
 use crate::simulate::{
-    AdaptiveParams, RandomPoseParams, ScannerParams, SimulateError, Stream, World,
+    AdaptiveParams, NoiseModel, RandomPoseParams, ScannerParams, SimulateError, Stream, World,
     elevations_centred, random_poses, simulate_pose, simulate_pose_adaptive, stream_rng,
 };
 use nalgebra::Point2;
@@ -41,8 +41,11 @@ pub fn paper_mean(scans: usize, noise: f64) -> Option<f64> {
 pub struct AccuracyParams {
     /// Scan counts per pose. Default 3, 4, 5.
     pub scans: Vec<usize>,
-    /// Range noise sigmas \[m\]. Default 0.01, 0.05, 0.10.
+    /// Range noise figures \[m\]: sigmas, or uniform widths (`noise_model`). Default 0.01,
+    /// 0.05, 0.10.
     pub noise: Vec<f64>,
+    /// What a noise figure means. Default Gaussian (a standard deviation).
+    pub noise_model: NoiseModel,
     /// Estimators to compare. Default both.
     pub estimators: Vec<Estimator>,
     /// Random poses per plan. Default 100.
@@ -80,6 +83,7 @@ impl Default for AccuracyParams {
         Self {
             scans: vec![3, 4, 5],
             noise: vec![0.01, 0.05, 0.10],
+            noise_model: NoiseModel::Gaussian,
             estimators: vec![Estimator::Paper, Estimator::Robust],
             poses_per_plan: 100,
             seed: 1,
@@ -221,6 +225,7 @@ pub fn run_accuracy(
                         fov: params.fov_deg.to_radians(),
                         max_range: params.max_range,
                         noise_sigma: noise,
+                        noise_model: params.noise_model,
                         ..ScannerParams::default()
                     };
                     let stream_seed = params
@@ -253,12 +258,13 @@ pub fn run_accuracy(
                             &mut rng,
                         )
                     };
+                    let sigma = params.noise_model.sigma(noise);
                     let (bound_deg, segmented_deg) = if noise > 0.0 {
                         let rays =
                             pose_rays(&worlds[pi], &planes[pi], &scans, &pose, params.max_range);
-                        let bound = attitude_bound(&rays, &pose, noise)
+                        let bound = attitude_bound(&rays, &pose, sigma)
                             .map_or(f64::INFINITY, |b| b[0].max(b[1]).to_degrees());
-                        let segmented = segmented_solution(&rays, noise)
+                        let segmented = segmented_solution(&rays, sigma)
                             .map_or(f64::INFINITY, |s| s.max_attitude_sigma().to_degrees());
                         (Some(bound), Some(segmented))
                     } else {

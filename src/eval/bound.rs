@@ -222,6 +222,13 @@ impl Linearization {
 /// the rays cannot fix the attitude (a corridor's parallel walls alone) or `sigma` is not
 /// positive.
 pub fn attitude_bound(rays: &[BoundRay], truth: &Pose, sigma: f64) -> Option<[f64; 2]> {
+    let cov = attitude_bound_cov(rays, truth, sigma)?;
+    Some([cov[(0, 0)].sqrt(), cov[(1, 1)].sqrt()])
+}
+
+/// The bound's whole 2x2 covariance of `(theta_x, theta_y)` \[rad^2\] (the axes are
+/// correlated); `None` as for [`attitude_bound`].
+pub fn attitude_bound_cov(rays: &[BoundRay], truth: &Pose, sigma: f64) -> Option<Matrix2<f64>> {
     if sigma.is_nan() || sigma <= 0.0 {
         return None;
     }
@@ -262,8 +269,7 @@ pub fn attitude_bound(rays: &[BoundRay], truth: &Pose, sigma: f64) -> Option<[f6
     if eig.min() <= scale * 1e-10 {
         return None;
     }
-    let cov = info.try_inverse()? * (sigma * sigma);
-    Some([cov[(0, 0)].sqrt(), cov[(1, 1)].sqrt()])
+    Some(info.try_inverse()? * (sigma * sigma))
 }
 
 /// Before [`segmented_solution`] fits a surface, the scan with its second most points must
