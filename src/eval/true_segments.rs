@@ -35,11 +35,15 @@ pub(crate) fn labelled_points(rays: &[BoundRay], sigma: f64) -> Vec<LabelledPoin
         .collect()
 }
 
-/// Refines up from the robot's own up (no tilt known) on the true segmentation; `None` when
-/// the surfaces cannot fix the attitude.
-pub fn fit_true_segments(rays: &[BoundRay], sigma: f64) -> Option<TrueSegmentsFit> {
+/// Refines up from `start` (robot frame) on the true segmentation; `None` when the surfaces
+/// cannot fix the attitude.
+pub fn fit_true_segments(
+    rays: &[BoundRay],
+    sigma: f64,
+    start: &Vector3<f64>,
+) -> Option<TrueSegmentsFit> {
     let points = labelled_points(rays, sigma);
-    let sol = ml::refine(&points, &Vector3::z(), &MlParams::default()).ok()?;
+    let sol = ml::refine(&points, start, &MlParams::default()).ok()?;
     Some(TrueSegmentsFit {
         attitude: sol.attitude,
         sigmas: sol.sigmas(),

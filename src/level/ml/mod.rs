@@ -65,10 +65,21 @@ pub(crate) struct MlParams {
     pub huber_k: f64,
     /// A surface with fewer points is left out \[points\]. Default 3 (a wall's line needs two).
     pub min_surface_points: usize,
+    /// A point whose ray meets its plane at an incidence `|n . L u|` below this is left out
+    /// \[1\]. Default 0.02 (within 1.1 degrees of grazing): such a range moves by metres for a
+    /// tenth of a degree of attitude, so it is not linear over the attitude's uncertainty and
+    /// its information is not there to be had; and while approaching from a wrong attitude a
+    /// floor seen by one scan lies in that scan's plane, which would make the plane through it
+    /// the scan's own.
+    pub min_incidence: f64,
     /// The covariance is inflated by the residuals' chi-square per degree of freedom when that
     /// exceeds its expectation by more than this many of its standard deviations \[1\].
     /// Default 3 (a right model is inflated 0.13% of the time).
     pub inflation_z: f64,
+    /// An estimate tilted further than this from the robot's up is refused \[deg\]. Default
+    /// 60: the paper's robot never tilts beyond 45 degrees (sect. 5.2), and the chart of up
+    /// by `(theta_x, theta_y)` degenerates at 90 (a refinement that ran there left its basin).
+    pub max_tilt_deg: f64,
 }
 
 impl Default for MlParams {
@@ -78,7 +89,9 @@ impl Default for MlParams {
             step_tolerance: 1e-10,
             huber_k: 3.0,
             min_surface_points: 3,
+            min_incidence: 0.02,
             inflation_z: 3.0,
+            max_tilt_deg: 60.0,
         }
     }
 }
@@ -118,7 +131,7 @@ pub(crate) struct MlSolution {
     pub floor: Option<f64>,
     pub ceiling: Option<f64>,
     /// Per input point: its normalised residual `(r - r^) / sigma` at the estimate, `None` for
-    /// a point on a surface left out (too few points).
+    /// a point left out (on a surface with too few points, or grazing its plane).
     pub residuals: Vec<Option<f64>>,
     /// Sum over used points of `min(rho^2, huber_k^2)` and its degrees of freedom (points less
     /// parameters).
@@ -148,4 +161,6 @@ pub(crate) enum MlError {
     Unobservable,
     #[error("a point has a non-finite or non-positive range or sigma")]
     BadPoint,
+    #[error("the refinement left the tilts a robot can have (beyond max_tilt_deg)")]
+    Diverged,
 }

@@ -37,6 +37,8 @@ struct State<'a> {
     /// While approaching from far: each point's incidence, frozen for one iteration (the
     /// plane residual, [`linearize_plane`]); `None` for the range residual.
     frozen: Option<Vec<f64>>,
+    /// Per point: used in the fit (on a kept surface, and not grazing it).
+    active: Vec<bool>,
 }
 
 /// Refines up from `up0` (robot frame, any length) and the labelled points: the maximum
@@ -46,31 +48,39 @@ pub(crate) fn refine(
     up0: &nalgebra::Vector3<f64>,
     params: &MlParams,
 ) -> Result<MlSolution, MlError> {
-    let bad = |p: &LabelledPoint| {
-        !(p.range.is_finite() && p.range > 0.0 && p.sigma.is_finite() && p.sigma > 0.0)
-            || !p
-                .origin
-                .coords
-                .iter()
-                .chain(p.dir.iter())
-                .all(|v| v.is_finite())
+    let good = |p: &LabelledPoint| {
+        let finite = p
+            .origin
+            .coords
+            .iter()
+            .chain(p.dir.iter())
+            .all(|v| v.is_finite());
+        finite && p.range.is_finite() && p.range > 0.0 && p.sigma.is_finite() && p.sigma > 0.0
     };
-    if points.iter().any(bad) {
+    if !points.iter().all(good) {
         return Err(MlError::BadPoint);
     }
     let start = Attitude::from_up(up0);
     let mut state = State::new(points, Vector2::new(start.theta_x, start.theta_y), params);
     let parameters = 2 + 2 * state.surfaces.len();
-    let used = state.slot.iter().filter(|s| s.is_some()).count();
-    if used <= parameters {
+    if state.active.iter().filter(|&&a| a).count() <= parameters {
         return Err(MlError::TooFewPoints);
     }
     // From far: least squares on the plane residuals, into the basin; then the likelihood
     // itself, robustly.
     state.frozen = Some(Vec::new());
+    state.freeze(params.min_incidence);
+    if observable_schur(&state.arrow(f64::INFINITY)).is_none() {
+        return Err(MlError::Unobservable);
+    }
     let (approach, _) = state.minimise(params, f64::INFINITY, APPROACH_TOLERANCE);
     state.frozen = None;
+    state.activate(params.min_incidence);
     let (iterations, converged) = state.minimise(params, params.huber_k, params.step_tolerance);
+    let up = Attitude::new(state.theta.x, state.theta.y).up_in_robot();
+    if up.z < params.max_tilt_deg.to_radians().cos() {
+        return Err(MlError::Diverged);
+    }
     state.solution(params, approach + iterations, converged)
 }
 
@@ -120,12 +130,27 @@ impl<'a> State<'a> {
         }
         State {
             points,
-            slot,
             surfaces,
             theta,
             placements,
             frozen: None,
+            active: slot.iter().map(Option::is_some).collect(),
+            slot,
         }
+    }
+
+    /// Uses the points on a kept surface whose ray meets it at an incidence `|n . L u|` of
+    /// at least `min_incidence` at the current state.
+    fn activate(&mut self, min_incidence: f64) {
+        let rot = Rotations::at(&self.theta);
+        self.active = self
+            .points
+            .iter()
+            .zip(&self.slot)
+            .map(|(p, s)| {
+                s.is_some_and(|s| incidence(p, &self.placements[s], &rot) >= min_incidence)
+            })
+            .collect();
     }
 
     /// Point `i`'s residual at a trial state, by the current mode.
@@ -137,11 +162,13 @@ impl<'a> State<'a> {
         }
     }
 
-    /// Freezes every point's incidence at the current state (plane mode only).
-    fn freeze(&mut self) {
+    /// Freezes every point's incidence at the current state, and uses only those not grazing
+    /// their plane (plane mode only).
+    fn freeze(&mut self, min_incidence: f64) {
         if self.frozen.is_none() {
             return;
         }
+        self.activate(min_incidence);
         let rot = Rotations::at(&self.theta);
         let b = self
             .points
@@ -157,7 +184,7 @@ impl<'a> State<'a> {
         let rot = Rotations::at(theta);
         (0..self.points.len())
             .filter_map(|i| {
-                let s = self.slot[i]?;
+                let s = self.slot[i].filter(|_| self.active[i])?;
                 Some(huber_cost(self.residual(i, &placements[s], &rot).rho, k))
             })
             .sum()
@@ -175,7 +202,9 @@ impl<'a> State<'a> {
             ],
         };
         for i in 0..self.points.len() {
-            let Some(s) = self.slot[i] else { continue };
+            let Some(s) = self.slot[i].filter(|_| self.active[i]) else {
+                continue;
+            };
             let lin = self.residual(i, &self.placements[s], &rot);
             let w = huber_weight(lin.rho, k);
             let (ja, js) = (lin.by_attitude, lin.by_placement);
@@ -199,7 +228,7 @@ impl<'a> State<'a> {
     fn minimise(&mut self, params: &MlParams, k: f64, tolerance: f64) -> (usize, bool) {
         let mut lambda = 1e-6;
         for iteration in 1..=params.max_iterations {
-            self.freeze();
+            self.freeze(params.min_incidence);
             let mut cost = self.cost(&self.theta, &self.placements, k);
             let arrow = self.arrow(k);
             let mut accepted = false;
@@ -251,20 +280,17 @@ impl<'a> State<'a> {
         converged: bool,
     ) -> Result<MlSolution, MlError> {
         let k = params.huber_k;
-        let arrow = self.arrow(k);
-        let schur = reduced(&arrow).ok_or(MlError::Unobservable)?.0;
-        let scale = arrow.h_aa.trace();
-        let eig = schur.symmetric_eigenvalues();
-        if !(scale > 0.0) || eig.min() <= scale * 1e-10 {
-            return Err(MlError::Unobservable);
-        }
+        let schur = observable_schur(&self.arrow(k)).ok_or(MlError::Unobservable)?;
         let cov = schur.try_inverse().ok_or(MlError::Unobservable)?;
         let rot = Rotations::at(&self.theta);
         let residuals: Vec<Option<f64>> = self
             .points
             .iter()
-            .zip(&self.slot)
-            .map(|(p, s)| s.map(|s| linearize(p, &self.placements[s], &rot).rho))
+            .zip(self.slot.iter().zip(&self.active))
+            .map(|(p, (s, &a))| {
+                s.filter(|_| a)
+                    .map(|s| linearize(p, &self.placements[s], &rot).rho)
+            })
             .collect();
         let clipped = |r: f64| (r * r).min(k * k);
         let mut surfaces: Vec<SurfaceFit> = self
@@ -340,22 +366,33 @@ impl<'a> State<'a> {
 
 /// The pseudo-inverse of a surface's own information: a placement the points leave free (a
 /// wall seen as one vertical line of points has no azimuth) carries no information, and
-/// marginalising it removes none from the attitude, as in the bound.
+/// marginalising it removes none from the attitude, as in the bound (nor does a surface all
+/// of whose points are left out).
 fn pseudo_inverse(m: &Matrix2<f64>) -> Option<Matrix2<f64>> {
     let eig = m.symmetric_eigen();
     let top = eig.eigenvalues.amax();
-    if !(top > 0.0) || !top.is_finite() {
+    if !top.is_finite() {
         return None;
     }
     let mut inv = Matrix2::zeros();
     for k in 0..2 {
         let l = eig.eigenvalues[k];
-        if l > top * 1e-12 {
+        if l > top * 1e-12 && l > 0.0 {
             let v = eig.eigenvectors.column(k);
             inv += v * v.transpose() / l;
         }
     }
     Some(inv)
+}
+
+/// The attitude's information with every placement marginalised, when it fixes both tilts:
+/// its smaller eigenvalue above 1e-10 of the unmarginalised information's trace (parallel
+/// walls alone leave the tilt about their normal free).
+fn observable_schur(arrow: &Arrow) -> Option<Matrix2<f64>> {
+    let schur = reduced(arrow)?.0;
+    let scale = arrow.h_aa.trace();
+    let eig = schur.symmetric_eigenvalues();
+    (scale > 0.0 && eig.min() > scale * 1e-10).then_some(schur)
 }
 
 /// The reduced attitude system `(S, g~)` with every surface eliminated.

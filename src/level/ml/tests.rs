@@ -350,10 +350,15 @@ fn parallel_walls_alone_are_unobservable_and_bad_points_refused() {
         refine(&corridor_points(0.0), &Vector3::z(), &MlParams::default()),
         Err(MlError::Unobservable)
     );
-    // ... and noise makes two nearly parallel walls, whose up is known to degrees at best.
+    // ... and noise makes two nearly parallel walls, whose common up is their normals'
+    // cross product, along the corridor: the refinement runs off towards a pitch of 90
+    // degrees and is refused (or, short of it, knows up to degrees at best).
     let pts = corridor_points(0.01);
-    let noisy = refine(&pts, &Vector3::z(), &MlParams::default()).unwrap();
-    assert!(noisy.sigmas()[1] > 5.0 * DEG, "{:?}", noisy.sigmas());
+    match refine(&pts, &Vector3::z(), &MlParams::default()) {
+        Err(MlError::Diverged) => {}
+        Ok(noisy) => assert!(noisy.sigmas()[1] > 5.0 * DEG, "{:?}", noisy.sigmas()),
+        Err(e) => panic!("{e}"),
+    }
     let mut bad = pts.clone();
     bad[3].sigma = 0.0;
     assert_eq!(
