@@ -80,6 +80,12 @@ pub(crate) struct MlParams {
     /// 60: the paper's robot never tilts beyond 45 degrees (sect. 5.2), and the chart of up
     /// by `(theta_x, theta_y)` degenerates at 90 (a refinement that ran there left its basin).
     pub max_tilt_deg: f64,
+    /// A floor or ceiling fitted closer than this to the scanner's height is refused \[m\].
+    /// Default 0.1. Seen by one scan, a floor or ceiling is a line in that scan's plane, and
+    /// an attitude that levels the scan's plane puts the line at the scanner's height, where
+    /// its rays graze it and fit any range: a false optimum (traced: a ceiling pose at 10 cm
+    /// noise refined to the upper scan's elevation with a sigma of 0.15 degrees).
+    pub min_level_clearance: f64,
 }
 
 impl Default for MlParams {
@@ -92,6 +98,7 @@ impl Default for MlParams {
             min_incidence: 0.02,
             inflation_z: 3.0,
             max_tilt_deg: 60.0,
+            min_level_clearance: 0.1,
         }
     }
 }
@@ -163,4 +170,6 @@ pub(crate) enum MlError {
     BadPoint,
     #[error("the refinement left the tilts a robot can have (beyond max_tilt_deg)")]
     Diverged,
+    #[error("the floor or ceiling came out at the scanner's height (a scan's own plane)")]
+    ScanPlane,
 }

@@ -81,6 +81,13 @@ pub(crate) fn refine(
     if up.z < params.max_tilt_deg.to_radians().cos() {
         return Err(MlError::Diverged);
     }
+    let at_scanner = [Surface::Floor, Surface::Ceiling]
+        .iter()
+        .filter_map(|&s| state.height(s))
+        .any(|d| d.abs() < params.min_level_clearance);
+    if at_scanner {
+        return Err(MlError::ScanPlane);
+    }
     state.solution(params, approach + iterations, converged)
 }
 

@@ -409,3 +409,56 @@ proptest! {
         prop_assert!((sol2.attitude[0] - sol.attitude[0]).abs() < 1e-10);
     }
 }
+
+/// A "floor" whose points are one scan's own line (here a level scan's wall hits, at the
+/// scanner's height) fits a level plane through the scanner, which is refused.
+#[test]
+fn a_floor_at_the_scanners_height_is_refused() {
+    let plan = box_plan(6.0, 4.0, 2.5, false);
+    let truth = pose(2.0, 1.5, 0.4, 0.0, 0.0);
+    let world = World::from_plan(&plan);
+    let scanner = ScannerParams {
+        noise_sigma: 0.0,
+        ..ScannerParams::default()
+    };
+    let mut rng = ChaCha8Rng::seed_from_u64(1);
+    let sim = simulate_pose(
+        &world,
+        0,
+        &truth,
+        &[0.0, 8.0 * DEG, 16.0 * DEG],
+        &scanner,
+        &mut rng,
+    );
+    let planes = WallPlanes::new(&plan.segments());
+    let r = pose_rays(&world, &planes, &sim, &truth, 30.0);
+    // The level scan's wall hits as the only "floor" (the true floor hits left out), kept
+    // even though they graze it, so that nothing but the clearance test stands in the way.
+    let pts: Vec<LabelledPoint> = labelled_points(&r, 0.01)
+        .into_iter()
+        .zip(&r)
+        .filter(|(p, _)| p.surface != Surface::Floor)
+        .map(|(p, ray)| LabelledPoint {
+            surface: if ray.scan == 0 {
+                Surface::Floor
+            } else {
+                p.surface
+            },
+            ..p
+        })
+        .collect();
+    let params = MlParams {
+        min_incidence: 0.0,
+        ..MlParams::default()
+    };
+    assert_eq!(
+        refine(&pts, &Vector3::z(), &params),
+        Err(MlError::ScanPlane)
+    );
+    let no_guard = MlParams {
+        min_level_clearance: 0.0,
+        ..params
+    };
+    let fooled = refine(&pts, &Vector3::z(), &no_guard).unwrap();
+    assert!(fooled.floor.unwrap().abs() < 0.1, "{:?}", fooled.floor);
+}
