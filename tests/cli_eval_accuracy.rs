@@ -187,3 +187,14 @@ fn simulate_uniform_noise_stays_within_half_its_width() {
     assert!(!bad.status.success());
     assert!(String::from_utf8_lossy(&bad.stderr).contains("laplace"));
 }
+
+#[test]
+fn a_bad_quad_tolerance_is_refused_by_name() {
+    let out = bin()
+        .args(["eval", "accuracy", plan("office").to_str().unwrap()])
+        .args(["--poses", "2", "--quad-tolerance", "0"])
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--quad-tolerance"));
+}

@@ -117,34 +117,38 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         let poses_path = dir.join("poses.jsonl");
         std::fs::write(&poses_path, pose_lines(&stats, &args.plans))
             .with_context(|| format!("{}: cannot write", poses_path.display()))?;
-        // Fig. 6 at the noise nearest 5 cm, one file per estimator.
-        let fig_noise = params
-            .noise
-            .iter()
-            .copied()
-            .min_by(|a, b| (a - 0.05).abs().total_cmp(&(b - 0.05).abs()));
-        if let Some(noise) = fig_noise {
-            for est in &params.estimators {
-                let series: Vec<Series> = stats
-                    .iter()
-                    .filter(|s| s.noise == noise && s.estimator == est.to_string())
-                    .map(|s| Series {
-                        label: format!("{} scans", s.scans),
-                        errors_deg: s.errors_deg.clone(),
-                    })
-                    .collect();
-                let title = format!(
-                    "Level estimation error, {} cm noise, {est} estimator",
-                    noise * 100.0
-                );
-                if let Err(e) = write_histogram(dir, &format!("fig6_{est}"), &title, &series) {
-                    eprintln!("warning: histogram not written: {e}");
-                }
-            }
-        }
+        write_fig6(dir, &stats, &params);
         eprintln!("wrote {}", path.display());
     }
     Ok(())
+}
+
+/// Fig. 6 at the noise nearest 5 cm, one file per estimator (a warning when one cannot be
+/// written: the tables are the result).
+fn write_fig6(dir: &std::path::Path, stats: &[CellStats], params: &AccuracyParams) {
+    let fig_noise = params
+        .noise
+        .iter()
+        .copied()
+        .min_by(|a, b| (a - 0.05).abs().total_cmp(&(b - 0.05).abs()));
+    let Some(noise) = fig_noise else { return };
+    for est in &params.estimators {
+        let series: Vec<Series> = stats
+            .iter()
+            .filter(|s| s.noise == noise && s.estimator == est.to_string())
+            .map(|s| Series {
+                label: format!("{} scans", s.scans),
+                errors_deg: s.errors_deg.clone(),
+            })
+            .collect();
+        let title = format!(
+            "Level estimation error, {} cm noise, {est} estimator",
+            noise * 100.0
+        );
+        if let Err(e) = write_histogram(dir, &format!("fig6_{est}"), &title, &series) {
+            eprintln!("warning: histogram not written: {e}");
+        }
+    }
 }
 
 /// One JSON line per pose, cell and estimator: what it was, what the leveler said, how far
