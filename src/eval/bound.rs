@@ -20,9 +20,10 @@
 //!
 //! Pure: rays in, sigmas out; [`pose_rays`] builds the rays from the simulator's world.
 
-use crate::geometry::{Pose, beam_direction, beam_origin, rot_x, rot_y};
+use crate::geometry::{Pose, beam_direction, beam_origin};
 use crate::level::LevelParams;
 use crate::level::grid::{GridPoint, PlaneAccumulator, PlaneFit};
+use crate::level::ml::model::Rotations;
 use crate::level::up::{self, PlaneObs, UpSolution};
 use crate::plan::Segment;
 use crate::scan::{Hit, Scan};
@@ -190,14 +191,10 @@ struct Linearization {
 
 impl Linearization {
     fn at(truth: &Pose) -> Self {
-        let (sx, cx) = truth.rx.sin_cos();
-        let (sy, cy) = truth.ry.sin_cos();
-        let d_rot_x = Matrix3::new(0.0, 0.0, 0.0, 0.0, -sx, -cx, 0.0, cx, -sx);
-        let d_rot_y = Matrix3::new(-sy, 0.0, cy, 0.0, 0.0, 0.0, -cy, 0.0, -sy);
-        let (rot_x, rot_y) = (*rot_x(truth.rx).matrix(), *rot_y(truth.ry).matrix());
+        let rot = Rotations::at(&Vector2::new(truth.rx, truth.ry));
         Linearization {
-            level_from_robot: rot_y * rot_x,
-            by_theta: [rot_y * d_rot_x, d_rot_y * rot_x],
+            level_from_robot: rot.level_from_robot,
+            by_theta: rot.by_theta,
             unyaw: (-truth.rz).sin_cos(),
         }
     }
