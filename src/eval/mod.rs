@@ -2,6 +2,7 @@
 
 pub mod accuracy;
 pub mod bound;
+pub mod demo;
 pub mod matching;
 pub mod metrics;
 pub mod real;

@@ -10,6 +10,7 @@
 //! - [`read_any`]: scans from either JSON Lines or CARMEN, told apart by the first character.
 
 pub mod carmen;
+pub mod level_record;
 pub mod scan_jsonl;
 pub mod tum;
 pub mod wall;
