@@ -6,7 +6,8 @@ use levelscan::formats::parse_plan;
 use levelscan::simulate::{
     RandomPoseParams, ScannerParams, World, elevations_centred, random_poses, simulate_poses,
 };
-use levelscan::viz::html::{Source, ViewParams, build_scene, viewer_page};
+use levelscan::viz::html::viewer_page;
+use levelscan::viz::scene::{Source, ViewParams, build_scene};
 
 fn main() {
     divan::main();

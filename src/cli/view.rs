@@ -8,7 +8,8 @@ use anyhow::{Context, bail};
 use levelscan::formats::carmen::CarmenParams;
 use levelscan::formats::{parse_plan, read_any};
 use levelscan::plan::Plan;
-use levelscan::viz::html::{Source, ViewParams, build_scene, viewer_page};
+use levelscan::viz::html::viewer_page;
+use levelscan::viz::scene::{Source, ViewParams, build_scene};
 use std::io::{Read, Write};
 use std::path::PathBuf;
 

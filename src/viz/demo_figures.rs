@@ -4,12 +4,12 @@
 //! SVG; a figure that cannot be drawn becomes [`Figure::Missing`] with the reason.
 
 use super::histogram;
-use super::html::{Scene, Source, ViewParams, build_scene};
 use super::plots::{
     AccuracyCell, MapPanel, grouped_bars_png, grouped_bars_svg, map_panels_png, map_panels_svg,
     run_map_panel, table_one_chart,
 };
 use super::report::Figure;
+use super::scene::{Scene, Source, ViewParams, build_scene};
 use crate::eval::accuracy::CellStats;
 use crate::eval::demo::{DemoRun, LeveledPose};
 use crate::eval::matching::{RunKind, RunResult};

@@ -3,8 +3,8 @@
 //! laid out as a [`Report`] from the demo's data ([`crate::eval::demo::DemoData`]).
 
 use super::demo_figures::Figures;
-use super::html::Scene;
 use super::report::{Block, Figure, Panel, Report, Section, Table};
+use super::scene::Scene;
 use crate::eval::demo::DemoData;
 
 /// Three decimals, or "-" for a missing or undefined number (a cell with no leveled pose).

@@ -8,3 +8,4 @@ pub mod histogram;
 pub mod html;
 pub mod plots;
 pub mod report;
+pub mod scene;

@@ -6,7 +6,8 @@
 //! with its ATE) come before anything else. Every section has a stable `id` (`summary`,
 //! `matching`, `accuracy`, `viewer`, `maps`, ...) so tests and links can find it.
 
-use super::html::{Scene, escape_html, page_head_assets, viewer_fragment};
+use super::html::{escape_html, page_head_assets, viewer_fragment};
+use super::scene::Scene;
 use serde::Serialize;
 
 /// A figure as the page embeds it.
