@@ -413,6 +413,57 @@ fn check_viewer_draws_and_toggles(b: &mut Browser, root: &str, layer: &str, name
     );
 }
 
+/// Checks a viewer's scale bar: present, labelled in metres, as long on screen as it says
+/// (the viewer's pixels per metre at the view's centre), and following a zoom.
+fn check_scale_bar(b: &mut Browser, root: &str, name: &str) {
+    let read = |b: &mut Browser| {
+        b.eval(&format!(
+            "(() => {{ const r0 = document.querySelector({sel}); const r = r0.classList.contains('lsv') ? r0 : r0.querySelector('.lsv');
+               const bar = r.querySelector('.lsv-scale-bar');
+               const label = r.querySelector('.lsv-scale-label'); const api = LevelscanViewer.instances.find(v => v.root === r);
+               if (!bar || !label || !api) return null;
+               return {{width: bar.getBoundingClientRect().width, label: label.textContent, scale: api.stats.scale}}; }})()",
+            sel = serde_json::to_string(root).unwrap()
+        ))
+    };
+    let before = read(b);
+    assert!(before.is_object(), "{name}: no scale bar in {root}");
+    let label = before["label"].as_str().unwrap();
+    let metres = before["scale"]["metres"].as_f64().unwrap();
+    let per_metre = before["scale"]["pxPerMetre"].as_f64().unwrap();
+    let width = before["width"].as_f64().unwrap();
+    assert!(
+        label.contains(" m") || label.contains(" cm"),
+        "{name}: scale label {label:?}"
+    );
+    assert!(
+        label.contains("grid"),
+        "{name}: grid step not named: {label:?}"
+    );
+    // The bar's border adds 2 px on each side.
+    assert!(
+        (width - 4.0 - metres * per_metre).abs() < 1.5,
+        "{name}: bar {width} px for {metres} m at {per_metre} px/m"
+    );
+    assert!((20.0..=150.0).contains(&width), "{name}: bar {width} px");
+    b.eval(&format!(
+        "(() => {{ const c = document.querySelector({sel}); c.dispatchEvent(new WheelEvent('wheel', {{deltaY: 800, bubbles: true, cancelable: true}}));
+           return new Promise(res => requestAnimationFrame(() => res(true))); }})()",
+        sel = serde_json::to_string(&format!("{root} canvas.lsv-canvas")).unwrap()
+    ));
+    let after = read(b);
+    let zoomed = after["scale"]["pxPerMetre"].as_f64().unwrap();
+    assert!(
+        zoomed < per_metre * 0.8,
+        "{name}: zooming out left {zoomed} px/m"
+    );
+    // Back to the first view for the checks that follow.
+    b.eval(&format!(
+        "document.querySelector({}).dispatchEvent(new MouseEvent('dblclick', {{bubbles: true}}))",
+        serde_json::to_string(&format!("{root} canvas.lsv-canvas")).unwrap()
+    ));
+}
+
 #[test]
 fn viewer_page_draws_and_layer_toggle_changes_it() {
     let Some(chromium) = chromium_or_skip("viewer_page_draws_and_layer_toggle_changes_it") else {
@@ -437,6 +488,7 @@ fn viewer_page_draws_and_layer_toggle_changes_it() {
     );
     assert_eq!(layers, json!(["plan", "scans", "poses"]));
     check_viewer_draws_and_toggles(&mut b, "#viewer", "scans", "view");
+    check_scale_bar(&mut b, "#viewer", "view");
     // Orbit and zoom with the mouse: the view changes and nothing throws.
     let before = b.screenshot_element("#viewer canvas.lsv-canvas", "view-before-orbit");
     b.eval(
@@ -561,5 +613,23 @@ fn demo_report_has_its_sections_and_its_viewer_draws() {
     let _ = b.screenshot_element("#accuracy", "report-accuracy");
     check_viewer_draws_and_toggles(&mut b, "#viewer", "polygons", "report-pose");
     check_viewer_draws_and_toggles(&mut b, "#maps", "matched", "report-matched");
+    check_scale_bar(&mut b, "#viewer", "report-pose");
+    check_scale_bar(&mut b, "#maps", "report-matched");
+    let matched = b.eval(
+        "Array.from(document.querySelectorAll('#maps .lsv-toggle')).map(t => t.parentElement.textContent)",
+    );
+    let labels = matched.as_array().unwrap();
+    assert!(
+        labels
+            .iter()
+            .any(|l| l.as_str().unwrap().starts_with("Reference path")),
+        "{matched}"
+    );
+    assert!(
+        labels
+            .iter()
+            .any(|l| l.as_str().unwrap().starts_with("Robot path")),
+        "{matched}"
+    );
     b.assert_no_errors("report.html after toggles");
 }

@@ -158,19 +158,63 @@ pub(super) fn matched_scans(groups: &[&Placed]) -> Layer {
     layer
 }
 
-/// The matched records' `true_pose` positions, joined in time order.
-pub(super) fn true_path(groups: &[&Placed]) -> Layer {
-    let mut layer = Layer::new("truth", "True path (green)", [0, 140, 60], 2.0);
-    let mut path = Vec::new();
-    for g in of_kind(groups, Kind::Matched) {
-        if let Some(t) = g.scans[0].true_pose {
-            push_mm(&mut path, &Point3::new(t.x, t.y, 0.0));
+/// The matched records' `true_pose` positions joined in time order, one line per source. It is
+/// called a reference, not the truth: a log's `true_pose` is often a SLAM-corrected path.
+pub(super) fn reference_path(groups: &[Placed]) -> Layer {
+    let mut layer = Layer::new(
+        "reference",
+        "Reference path (true_pose, green)",
+        [0, 140, 60],
+        2.0,
+    );
+    let points = groups
+        .iter()
+        .filter(|g| g.kind == Kind::Matched)
+        .filter_map(|g| {
+            let t = g.scans[0].true_pose?;
+            Some((g.source, Point3::new(t.x, t.y, 0.0)))
+        });
+    layer.lines = lines_per_source(points);
+    layer
+}
+
+/// Where the robot was at every pose (decimated or not), joined in time order, one line per
+/// source: the poses the scans are drawn from.
+pub(super) fn robot_path(groups: &[Placed]) -> Layer {
+    let path: Vec<&Placed> = groups.iter().filter(|g| g.cone).collect();
+    let mut fields: Vec<&str> = path.iter().filter_map(|g| g.pose_from).collect();
+    fields.dedup();
+    let label = match fields.as_slice() {
+        [field] => format!("Robot path ({field}, purple)"),
+        _ => "Robot path (purple)".to_string(),
+    };
+    let mut layer = Layer::new("path", &label, [120, 60, 170], 1.5);
+    let points = path
+        .iter()
+        .map(|g| (g.source, Point3::new(g.pose.x, g.pose.y, g.pose.z)));
+    layer.lines = lines_per_source(points);
+    layer
+}
+
+/// Polylines of `(source, point)` in order, a new line at each change of source; lines of one
+/// point are left out (a path needs two).
+fn lines_per_source(points: impl Iterator<Item = (usize, Point3<f64>)>) -> Vec<Vec<Mm>> {
+    let mut lines: Vec<(usize, Vec<Mm>)> = Vec::new();
+    for (source, p) in points {
+        match lines.last_mut() {
+            Some((s, line)) if *s == source => push_mm(line, &p),
+            _ => {
+                let mut line = Vec::new();
+                push_mm(&mut line, &p);
+                lines.push((source, line));
+            }
         }
     }
-    if path.len() >= 6 {
-        layer.lines.push(path);
-    }
-    layer
+    lines
+        .into_iter()
+        .map(|(_, l)| l)
+        .filter(|l| l.len() >= 6)
+        .collect()
 }
 
 fn cone(pose: &Pose, index: usize, count: usize) -> Cone {
@@ -188,8 +232,14 @@ fn cone(pose: &Pose, index: usize, count: usize) -> Cone {
 }
 
 /// The robot's poses as cones shaded light to dark in time order; the plan's poses when no
-/// record gives one.
-pub(super) fn pose_cones(groups: &[&Placed], plan: Option<&Plan>) -> Layer {
+/// record gives one. Beyond `max_cones`, one pose in k keeps its cone (the first and the last
+/// always), and `notes` says so: 900 cones hide the map they sit on.
+pub(super) fn pose_cones(
+    groups: &[&Placed],
+    plan: Option<&Plan>,
+    max_cones: usize,
+    notes: &mut Vec<String>,
+) -> Layer {
     let mut layer = Layer::new("poses", "Robot poses (light to dark)", [0, 0, 0], 1.0);
     let mut poses: Vec<Pose> = groups.iter().filter(|g| g.cone).map(|g| g.pose).collect();
     if poses.is_empty()
@@ -198,9 +248,16 @@ pub(super) fn pose_cones(groups: &[&Placed], plan: Option<&Plan>) -> Layer {
         poses.extend(plan.poses.iter().copied());
     }
     let n = poses.len();
+    let stride = n.div_ceil(max_cones.max(1)).max(1);
+    if stride > 1 {
+        notes.push(format!(
+            "{n} poses: a cone at 1 pose in {stride} (--max-cones {max_cones}); the robot path joins them all."
+        ));
+    }
     layer.cones = poses
         .iter()
         .enumerate()
+        .filter(|&(i, _)| i % stride == 0 || i + 1 == n)
         .map(|(i, p)| cone(p, i, n))
         .collect();
     layer

@@ -8,7 +8,8 @@
 //! the laser did not see a surface, [`lines`]), extracted wall polygons in alternating
 //! translucent green and red, pseudo-level (and matched level) scans in blue, floor-plan walls as
 //! dark translucent rectangles, and robot poses as flattened cones shaded from light to dark in
-//! time order.
+//! time order (thinned on long logs), joined by the robot's path; a matched log's `true_pose`
+//! is drawn as a reference path.
 //!
 //! Which records are what is read from the records themselves:
 //! - a record with a `level` object is `levelscan level` output: its scan is a pseudo-level scan in
@@ -40,6 +41,9 @@ pub struct ViewParams {
     /// the same sequence is loaded (level output carries only `[x, y, rz]`). Default 0.45, the
     /// height of the paper's protocol (issue 3).
     pub default_height: f64,
+    /// Most pose cones drawn; beyond it one pose in k keeps its cone (the robot path still
+    /// joins every pose). Default 100: a long log's hundreds of cones hide its map.
+    pub max_cones: usize,
     /// Page title. Default "levelscan view".
     pub title: String,
 }
@@ -49,6 +53,7 @@ impl Default for ViewParams {
         Self {
             max_points: 250_000,
             default_height: 0.45,
+            max_cones: 100,
             title: "levelscan view".to_string(),
         }
     }
@@ -156,6 +161,7 @@ pub struct Source {
 pub fn build_scene(plan: Option<&Plan>, sources: &[Source], params: &ViewParams) -> Scene {
     let placed = place::place(sources, params);
     let drawn: Vec<&place::Placed> = placed.groups.iter().filter(|g| g.drawn).collect();
+    let mut notes = placed.notes.clone();
     let mut layers = vec![
         layers::plan_walls(plan),
         layers::raw_scans(&drawn),
@@ -163,12 +169,12 @@ pub fn build_scene(plan: Option<&Plan>, sources: &[Source], params: &ViewParams)
         layers::wall_patches(&drawn),
         layers::pseudo_level_scans(&drawn),
         layers::matched_scans(&drawn),
-        layers::true_path(&drawn),
-        layers::pose_cones(&drawn, plan),
+        layers::reference_path(&placed.groups),
+        layers::robot_path(&placed.groups),
+        layers::pose_cones(&drawn, plan, params.max_cones, &mut notes),
     ];
     let top_down = layers::is_top_down(&drawn, &layers);
     layers.retain(|l| !l.is_empty());
-    let mut notes = placed.notes;
     if layers.is_empty() {
         notes.push("Nothing to show: no walls, scans or poses were given.".to_string());
     }

@@ -28,14 +28,26 @@ pub(super) fn kind_of(scan: &Scan) -> Kind {
     }
 }
 
+/// The first of a record's poses in `order`, with the field's name.
+fn first_pose(scan: &Scan, order: [&'static str; 3]) -> Option<(Pose, &'static str)> {
+    order.into_iter().find_map(|field| {
+        let pose = match field {
+            "true_pose" => scan.true_pose,
+            "estimate" => scan.estimate,
+            _ => scan.odometry,
+        };
+        pose.map(|p| (p, field))
+    })
+}
+
 /// Where a raw record is: `true_pose`, else `estimate`, else `odometry`, else the origin.
-fn raw_pose(scan: &Scan) -> Option<Pose> {
-    scan.true_pose.or(scan.estimate).or(scan.odometry)
+fn raw_pose(scan: &Scan) -> Option<(Pose, &'static str)> {
+    first_pose(scan, ["true_pose", "estimate", "odometry"])
 }
 
 /// Where a matched record is: what the matcher concluded first.
-fn matched_pose(scan: &Scan) -> Option<Pose> {
-    scan.estimate.or(scan.odometry).or(scan.true_pose)
+fn matched_pose(scan: &Scan) -> Option<(Pose, &'static str)> {
+    first_pose(scan, ["estimate", "odometry", "true_pose"])
 }
 
 /// The estimated attitude of a `level` record, when it leveled.
@@ -50,14 +62,17 @@ fn level_attitude(scan: &Scan) -> Option<Attitude> {
 /// record when sequences are absent), the unit of decimation and of a pose cone.
 pub(super) struct Placed<'a> {
     pub kind: Kind,
+    /// Index of the group's source.
+    pub source: usize,
+    /// The record field the position comes from (`true_pose`, `estimate`, `odometry`), or
+    /// `None` when none is given (drawn at the origin).
+    pub pose_from: Option<&'static str>,
     pub scans: Vec<&'a Scan>,
     /// The robot's pose in the world: raw records' 6-DOF pose; for level output the raw pose
     /// of the same sequence when loaded (true attitude and height, so polygons sit on the red
     /// scans), else its planar pose with the estimated attitude at the default height; for
     /// matched records the planar estimate at z = 0.
     pub pose: Pose,
-    /// False when no pose was found and the group sits at the origin.
-    pub located: bool,
     /// Whether the group adds a pose cone (level output whose raw scans are loaded does not).
     pub cone: bool,
     /// Kept after decimation.
@@ -94,15 +109,19 @@ pub(super) fn place<'a>(sources: &'a [Source], params: &ViewParams) -> Placement
     let mut raw_by_sequence: HashMap<u64, Pose> = HashMap::new();
     for scan in sources.iter().flat_map(|s| &s.scans) {
         if kind_of(scan) == Kind::Raw
-            && let (Some(seq), Some(pose)) = (scan.sequence, raw_pose(scan))
+            && let (Some(seq), Some((pose, _))) = (scan.sequence, raw_pose(scan))
         {
             raw_by_sequence.entry(seq).or_insert(pose);
         }
     }
-    let all: Vec<(Kind, Vec<&Scan>)> = sources.iter().flat_map(groups).collect();
+    let all: Vec<(usize, Kind, Vec<&Scan>)> = sources
+        .iter()
+        .enumerate()
+        .flat_map(|(i, s)| groups(s).into_iter().map(move |(k, g)| (i, k, g)))
+        .collect();
     let total_points: usize = all
         .iter()
-        .flat_map(|(_, g)| g.iter())
+        .flat_map(|(_, _, g)| g.iter())
         .map(|s| s.valid_count())
         .sum();
     let stride = total_points.div_ceil(params.max_points.max(1)).max(1);
@@ -118,13 +137,17 @@ pub(super) fn place<'a>(sources: &'a [Source], params: &ViewParams) -> Placement
     let groups: Vec<Placed> = all
         .into_iter()
         .enumerate()
-        .map(|(k, (kind, scans))| {
+        .map(|(k, (source, kind, scans))| {
             let mut g = locate(kind, scans, &raw_by_sequence, params);
+            g.source = source;
             g.drawn = k % stride == 0;
             g
         })
         .collect();
-    let unplaced = groups.iter().filter(|g| g.drawn && !g.located).count();
+    let unplaced = groups
+        .iter()
+        .filter(|g| g.drawn && g.pose_from.is_none())
+        .count();
     if unplaced > 0 {
         notes.push(format!(
             "{unplaced} poses had no true_pose, estimate or odometry and are drawn at the origin."
@@ -140,10 +163,10 @@ fn locate<'a>(
     params: &ViewParams,
 ) -> Placed<'a> {
     let first = scans[0];
-    let (pose, located, cone) = match kind {
+    let (pose, pose_from, cone) = match kind {
         Kind::Raw => {
             let pose = raw_pose(first);
-            (pose.unwrap_or_default(), pose.is_some(), true)
+            (pose.unwrap_or_default().0, pose.map(|p| p.1), true)
         }
         Kind::Leveled => {
             let planar = raw_pose(first);
@@ -151,7 +174,7 @@ fn locate<'a>(
                 .sequence
                 .and_then(|s| raw_by_sequence.get(&s).copied());
             let pose = raw.unwrap_or_else(|| {
-                let p = planar.unwrap_or_default();
+                let p = planar.unwrap_or_default().0;
                 let att = level_attitude(first).unwrap_or_default();
                 Pose::new(
                     p.x,
@@ -162,23 +185,21 @@ fn locate<'a>(
                     att.theta_x,
                 )
             });
-            (pose, planar.is_some(), raw.is_none())
+            (pose, planar.map(|p| p.1), raw.is_none())
         }
         Kind::Matched => {
             let pose = matched_pose(first);
-            let p = pose.unwrap_or_default();
-            (
-                Pose::new(p.x, p.y, 0.0, p.rz, 0.0, 0.0),
-                pose.is_some(),
-                true,
-            )
+            let p = pose.unwrap_or_default().0;
+            let planar = Pose::new(p.x, p.y, 0.0, p.rz, 0.0, 0.0);
+            (planar, pose.map(|p| p.1), true)
         }
     };
     Placed {
         kind,
+        source: 0,
+        pose_from,
         scans,
         pose,
-        located,
         cone,
         drawn: true,
     }

@@ -214,7 +214,7 @@ fn matched_2d_log_opens_top_down_at_estimates() {
     let cones = &scene.layer("poses").unwrap().cones;
     assert_eq!((cones[0].s, cones[1].s), (0.0, 1.0));
     assert_eq!(
-        coords(&scene.layer("truth").unwrap().lines[0]),
+        coords(&scene.layer("reference").unwrap().lines[0]),
         vec![[0, 0, 0], [1000, 0, 0]]
     );
 }
@@ -272,4 +272,109 @@ fn big_input_is_decimated_by_whole_poses() {
             .iter()
             .any(|n| n.contains("1 pose in 4 (3 poses)"))
     );
+}
+
+#[test]
+fn matched_log_names_its_true_pose_a_reference_and_draws_the_robot_path() {
+    let scans: Vec<Scan> = (0..3)
+        .map(|k| {
+            let mut s = scan_with(&[Some(1.0)], &[0.0]);
+            s.sequence = None;
+            s.estimate = Some(Pose::planar(k as f64, 1.0, 0.0));
+            s.true_pose = Some(Pose::planar(k as f64, 0.0, 0.0));
+            s
+        })
+        .collect();
+    let scene = build_scene(
+        None,
+        &[Source {
+            name: "m".into(),
+            scans,
+        }],
+        &ViewParams::default(),
+    );
+    let reference = scene.layer("reference").unwrap();
+    assert_eq!(reference.label, "Reference path (true_pose, green)");
+    assert!(scene.layers.iter().all(|l| !l.label.contains("True")));
+    let path = scene.layer("path").unwrap();
+    assert_eq!(path.label, "Robot path (estimate, purple)");
+    assert_eq!(
+        coords(&path.lines[0]),
+        vec![[0, 1000, 0], [1000, 1000, 0], [2000, 1000, 0]]
+    );
+}
+
+#[test]
+fn long_logs_keep_one_cone_in_k_and_the_whole_path() {
+    // 251 poses over a cap of 100 cones: every 3rd pose (0, 3, ..., 249) and the last (250).
+    let scans: Vec<Scan> = (0..251)
+        .map(|k| {
+            let mut s = scan_with(&[Some(1.0)], &[0.0]);
+            s.sequence = Some(k);
+            s.elevation = Some(0.0);
+            s.true_pose = Some(Pose::planar(k as f64 * 0.1, 0.0, 0.0));
+            s
+        })
+        .collect();
+    let scene = build_scene(
+        None,
+        &[Source {
+            name: "log".into(),
+            scans,
+        }],
+        &ViewParams::default(),
+    );
+    let cones = &scene.layer("poses").unwrap().cones;
+    assert_eq!(cones.len(), 85);
+    assert_eq!(cones[1].t[0], 300);
+    assert_eq!((cones[84].t[0], cones[84].s), (25_000, 1.0));
+    assert!(scene.notes.iter().any(|n| n.contains("1 pose in 3")));
+    let path = scene.layer("path").unwrap();
+    assert_eq!(path.label, "Robot path (true_pose, purple)");
+    assert_eq!(path.point_count(), 251);
+}
+
+/// A scan's bearings and ranges, valid everywhere, one degree apart from `first_deg`.
+fn scan_deg(first_deg: f64, ranges: &[f64]) -> Scan {
+    let bearings: Vec<f64> = (0..ranges.len())
+        .map(|i| (first_deg + i as f64).to_radians())
+        .collect();
+    let readings: Vec<Option<f64>> = ranges.iter().map(|&r| Some(r)).collect();
+    let mut s = scan_with(&readings, &bearings);
+    s.elevation = Some(0.0);
+    s
+}
+
+#[test]
+fn breakpoint_distance_is_borges_and_aldons() {
+    // D = r sin(dphi) / sin(lambda - dphi) + 3 sigma_r, lambda 10 deg, sigma_r 2 cm.
+    let (r, dphi) = (5.0, 1f64.to_radians());
+    let d = r * dphi.sin() / (10f64.to_radians() - dphi).sin() + 0.06;
+    assert!((super::lines::max_joined_distance(r, dphi) - d).abs() < 1e-12);
+    assert!((super::lines::max_joined_distance(r, -dphi) - d).abs() < 1e-12);
+}
+
+#[test]
+fn clutter_at_alternating_depths_is_not_joined_into_a_web() {
+    // 3 m and 3.5 m on alternate rays one degree apart: points 0.5 m apart, each on its own
+    // surface (a fixed 0.3 m + 15% of the range would join them all).
+    let ranges: Vec<f64> = (0..20)
+        .map(|i| if i % 2 == 0 { 3.0 } else { 3.5 })
+        .collect();
+    let scene = scene_of(scan_deg(0.0, &ranges));
+    let layer = scene.layer("scans").unwrap();
+    assert_eq!(layer.lines.len(), 20);
+}
+
+#[test]
+fn an_oblique_wall_stays_one_line() {
+    // The wall x = 2 seen from the origin at bearings 0 to 70 degrees: range 2 / cos(bearing),
+    // up to 5.8 m and points 0.3 m apart at the far end, still one surface.
+    let ranges: Vec<f64> = (0..=70)
+        .map(|d| 2.0 / f64::from(d).to_radians().cos())
+        .collect();
+    let scene = scene_of(scan_deg(0.0, &ranges));
+    let layer = scene.layer("scans").unwrap();
+    assert_eq!(layer.lines.len(), 1);
+    assert_eq!(layer.point_count(), 71);
 }
