@@ -609,6 +609,37 @@ fn demo_report_has_its_sections_and_its_viewer_draws() {
         json!([2, 3, 0]),
         "accuracy charts, maps, missing figures"
     );
+    // Table I and Fig. 6: every text at least 12 px on the page, as the report shows them.
+    let smallest = b.eval(
+        "Math.min(...Array.from(document.querySelectorAll('#accuracy svg')).flatMap(svg => {
+           const k = svg.getBoundingClientRect().width / svg.viewBox.baseVal.width;
+           return Array.from(svg.querySelectorAll('text')).filter(t => t.textContent.trim())
+             .map(t => parseFloat(t.getAttribute('font-size')) * k); }))",
+    );
+    assert!(
+        smallest.as_f64().unwrap() >= 12.0,
+        "smallest chart text {smallest} px"
+    );
+    // Fig. 6 keeps the poses beyond its axis in an overflow bin.
+    let fig6 = b.eval(
+        "Array.from(document.querySelectorAll('#accuracy svg')[1].querySelectorAll('text')).map(t => t.textContent.trim())",
+    );
+    assert!(
+        fig6.as_array()
+            .unwrap()
+            .iter()
+            .any(|t| t.as_str().unwrap().starts_with("> ")),
+        "no overflow bin in {fig6}"
+    );
+    // The columns are defined.
+    let terms =
+        b.eval("Array.from(document.querySelectorAll('#accuracy dl dt')).map(d => d.textContent)");
+    for term in ["ok but > 5 deg", "phantoms", "coverage"] {
+        assert!(
+            terms.as_array().unwrap().iter().any(|t| t == term),
+            "{term} not defined: {terms}"
+        );
+    }
     let _ = b.screenshot_element("#summary", "report-first-screen");
     let _ = b.screenshot_element("#accuracy", "report-accuracy");
     check_viewer_draws_and_toggles(&mut b, "#viewer", "polygons", "report-pose");
@@ -632,4 +663,37 @@ fn demo_report_has_its_sections_and_its_viewer_draws() {
         "{matched}"
     );
     b.assert_no_errors("report.html after toggles");
+    for map in ["map_leveled_metascan.svg", "map_level_floor.svg"] {
+        check_map_axes_and_legend(&mut b, &out.join(map), map);
+    }
+}
+
+/// A map as the demo writes it: axes named in metres with numbered ticks, a scale bar, and a
+/// legend that covers no wall (its texts lie outside the box of the plan's wall lines).
+fn check_map_axes_and_legend(b: &mut Browser, svg: &Path, name: &str) {
+    b.open(svg);
+    b.assert_no_errors(name);
+    let found = b.eval(
+        "(() => { const texts = Array.from(document.querySelectorAll('text'));
+           const t = s => texts.filter(e => e.textContent.trim() === s);
+           const box = r => ({l: r.left, r: r.right, t: r.top, b: r.bottom});
+           const walls = Array.from(document.querySelectorAll('polyline[stroke=\"#969696\"]'))
+             .map(e => box(e.getBoundingClientRect()));
+           const legend = ['plan walls', 'matched points', 'true path', 'estimated path']
+             .flatMap(s => t(s)).map(e => box(e.getBoundingClientRect()));
+           const hits = legend.filter(l => walls.some(w => l.l < w.r && l.r > w.l && l.t < w.b && l.b > w.t));
+           return {x: t('x [m]').length, y: t('y [m]').length,
+                   ticks: texts.filter(e => /^-?[0-9]+$/.test(e.textContent.trim())).length,
+                   scale: texts.filter(e => /^scale [0-9]+ c?m$/.test(e.textContent.trim())).length,
+                   walls: walls.length, legend: legend.length, covered: hits.length}; })()",
+    );
+    let n = |k: &str| found[k].as_u64().unwrap();
+    assert!(
+        n("x") >= 1 && n("y") >= 1,
+        "{name}: axes not named: {found}"
+    );
+    assert!(n("ticks") >= 8, "{name}: too few tick labels: {found}");
+    assert!(n("scale") >= 1, "{name}: no scale bar: {found}");
+    assert!(n("walls") >= 10 && n("legend") >= 4, "{name}: {found}");
+    assert_eq!(n("covered"), 0, "{name}: the legend covers a wall: {found}");
 }

@@ -4,10 +4,8 @@
 //! SVG; a figure that cannot be drawn becomes [`Figure::Missing`] with the reason.
 
 use super::histogram;
-use super::plots::{
-    AccuracyCell, MapPanel, grouped_bars_png, grouped_bars_svg, map_panels_png, map_panels_svg,
-    run_map_panel, table_one_chart,
-};
+use super::map_plot::{MapPanel, map_panels_png, map_panels_svg, run_map_panel};
+use super::plots::{AccuracyCell, grouped_bars_png, grouped_bars_svg, table_one_chart};
 use super::report::Figure;
 use super::scene::{Scene, Source, ViewParams, build_scene};
 use crate::eval::accuracy::CellStats;
@@ -125,10 +123,10 @@ fn table_one_figure(dir: &Path, accuracy: &[CellStats]) -> Figure {
         })
         .collect();
     let chart = table_one_chart(&cells);
-    match grouped_bars_svg(&chart, (760, 420)) {
+    match grouped_bars_svg(&chart, histogram::SIZE) {
         Ok(svg) => {
             let _ = std::fs::write(dir.join("table1.svg"), &svg);
-            let _ = grouped_bars_png(&chart, &dir.join("table1.png"), (760, 420));
+            let _ = grouped_bars_png(&chart, &dir.join("table1.png"), histogram::SIZE);
             Figure::Svg(svg)
         }
         Err(e) => Figure::Missing(e.to_string()),

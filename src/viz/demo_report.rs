@@ -5,6 +5,7 @@
 use super::demo_figures::Figures;
 use super::report::{Block, Figure, Panel, Report, Section, Table};
 use super::scene::Scene;
+use crate::eval::accuracy::AccuracyParams;
 use crate::eval::demo::DemoData;
 
 /// Three decimals, or "-" for a missing or undefined number (a cell with no leveled pose).
@@ -201,6 +202,7 @@ fn accuracy_section(data: &DemoData, table_one: Figure, histogram: Figure) -> Se
                 .to_vec(),
                 rows: accuracy_rows,
             }),
+            Block::Definitions(accuracy_definitions()),
             Block::Panels(vec![
                 Panel {
                     title: "Table I as a figure".into(),
@@ -211,12 +213,58 @@ fn accuracy_section(data: &DemoData, table_one: Figure, histogram: Figure) -> Se
                 Panel {
                     title: "Distribution of error (Fig. 6)".into(),
                     metric: String::new(),
-                    caption: "Share of leveled poses per 0.5 degree bucket.".into(),
+                    caption: "Share of leveled poses per 0.5 degree bucket, labelled by its \
+                              upper bound; the axis ends where 99% of the errors do, and the \
+                              last bin (outlined) counts every pose beyond it."
+                        .into(),
                     figure: histogram,
                 },
             ]),
         ],
     }
+}
+
+/// What Table I's columns mean.
+fn accuracy_definitions() -> Vec<(String, String)> {
+    let phantom_cm = AccuracyParams::default().phantom_distance * 100.0;
+    [
+        (
+            "mean, median, p95, max",
+            "of the error max(|dtheta_x|, |dtheta_y|) over the leveled poses, in degrees \
+             (p95: the 95th percentile)."
+                .to_string(),
+        ),
+        (
+            "leveled",
+            "share of the poses that level reported as ok (the rest failed with a reason, \
+             e.g. facing_floor)."
+                .to_string(),
+        ),
+        (
+            "ok but > 5 deg",
+            "poses reported ok whose error is above 5 degrees: the leveler's silent failures, \
+             the ones a matcher downstream cannot know about."
+                .to_string(),
+        ),
+        (
+            "phantoms",
+            format!(
+                "share of the valid pseudo-level points that lie farther than {phantom_cm:.0} cm \
+                 from every true wall: floor or ceiling hits, or misplaced points, that a \
+                 matcher would take for obstacles."
+            ),
+        ),
+        (
+            "coverage",
+            "valid pseudo-level points over the wall hits of the pose's best single scan (the \
+             one with most wall hits): how much of the visible walls the pseudo-level scan \
+             keeps."
+                .to_string(),
+        ),
+    ]
+    .into_iter()
+    .map(|(k, v)| (k.to_string(), v))
+    .collect()
 }
 
 /// The 3D view of the pose with most wall polygons (Fig. 5a).

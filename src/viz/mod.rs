@@ -6,6 +6,8 @@ pub mod demo_figures;
 pub mod demo_report;
 pub mod histogram;
 pub mod html;
+pub mod legend;
+pub mod map_plot;
 pub mod plots;
 pub mod report;
 pub mod scene;

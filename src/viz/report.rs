@@ -48,6 +48,8 @@ pub enum Block {
     /// A command line, shown verbatim.
     Code(String),
     Table(Table),
+    /// Terms and what they mean (a table's columns), as a definition list.
+    Definitions(Vec<(String, String)>),
     /// Panels side by side.
     Panels(Vec<Panel>),
     /// An interactive 3D viewer.
@@ -154,6 +156,19 @@ fn table_html(t: &Table) -> String {
     s
 }
 
+fn definitions_html(terms: &[(String, String)]) -> String {
+    let mut s = String::from("<dl class=\"lsr-defs\">\n");
+    for (term, meaning) in terms {
+        s.push_str(&format!(
+            "<dt>{}</dt><dd>{}</dd>\n",
+            escape_html(term),
+            escape_html(meaning)
+        ));
+    }
+    s.push_str("</dl>\n");
+    s
+}
+
 /// Renders the whole page.
 pub fn render(report: &Report) -> String {
     let mut body = String::new();
@@ -194,6 +209,7 @@ pub fn render(report: &Report) -> String {
                     escape_html(c)
                 )),
                 Block::Table(t) => body.push_str(&table_html(t)),
+                Block::Definitions(d) => body.push_str(&definitions_html(d)),
                 Block::Panels(p) => body.push_str(&panels_html(p, "")),
                 Block::Viewer(scene) => {
                     viewers += 1;
