@@ -11,6 +11,8 @@
 
 pub mod carmen;
 pub mod level_record;
+pub mod pgm_map;
+pub mod ply;
 pub mod scan_jsonl;
 pub mod tum;
 pub mod wall;
