@@ -568,7 +568,9 @@ fn demo_report_has_its_sections_and_its_viewer_draws() {
     b.open(&out.join("report.html"));
     b.assert_no_errors("report.html");
     let sections = b.eval("Array.from(document.querySelectorAll('section')).map(s => s.id)");
-    for id in ["summary", "matching", "accuracy", "viewer", "maps", "data"] {
+    for id in [
+        "summary", "matching", "run", "accuracy", "viewer", "maps", "data",
+    ] {
         assert!(
             sections.as_array().unwrap().iter().any(|s| s == id),
             "section {id} missing from {sections}"
@@ -602,13 +604,30 @@ fn demo_report_has_its_sections_and_its_viewer_draws() {
     assert_eq!(tables, json!([6, 9]), "matching runs and Table I cells");
     let figures = b.eval(
         "[document.querySelectorAll('#accuracy svg').length, document.querySelectorAll('#maps img').length,
-          document.querySelectorAll('.lsr-missing').length]",
+          document.querySelectorAll('#run svg').length, document.querySelectorAll('.lsr-missing').length]",
     );
     assert_eq!(
         figures,
-        json!([2, 3, 0]),
-        "accuracy charts, maps, missing figures"
+        json!([2, 3, 2, 0]),
+        "accuracy charts, maps, run plots, missing figures"
     );
+    // Roll and pitch over time and the error along the trajectory: axes named, readable.
+    let run_texts = b.eval(
+        "Array.from(document.querySelectorAll('#run svg text')).map(t => t.textContent.trim())",
+    );
+    for name in [
+        "roll theta_x [deg]",
+        "pitch theta_y [deg]",
+        "estimate +- 3 sigma",
+        "x [m]",
+        "position error [m]",
+        "distance travelled [m]",
+    ] {
+        assert!(
+            run_texts.as_array().unwrap().iter().any(|t| t == name),
+            "{name} missing from the run plots"
+        );
+    }
     // Table I and Fig. 6: every text at least 12 px on the page, as the report shows them.
     let smallest = b.eval(
         "Math.min(...Array.from(document.querySelectorAll('#accuracy svg')).flatMap(svg => {

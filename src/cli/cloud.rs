@@ -5,7 +5,7 @@
 use super::{open_input, open_output};
 use anyhow::{Context, bail};
 use levelscan::formats::carmen::CarmenParams;
-use levelscan::formats::ply::{CloudPoint, write_ply};
+use levelscan::formats::ply::{pose_cloud, write_ply};
 use levelscan::formats::read_any;
 use levelscan::scan::Scan;
 use std::io::Write;
@@ -29,18 +29,7 @@ pub struct Args {
 
 pub fn run(args: Args) -> anyhow::Result<()> {
     let (name, sequence, scans) = read_pose(args.input.as_deref(), args.sequence)?;
-    let mut points = Vec::new();
-    for (k, scan) in scans.iter().enumerate() {
-        for i in 0..scan.nrays() {
-            if let (Some(p), Some(r)) = (scan.point_in_robot(i), scan.range(i)) {
-                points.push(CloudPoint {
-                    p: [p.x as f32, p.y as f32, p.z as f32],
-                    scan: k.min(255) as u8,
-                    range: r as f32,
-                });
-            }
-        }
-    }
+    let points = pose_cloud(&scans);
     let elevations: Vec<String> = scans
         .iter()
         .map(|s| format!("{:.2}", s.elevation.unwrap_or(0.0).to_degrees()))

@@ -7,9 +7,12 @@
 use super::progress_bar;
 use anyhow::Context;
 use levelscan::eval::demo::{DemoData, DemoParams, run_demo};
+use levelscan::formats::pgm_map::{Classes, pgm_bytes, yaml_text};
+use levelscan::formats::ply::{pose_cloud, write_ply};
 use levelscan::formats::write_scan;
+use levelscan::occupancy::{GridParams, PlacedScan, build_grid};
 use levelscan::scan::Scan;
-use levelscan::viz::demo_figures::make_figures;
+use levelscan::viz::demo_figures::{make_figures, shown_pose};
 use levelscan::viz::demo_report::{build_report, fmt_m};
 use levelscan::viz::html::viewer_page;
 use levelscan::viz::report::render;
@@ -72,6 +75,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         &dir.join("leveled.jsonl"),
         demo.leveled.iter().map(|l| &l.record),
     )?;
+    let matched = demo.matched_leveled();
+    write_jsonl(&dir.join("matched.jsonl"), matched.iter())?;
+    write_map(dir, &matched)?;
+    if let Some(scans) = demo.tilted.get(shown_pose(&demo.leveled)) {
+        write_cloud(dir, scans)?;
+    }
 
     stages.set_message("figures");
     let clock = Instant::now();
@@ -94,6 +103,37 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     stages.finish_and_clear();
     print_summary(&demo.data, &report_path);
     Ok(())
+}
+
+/// The occupancy grid of the leveled scans as metascan placed them, for ROS map_server.
+fn write_map(dir: &Path, matched: &[Scan]) -> anyhow::Result<()> {
+    let placed: Vec<PlacedScan> = matched
+        .iter()
+        .filter_map(|s| {
+            Some(PlacedScan {
+                pose: s.estimate?.to_pose2(),
+                hits: s.points_2d(),
+            })
+        })
+        .collect();
+    let grid = build_grid(&placed, &GridParams::default()).context("map.yaml")?;
+    std::fs::write(dir.join("map.pgm"), pgm_bytes(&grid, &Classes::default()))
+        .with_context(|| format!("{}: cannot write map.pgm", dir.display()))?;
+    write(&dir.join("map.yaml"), &yaml_text("map.pgm", &grid))
+}
+
+/// The 3D view's pose as a point cloud, robot frame.
+fn write_cloud(dir: &Path, scans: &[Scan]) -> anyhow::Result<()> {
+    let points = pose_cloud(scans);
+    let sequence = scans.first().and_then(|s| s.sequence).unwrap_or(0);
+    let comments = [
+        format!("levelscan demo, sequence {sequence}"),
+        "frame robot (REP-103: x forward, y left, z up), metres".to_string(),
+    ];
+    let mut bytes = Vec::new();
+    write_ply(&mut bytes, &points, &comments, false).context("pose.ply")?;
+    std::fs::write(dir.join("pose.ply"), bytes)
+        .with_context(|| format!("{}: cannot write pose.ply", dir.display()))
 }
 
 fn write(path: &Path, text: &str) -> anyhow::Result<()> {

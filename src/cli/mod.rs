@@ -5,6 +5,7 @@ mod demo;
 mod eval;
 mod eval_accuracy;
 mod eval_matching;
+mod eval_run;
 mod info;
 mod level;
 mod map;

@@ -215,6 +215,28 @@ impl DemoRun {
     pub fn run(&self, kind: RunKind, mode: Mode) -> Option<&RunResult> {
         self.runs.iter().find(|r| r.kind == kind && r.mode == mode)
     }
+
+    /// The leveled records as metascan matched them, like `match` output: each at its
+    /// estimate (aligned onto the truth, as the ATE measures it), with a `match` object; the
+    /// wall polygons dropped (they belong to the 3D view).
+    pub fn matched_leveled(&self) -> Vec<Scan> {
+        let Some(run) = self.run(RunKind::Leveled, Mode::Metascan) else {
+            return Vec::new();
+        };
+        self.leveled
+            .iter()
+            .zip(&run.aligned)
+            .map(|(l, e)| {
+                let mut s = l.record.clone();
+                s.estimate = Some(Pose::planar(e.x, e.y, e.theta));
+                s.extra.remove("wall_polygons");
+                s.extra.remove("wall_patches");
+                s.extra
+                    .insert("match".into(), serde_json::json!({"status": "ok"}));
+                s
+            })
+            .collect()
+    }
 }
 
 /// Runs the demo; `on_stage` is told each stage as it starts.

@@ -6,3 +6,4 @@ pub mod demo;
 pub mod matching;
 pub mod metrics;
 pub mod real;
+pub mod run;

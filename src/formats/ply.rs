@@ -2,6 +2,7 @@
 //! vertex per valid ray, `x y z` as float, the scan's index within its pose and the range, and
 //! a colour per scan so that the scans tell apart in any viewer.
 
+use crate::scan::Scan;
 use std::io::{self, Write};
 
 /// One point of a cloud.
@@ -13,6 +14,23 @@ pub struct CloudPoint {
     pub scan: u8,
     /// Measured range \[m\].
     pub range: f32,
+}
+
+/// The points of one pose's scans in the robot frame: each valid ray at its hinge elevation and
+/// offset ([`Scan::point_in_robot`]), tagged with its scan's index in `scans`.
+pub fn pose_cloud(scans: &[Scan]) -> Vec<CloudPoint> {
+    let mut points = Vec::new();
+    for (k, s) in scans.iter().enumerate() {
+        points.extend((0..s.nrays()).filter_map(|i| {
+            let (p, r) = (s.point_in_robot(i)?, s.range(i)?);
+            Some(CloudPoint {
+                p: [p.x as f32, p.y as f32, p.z as f32],
+                scan: k.min(255) as u8,
+                range: r as f32,
+            })
+        }));
+    }
+    points
 }
 
 /// Colours of scans 0, 1, 2, ... (cycled).

@@ -7,15 +7,16 @@ use super::histogram;
 use super::map_plot::{MapPanel, map_panels_png, map_panels_svg, run_map_panel};
 use super::plots::{AccuracyCell, grouped_bars_png, grouped_bars_svg, table_one_chart};
 use super::report::Figure;
+use super::run_plots::write_run_figures;
 use super::scene::{Scene, Source, ViewParams, build_scene};
 use crate::eval::accuracy::CellStats;
 use crate::eval::demo::{DemoRun, LeveledPose};
 use crate::eval::matching::{RunKind, RunResult};
+use crate::eval::run::{evaluate_run, run_poses};
 use crate::geometry::{Pose, Pose2};
 use crate::matching::matcher::Mode;
 use crate::plan::Plan;
 use crate::scan::Scan;
-use serde_json::json;
 use std::path::Path;
 
 /// The figures of the report.
@@ -30,12 +31,16 @@ pub struct Figures {
     pub pose_view: Scene,
     /// The leveled scans as metascan matched them, top down (Fig. 5b).
     pub matched_view: Scene,
+    /// Roll and pitch over the run, and the position error along it.
+    pub attitude: Figure,
+    pub trajectory_error: Figure,
 }
 
 /// Draws the report's figures from the demo's run, writing each as PNG and SVG in `dir`.
 pub fn make_figures(dir: &Path, run: &DemoRun) -> Figures {
     let (metascan, pairwise, level_floor) = map_figures(dir, &run.plan, &run.runs);
-    let leveled: Vec<Scan> = run.leveled.iter().map(|l| l.record.clone()).collect();
+    let matched = run.matched_leveled();
+    let [attitude, trajectory_error] = run_figures(dir, run, &matched);
     Figures {
         metascan,
         pairwise,
@@ -43,7 +48,29 @@ pub fn make_figures(dir: &Path, run: &DemoRun) -> Figures {
         table_one: table_one_figure(dir, &run.data.accuracy),
         histogram: histogram_figure(dir, &run.data.accuracy),
         pose_view: pose_scene(&run.plan, &run.tilted, &run.leveled),
-        matched_view: matched_scene(&run.plan, &run.runs, &leveled),
+        matched_view: matched_scene(&run.plan, matched),
+        attitude,
+        trajectory_error,
+    }
+}
+
+/// Roll and pitch over the run against the truth, and the leveled metascan run's position
+/// error along its trajectory (`levelscan eval run`'s figures).
+fn run_figures(dir: &Path, run: &DemoRun, matched: &[Scan]) -> [Figure; 2] {
+    let records: Vec<Scan> = run
+        .tilted
+        .iter()
+        .flatten()
+        .chain(matched)
+        .cloned()
+        .collect();
+    let poses = run_poses(&records);
+    match write_run_figures(dir, "run_", &poses, &evaluate_run(&poses)) {
+        Ok(svgs) => svgs.map(Figure::Svg),
+        Err(e) => [
+            Figure::Missing(e.to_string()),
+            Figure::Missing(e.to_string()),
+        ],
     }
 }
 
@@ -205,25 +232,7 @@ fn pose_scene(plan: &Plan, tilted: &[Vec<Scan>], leveled: &[LeveledPose]) -> Sce
 }
 
 /// The leveled scans as matched by metascan, top down (the paper's Fig. 5b).
-fn matched_scene(plan: &Plan, runs: &[RunResult], leveled: &[Scan]) -> Scene {
-    let run = runs
-        .iter()
-        .find(|r| r.kind == RunKind::Leveled && r.mode == Mode::Metascan);
-    let scans: Vec<Scan> = match run {
-        Some(run) => leveled
-            .iter()
-            .zip(&run.aligned)
-            .map(|(s, e)| {
-                let mut s = s.clone();
-                s.estimate = Some(Pose::planar(e.x, e.y, e.theta));
-                s.extra.remove("wall_polygons");
-                s.extra.remove("wall_patches");
-                s.extra.insert("match".into(), json!({"status": "ok"}));
-                s
-            })
-            .collect(),
-        None => Vec::new(),
-    };
+fn matched_scene(plan: &Plan, scans: Vec<Scan>) -> Scene {
     let params = ViewParams {
         title: "Leveled scans matched with metascan, top down".into(),
         ..ViewParams::default()

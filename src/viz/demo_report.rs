@@ -59,6 +59,7 @@ pub fn build_report(data: &DemoData, figures: Figures) -> Report {
         headline: headline(data, raw_meta, lev_meta),
         sections: vec![
             matching_section(data),
+            run_section(figures.attitude, figures.trajectory_error),
             accuracy_section(data, figures.table_one, figures.histogram),
             viewer_section(data, figures.pose_view),
             maps_section(
@@ -148,6 +149,35 @@ fn matching_section(data: &DemoData) -> Section {
             .to_vec(),
             rows: matching_rows,
         })],
+    }
+}
+
+/// Roll and pitch over the run, and the position error along it (`levelscan eval run`).
+fn run_section(attitude: Figure, trajectory_error: Figure) -> Section {
+    Section {
+        id: "run".into(),
+        title: "Attitude and error along the run".into(),
+        blocks: vec![
+            Block::Panels(vec![Panel {
+                title: "Roll and pitch over the run".into(),
+                metric: String::new(),
+                caption: "Blue: level's estimate at each pose with its 3-sigma band (the sigmas \
+                          level reports); black: the simulator's truth; red marks: poses level \
+                          could not level."
+                    .into(),
+                figure: attitude,
+            }]),
+            Block::Panels(vec![Panel {
+                title: "Position error along the trajectory".into(),
+                metric: String::new(),
+                caption: "Leveled scans, metascan: each estimate after the ATE's alignment, \
+                          coloured by its distance from the true position (left), and that \
+                          error over the distance travelled (right)."
+                    .into(),
+                figure: trajectory_error,
+            }]),
+            Block::Code("levelscan eval run scans.jsonl matched.jsonl --out run".into()),
+        ],
     }
 }
 
@@ -364,14 +394,20 @@ fn about_section(data: &DemoData) -> Section {
             Block::Text(
                 "Beside this page: report.json (every number here), scans_tilted.jsonl (the \
                  simulated scans), leveled.jsonl (level output with wall polygons), \
-                 view_pose.html, and the figures as PNG and SVG. The same steps by hand:"
+                 matched.jsonl (the leveled scans at their metascan estimates), map.yaml and \
+                 map.pgm (their occupancy grid, for ROS map_server), pose.ply (the 3D view's \
+                 pose as a point cloud in the robot frame), view_pose.html, and the figures as \
+                 PNG and SVG. The same steps by hand:"
                     .into(),
             ),
             Block::Code(
                 "levelscan simulate examples/plans/office.wall --scans 5 > scans.jsonl\n\
                  levelscan level --polygons scans.jsonl > leveled.jsonl\n\
                  levelscan match --mode metascan leveled.jsonl > matched.jsonl\n\
-                 levelscan view scans.jsonl leveled.jsonl --plan examples/plans/office.wall -o view.html"
+                 levelscan view scans.jsonl leveled.jsonl --plan examples/plans/office.wall -o view.html\n\
+                 levelscan eval run scans.jsonl matched.jsonl --out run\n\
+                 levelscan map matched.jsonl -o map.yaml\n\
+                 levelscan cloud scans.jsonl --sequence 0 -o pose.ply"
                     .into(),
             ),
         ],

@@ -10,4 +10,5 @@ pub mod legend;
 pub mod map_plot;
 pub mod plots;
 pub mod report;
+pub mod run_plots;
 pub mod scene;
