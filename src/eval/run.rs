@@ -102,7 +102,9 @@ pub fn run_poses(records: &[Scan]) -> Vec<RunPose> {
 
 /// Attitude statistics and the trajectory error of a run's poses.
 pub fn evaluate_run(poses: &[RunPose]) -> RunEvaluation {
-    let judged: Vec<([f64; 2], [f64; 2], Option<[f64; 2]>)> = poses
+    // (estimate, truth, sigma) of every leveled pose with a known truth.
+    type Judged = ([f64; 2], [f64; 2], Option<[f64; 2]>);
+    let judged: Vec<Judged> = poses
         .iter()
         .filter_map(|p| Some((p.attitude?, p.true_attitude?, p.sigma)))
         .collect();

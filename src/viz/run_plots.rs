@@ -7,6 +7,7 @@ use super::map_plot::equal_aspect;
 use super::plots::PlotError;
 use crate::eval::run::{RunEvaluation, RunPose};
 use plotters::coord::Shift;
+use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
 use std::path::Path;
 
@@ -43,6 +44,35 @@ fn span(values: impl Iterator<Item = f64>) -> (f64, f64) {
     } else {
         (-1.0, 1.0)
     }
+}
+
+type Chart<'a, DB> = ChartContext<'a, DB, Cartesian2d<RangedCoordf64, RangedCoordf64>>;
+
+/// The 3-sigma band `(low, high)` per pose at times `t`, one polygon per run of consecutive
+/// poses that have one.
+fn draw_band<DB: DrawingBackend>(
+    ctx: &mut Chart<'_, DB>,
+    band: &[Option<(f64, f64)>],
+    t: &[f64],
+) -> Result<(), PlotError> {
+    let pairs: Vec<(&Option<(f64, f64)>, &f64)> = band.iter().zip(t).collect();
+    for run in pairs.split(|(b, _)| b.is_none()).filter(|r| !r.is_empty()) {
+        let mut outline: Vec<(f64, f64)> = run
+            .iter()
+            .filter_map(|&(b, x)| Some((*x, b.as_ref()?.1)))
+            .collect();
+        outline.extend(
+            run.iter()
+                .rev()
+                .filter_map(|&(b, x)| Some((*x, b.as_ref()?.0))),
+        );
+        ctx.draw_series(std::iter::once(Polygon::new(
+            outline,
+            ESTIMATE.mix(0.18).filled(),
+        )))
+        .map_err(err)?;
+    }
+    Ok(())
 }
 
 /// Roll (`axis` 0) or pitch (1) of every pose in one panel.
@@ -87,29 +117,7 @@ fn draw_angle<DB: DrawingBackend>(
         .axis_desc_style(("sans-serif", FONT + 1))
         .draw()
         .map_err(err)?;
-    // The 3-sigma band, one polygon per run of consecutive leveled poses.
-    for run in band
-        .iter()
-        .zip(&t)
-        .collect::<Vec<_>>()
-        .split(|(b, _)| b.is_none())
-        .filter(|r| !r.is_empty())
-    {
-        let mut outline: Vec<(f64, f64)> = run
-            .iter()
-            .filter_map(|&(b, x)| Some((*x, b.as_ref()?.1)))
-            .collect();
-        outline.extend(
-            run.iter()
-                .rev()
-                .filter_map(|&(b, x)| Some((*x, b.as_ref()?.0))),
-        );
-        ctx.draw_series(std::iter::once(Polygon::new(
-            outline,
-            ESTIMATE.mix(0.18).filled(),
-        )))
-        .map_err(err)?;
-    }
+    draw_band(&mut ctx, &band, &t)?;
     let line = |f: &dyn Fn(&RunPose) -> Option<f64>| -> Vec<(f64, f64)> {
         poses
             .iter()
