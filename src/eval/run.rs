@@ -210,7 +210,7 @@ mod tests {
         };
         let level = match att {
             Some([x, y]) => json!({"status": "ok", "theta_x": x, "theta_y": y,
-                                   "sigma_x": 0.01, "sigma_y": 0.01}),
+                                   "sigma_x": 0.005, "sigma_y": 0.005}),
             None => json!({"status": "failed", "reason": "facing_floor"}),
         };
         s.extra.insert("level".into(), level);
@@ -254,7 +254,7 @@ mod tests {
         assert_eq!((ev.poses, ev.leveled), (2, 1));
         let [rx, ry] = ev.attitude_rmse_deg.unwrap();
         assert!((rx - 0.02f64.to_degrees()).abs() < 1e-9 && ry.abs() < 1e-9);
-        // 0.02 rad off with a sigma of 0.01: outside 3 sigma.
+        // 0.02 rad off with a sigma of 0.005: outside 3 sigma.
         assert_eq!(ev.within_3_sigma, Some(0.0));
     }
 

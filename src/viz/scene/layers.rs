@@ -248,7 +248,12 @@ pub(super) fn pose_cones(
         poses.extend(plan.poses.iter().copied());
     }
     let n = poses.len();
-    let stride = n.div_ceil(max_cones.max(1)).max(1);
+    // One slot is kept for the last pose, so that at most `max_cones` are drawn.
+    let stride = if n > max_cones {
+        n.div_ceil(max_cones.saturating_sub(1).max(1))
+    } else {
+        1
+    };
     if stride > 1 {
         notes.push(format!(
             "{n} poses: a cone at 1 pose in {stride} (--max-cones {max_cones}); the robot path joins them all."
