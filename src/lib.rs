@@ -10,7 +10,8 @@
 //! - [`matching`]: ICP scan matching, pairwise and metascan (sect. 2.2, 8.2).
 //! - [`eval`]: the paper's experiments and trajectory metrics (sect. 8).
 //! - [`viz`]: plots, the 3D viewer and reports (sect. 7.2.3).
-//! - [`formats`]: scan JSON Lines (CSM), `.wall`, CARMEN and TUM files.
+//! - [`occupancy`]: occupancy grids from matched scans (ROS map_server maps).
+//! - [`formats`]: scan JSON Lines (CSM), `.wall`, CARMEN and TUM files, maps and point clouds.
 //!
 //! The algorithm modules are pure functions on plain types; all I/O lives in [`formats`] and
 //! the command line.
@@ -20,6 +21,7 @@ pub mod formats;
 pub mod geometry;
 pub mod level;
 pub mod matching;
+pub mod occupancy;
 pub mod plan;
 pub mod pseudo_level;
 pub mod scan;

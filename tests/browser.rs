@@ -413,6 +413,57 @@ fn check_viewer_draws_and_toggles(b: &mut Browser, root: &str, layer: &str, name
     );
 }
 
+/// Checks a viewer's scale bar: present, labelled in metres, as long on screen as it says
+/// (the viewer's pixels per metre at the view's centre), and following a zoom.
+fn check_scale_bar(b: &mut Browser, root: &str, name: &str) {
+    let read = |b: &mut Browser| {
+        b.eval(&format!(
+            "(() => {{ const r0 = document.querySelector({sel}); const r = r0.classList.contains('lsv') ? r0 : r0.querySelector('.lsv');
+               const bar = r.querySelector('.lsv-scale-bar');
+               const label = r.querySelector('.lsv-scale-label'); const api = LevelscanViewer.instances.find(v => v.root === r);
+               if (!bar || !label || !api) return null;
+               return {{width: bar.getBoundingClientRect().width, label: label.textContent, scale: api.stats.scale}}; }})()",
+            sel = serde_json::to_string(root).unwrap()
+        ))
+    };
+    let before = read(b);
+    assert!(before.is_object(), "{name}: no scale bar in {root}");
+    let label = before["label"].as_str().unwrap();
+    let metres = before["scale"]["metres"].as_f64().unwrap();
+    let per_metre = before["scale"]["pxPerMetre"].as_f64().unwrap();
+    let width = before["width"].as_f64().unwrap();
+    assert!(
+        label.contains(" m") || label.contains(" cm"),
+        "{name}: scale label {label:?}"
+    );
+    assert!(
+        label.contains("grid"),
+        "{name}: grid step not named: {label:?}"
+    );
+    // The bar's border adds 2 px on each side.
+    assert!(
+        (width - 4.0 - metres * per_metre).abs() < 1.5,
+        "{name}: bar {width} px for {metres} m at {per_metre} px/m"
+    );
+    assert!((20.0..=150.0).contains(&width), "{name}: bar {width} px");
+    b.eval(&format!(
+        "(() => {{ const c = document.querySelector({sel}); c.dispatchEvent(new WheelEvent('wheel', {{deltaY: 800, bubbles: true, cancelable: true}}));
+           return new Promise(res => requestAnimationFrame(() => res(true))); }})()",
+        sel = serde_json::to_string(&format!("{root} canvas.lsv-canvas")).unwrap()
+    ));
+    let after = read(b);
+    let zoomed = after["scale"]["pxPerMetre"].as_f64().unwrap();
+    assert!(
+        zoomed < per_metre * 0.8,
+        "{name}: zooming out left {zoomed} px/m"
+    );
+    // Back to the first view for the checks that follow.
+    b.eval(&format!(
+        "document.querySelector({}).dispatchEvent(new MouseEvent('dblclick', {{bubbles: true}}))",
+        serde_json::to_string(&format!("{root} canvas.lsv-canvas")).unwrap()
+    ));
+}
+
 #[test]
 fn viewer_page_draws_and_layer_toggle_changes_it() {
     let Some(chromium) = chromium_or_skip("viewer_page_draws_and_layer_toggle_changes_it") else {
@@ -437,6 +488,7 @@ fn viewer_page_draws_and_layer_toggle_changes_it() {
     );
     assert_eq!(layers, json!(["plan", "scans", "poses"]));
     check_viewer_draws_and_toggles(&mut b, "#viewer", "scans", "view");
+    check_scale_bar(&mut b, "#viewer", "view");
     // Orbit and zoom with the mouse: the view changes and nothing throws.
     let before = b.screenshot_element("#viewer canvas.lsv-canvas", "view-before-orbit");
     b.eval(
@@ -516,7 +568,9 @@ fn demo_report_has_its_sections_and_its_viewer_draws() {
     b.open(&out.join("report.html"));
     b.assert_no_errors("report.html");
     let sections = b.eval("Array.from(document.querySelectorAll('section')).map(s => s.id)");
-    for id in ["summary", "matching", "accuracy", "viewer", "maps", "data"] {
+    for id in [
+        "summary", "matching", "run", "accuracy", "viewer", "maps", "data",
+    ] {
         assert!(
             sections.as_array().unwrap().iter().any(|s| s == id),
             "section {id} missing from {sections}"
@@ -550,16 +604,115 @@ fn demo_report_has_its_sections_and_its_viewer_draws() {
     assert_eq!(tables, json!([6, 9]), "matching runs and Table I cells");
     let figures = b.eval(
         "[document.querySelectorAll('#accuracy svg').length, document.querySelectorAll('#maps img').length,
-          document.querySelectorAll('.lsr-missing').length]",
+          document.querySelectorAll('#run svg').length, document.querySelectorAll('.lsr-missing').length]",
     );
     assert_eq!(
         figures,
-        json!([2, 3, 0]),
-        "accuracy charts, maps, missing figures"
+        json!([2, 3, 2, 0]),
+        "accuracy charts, maps, run plots, missing figures"
     );
+    // Roll and pitch over time and the error along the trajectory: axes named, readable.
+    let run_texts = b.eval(
+        "Array.from(document.querySelectorAll('#run svg text')).map(t => t.textContent.trim())",
+    );
+    for name in [
+        "roll theta_x [deg]",
+        "pitch theta_y [deg]",
+        "estimate +- 3 sigma",
+        "x [m]",
+        "position error [m]",
+        "distance travelled [m]",
+    ] {
+        assert!(
+            run_texts.as_array().unwrap().iter().any(|t| t == name),
+            "{name} missing from the run plots"
+        );
+    }
+    // Table I and Fig. 6: every text at least 12 px on the page, as the report shows them.
+    let smallest = b.eval(
+        "Math.min(...Array.from(document.querySelectorAll('#accuracy svg')).flatMap(svg => {
+           const k = svg.getBoundingClientRect().width / svg.viewBox.baseVal.width;
+           return Array.from(svg.querySelectorAll('text')).filter(t => t.textContent.trim())
+             .map(t => parseFloat(t.getAttribute('font-size')) * k); }))",
+    );
+    assert!(
+        smallest.as_f64().unwrap() >= 12.0,
+        "smallest chart text {smallest} px"
+    );
+    // Fig. 6 keeps the poses beyond its axis in an overflow bin.
+    let fig6 = b.eval(
+        "Array.from(document.querySelectorAll('#accuracy svg')[1].querySelectorAll('text')).map(t => t.textContent.trim())",
+    );
+    assert!(
+        fig6.as_array()
+            .unwrap()
+            .iter()
+            .any(|t| t.as_str().unwrap().starts_with("> ")),
+        "no overflow bin in {fig6}"
+    );
+    // The columns are defined.
+    let terms =
+        b.eval("Array.from(document.querySelectorAll('#accuracy dl dt')).map(d => d.textContent)");
+    for term in ["ok but > 5 deg", "phantoms", "coverage"] {
+        assert!(
+            terms.as_array().unwrap().iter().any(|t| t == term),
+            "{term} not defined: {terms}"
+        );
+    }
     let _ = b.screenshot_element("#summary", "report-first-screen");
     let _ = b.screenshot_element("#accuracy", "report-accuracy");
     check_viewer_draws_and_toggles(&mut b, "#viewer", "polygons", "report-pose");
     check_viewer_draws_and_toggles(&mut b, "#maps", "matched", "report-matched");
+    check_scale_bar(&mut b, "#viewer", "report-pose");
+    check_scale_bar(&mut b, "#maps", "report-matched");
+    let matched = b.eval(
+        "Array.from(document.querySelectorAll('#maps .lsv-toggle')).map(t => t.parentElement.textContent)",
+    );
+    let labels = matched.as_array().unwrap();
+    assert!(
+        labels
+            .iter()
+            .any(|l| l.as_str().unwrap().starts_with("Reference path")),
+        "{matched}"
+    );
+    assert!(
+        labels
+            .iter()
+            .any(|l| l.as_str().unwrap().starts_with("Robot path")),
+        "{matched}"
+    );
     b.assert_no_errors("report.html after toggles");
+    for map in ["map_leveled_metascan.svg", "map_level_floor.svg"] {
+        check_map_axes_and_legend(&mut b, &out.join(map), map);
+    }
+}
+
+/// A map as the demo writes it: axes named in metres with numbered ticks, a scale bar, and a
+/// legend that covers no wall (its texts lie outside the box of the plan's wall lines).
+fn check_map_axes_and_legend(b: &mut Browser, svg: &Path, name: &str) {
+    b.open(svg);
+    b.assert_no_errors(name);
+    let found = b.eval(
+        "(() => { const texts = Array.from(document.querySelectorAll('text'));
+           const t = s => texts.filter(e => e.textContent.trim() === s);
+           const box = r => ({l: r.left, r: r.right, t: r.top, b: r.bottom});
+           const walls = Array.from(document.querySelectorAll('polyline[stroke=\"#969696\"]'))
+             .map(e => box(e.getBoundingClientRect()));
+           const legend = ['plan walls', 'matched points', 'true path', 'estimated path']
+             .flatMap(s => t(s)).map(e => box(e.getBoundingClientRect()));
+           const hits = legend.filter(l => walls.some(w => l.l < w.r && l.r > w.l && l.t < w.b && l.b > w.t));
+           return {x: t('x [m]').length, y: t('y [m]').length,
+                   ticks: texts.filter(e => /^-?[0-9]+$/.test(e.textContent.trim())).length,
+                   scale: texts.filter(e => /^scale [0-9]+ c?m$/.test(e.textContent.trim())).length,
+                   walls: walls.length, legend: legend.length, covered: hits.length}; })()",
+    );
+    let n = |k: &str| found[k].as_u64().unwrap();
+    assert!(
+        n("x") >= 1 && n("y") >= 1,
+        "{name}: axes not named: {found}"
+    );
+    assert!(n("ticks") >= 8, "{name}: too few tick labels: {found}");
+    assert!(n("scale") >= 1, "{name}: no scale bar: {found}");
+    assert!(n("walls") >= 10 && n("legend") >= 4, "{name}: {found}");
+    assert_eq!(n("covered"), 0, "{name}: the legend covers a wall: {found}");
 }

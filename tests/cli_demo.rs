@@ -68,6 +68,12 @@ fn demo_writes_a_self_contained_report_where_leveling_beats_raw_scans() {
         "maps_raw_vs_leveled.svg",
         "table1.svg",
         "fig6_histogram.png",
+        "matched.jsonl",
+        "map.yaml",
+        "map.pgm",
+        "pose.ply",
+        "run_attitude.svg",
+        "run_trajectory_error.png",
     ] {
         assert!(dir.join(f).exists(), "{f} missing");
     }
@@ -88,6 +94,73 @@ fn demo_writes_a_self_contained_report_where_leveling_beats_raw_scans() {
     assert!(raw > 3.0 * leveled, "raw {raw} vs leveled {leveled}");
     // Table I: 3 scan counts x 3 noise levels.
     assert_eq!(report["accuracy"].as_array().unwrap().len(), 9);
+    // The map is the one map_server reads: its image beside it, 5 cm cells.
+    let yaml = std::fs::read_to_string(dir.join("map.yaml")).unwrap();
+    assert!(
+        yaml.starts_with("image: map.pgm\nmode: trinary\nresolution: 0.05\n"),
+        "{yaml}"
+    );
+    assert!(
+        std::fs::read(dir.join("map.pgm"))
+            .unwrap()
+            .starts_with(b"P5\n")
+    );
+    let ply = std::fs::read(dir.join("pose.ply")).unwrap();
+    assert!(ply.starts_with(b"ply\nformat binary_little_endian 1.0\n"));
+}
+
+#[test]
+fn eval_run_plots_the_demos_run_as_a_user_would() {
+    let dir = temp_dir("eval-run");
+    demo(&dir);
+    let out = Command::new(BIN)
+        .args(["eval", "run"])
+        .arg(dir.join("scans_tilted.jsonl"))
+        .arg(dir.join("matched.jsonl"))
+        .arg("--out")
+        .arg(dir.join("run"))
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let table = String::from_utf8(out.stdout).unwrap();
+    assert!(
+        table.starts_with("| poses | leveled | roll RMSE [deg]"),
+        "{table}"
+    );
+    let run: Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("run/run.json")).unwrap()).unwrap();
+    assert_eq!(run["summary"]["poses"], 30);
+    assert_eq!(run["poses"].as_array().unwrap().len(), 30);
+    // Truth joined from the raw scans: every leveled pose has its true attitude and error.
+    let rmse = run["summary"]["attitude_rmse_deg"][0].as_f64().unwrap();
+    assert!(rmse > 0.0 && rmse < 1.0, "roll RMSE {rmse}");
+    assert!(run["poses"][0]["true_attitude"].is_array());
+    let ate = run["summary"]["ate"]["rmse"].as_f64().unwrap();
+    assert!(ate < 0.05, "{ate}");
+    for f in [
+        "attitude.svg",
+        "attitude.png",
+        "trajectory_error.svg",
+        "trajectory_error.png",
+    ] {
+        assert!(dir.join("run").join(f).exists(), "{f} missing");
+    }
+    let svg = std::fs::read_to_string(dir.join("run/attitude.svg")).unwrap();
+    assert!(svg.contains("roll theta_x [deg]") && svg.contains("truth (true_pose)"));
+    // Only raw scans: nothing to evaluate, and the user is told what to give.
+    let out = Command::new(BIN)
+        .args(["eval", "run"])
+        .arg(dir.join("scans_tilted.jsonl"))
+        .arg("--out")
+        .arg(dir.join("run2"))
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("no level or match output"));
 }
 
 #[test]

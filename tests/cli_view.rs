@@ -265,3 +265,50 @@ fn view_reads_a_carmen_log_at_its_corrected_poses() {
     assert_eq!(points(scans), 19);
     assert_eq!(xyz(&scans["lines"][0], 9), [3000, 2000, 0]);
 }
+
+#[test]
+fn a_long_matched_log_keeps_few_cones_its_whole_path_and_a_reference() {
+    // 250 matched 2D records (CSM layout) along x, their true_pose 10 cm to the side.
+    let mut text = String::new();
+    for k in 0..250 {
+        let x = f64::from(k) * 0.1;
+        let line = json!({"nrays": 2, "theta": [0.0, 0.1], "readings": [1.0, 1.0],
+                          "estimate": [x, 0.0, 0.0], "true_pose": [x, 0.1, 0.0]});
+        text.push_str(&format!("{line}\n"));
+    }
+    let dir = temp_dir("long");
+    let log = write(&dir, "matched.jsonl", &text);
+    let page = dir.join("v.html");
+    let out = run(
+        &[
+            "view",
+            log.to_str().unwrap(),
+            "--max-cones",
+            "50",
+            "-o",
+            page.to_str().unwrap(),
+        ],
+        None,
+    );
+    assert!(out.status.success(), "{}", stderr(&out));
+    // One pose in ceil(250 / 49) = 6 (0, 6, ..., 246) and the last: 43 cones, at most 50.
+    assert!(
+        stderr(&out).contains("250 poses: a cone at 1 pose in 6"),
+        "{}",
+        stderr(&out)
+    );
+    let scene = embedded_scene(&std::fs::read_to_string(&page).unwrap());
+    assert_eq!(
+        layer(&scene, "poses").unwrap()["cones"]
+            .as_array()
+            .unwrap()
+            .len(),
+        43
+    );
+    let path = layer(&scene, "path").unwrap();
+    assert_eq!(points(path), 250);
+    assert_eq!(path["label"], "Robot path (estimate, purple)");
+    let reference = layer(&scene, "reference").unwrap();
+    assert_eq!(reference["label"], "Reference path (true_pose, green)");
+    assert_eq!(xyz(&reference["lines"][0], 1), [100, 100, 0]);
+}

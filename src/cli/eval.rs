@@ -10,6 +10,8 @@ pub enum EvalCommand {
     Matching(super::eval_matching::MatchingArgs),
     /// Pairwise matching on real CARMEN logs with perturbed odometry, scored by RPE.
     Real(super::eval_matching::RealArgs),
+    /// Plots of one run: roll and pitch over time against the truth, position error along it.
+    Run(super::eval_run::Args),
 }
 
 pub fn run(c: EvalCommand) -> anyhow::Result<()> {
@@ -17,5 +19,6 @@ pub fn run(c: EvalCommand) -> anyhow::Result<()> {
         EvalCommand::Accuracy(a) => super::eval_accuracy::run(a),
         EvalCommand::Matching(a) => super::eval_matching::run_matching(a),
         EvalCommand::Real(a) => super::eval_matching::run_real(a),
+        EvalCommand::Run(a) => super::eval_run::run(a),
     }
 }

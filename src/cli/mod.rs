@@ -1,11 +1,14 @@
 //! Subcommands, one file each, and the input/output plumbing they share.
 
+mod cloud;
 mod demo;
 mod eval;
 mod eval_accuracy;
 mod eval_matching;
+mod eval_run;
 mod info;
 mod level;
+mod map;
 mod matching;
 mod simulate;
 mod view;
@@ -44,6 +47,10 @@ pub enum Command {
     Eval(eval::EvalCommand),
     /// Write a self-contained HTML page with a 3D view of scans, polygons and plans.
     View(view::Args),
+    /// Write an occupancy grid for ROS map_server (PGM + YAML) from matched scans.
+    Map(map::Args),
+    /// Write one pose's scans as a PLY point cloud in the robot frame.
+    Cloud(cloud::Args),
 }
 
 pub fn run(cli: Cli) -> anyhow::Result<()> {
@@ -55,6 +62,8 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Info(a) => info::run(a),
         Command::Eval(c) => eval::run(c),
         Command::View(a) => view::run(a),
+        Command::Map(a) => map::run(a),
+        Command::Cloud(a) => cloud::run(a),
     }
 }
 

@@ -8,7 +8,8 @@ use anyhow::{Context, bail};
 use levelscan::formats::carmen::CarmenParams;
 use levelscan::formats::{parse_plan, read_any};
 use levelscan::plan::Plan;
-use levelscan::viz::html::{Source, ViewParams, build_scene, viewer_page};
+use levelscan::viz::html::viewer_page;
+use levelscan::viz::scene::{Source, ViewParams, build_scene};
 use std::io::{Read, Write};
 use std::path::PathBuf;
 
@@ -26,6 +27,9 @@ pub struct Args {
     /// Most scan points embedded in the page; bigger inputs keep every k-th pose.
     #[arg(long, default_value_t = ViewParams::default().max_points)]
     pub max_points: usize,
+    /// Most pose cones drawn; longer runs keep one pose in k (the robot path joins them all).
+    #[arg(long, default_value_t = ViewParams::default().max_cones)]
+    pub max_cones: usize,
     /// Scanner height \[m\] for `level` output whose raw scans are not loaded alongside.
     #[arg(long, default_value_t = ViewParams::default().default_height)]
     pub height: f64,
@@ -109,6 +113,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     let params = ViewParams {
         max_points: args.max_points,
+        max_cones: args.max_cones,
         default_height: args.height,
         title: args.title,
     };

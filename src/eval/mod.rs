@@ -2,7 +2,10 @@
 
 pub mod accuracy;
 pub mod bound;
+pub mod demo;
 pub mod matching;
 pub mod metrics;
 pub mod real;
+pub mod run;
 pub mod true_segments;
+

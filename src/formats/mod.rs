@@ -10,6 +10,9 @@
 //! - [`read_any`]: scans from either JSON Lines or CARMEN, told apart by the first character.
 
 pub mod carmen;
+pub mod level_record;
+pub mod pgm_map;
+pub mod ply;
 pub mod scan_jsonl;
 pub mod tum;
 pub mod wall;

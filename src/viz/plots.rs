@@ -1,11 +1,11 @@
-//! Static figures with plotters: tables as grouped bar charts (the paper's Table I as a figure,
+//! Static figures with plotters (the maps are in [`super::map_plot`], re-exported here): tables
+//! as grouped bar charts (the paper's Table I as a figure,
 //! with the paper's own values beside ours), drawn on any plotters backend, and written as SVG
 //! text (for self-contained reports) or PNG files.
 
+use super::legend::{Entry, Mark, draw_legend};
+pub use super::map_plot::{MapPanel, map_panels_png, map_panels_svg, run_map_panel};
 use crate::eval::accuracy::paper_mean;
-use crate::eval::matching::RunResult;
-use crate::geometry::Pose2;
-use crate::plan::Plan;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 use std::path::Path;
@@ -123,7 +123,11 @@ pub fn table_one_chart(cells: &[AccuracyCell]) -> GroupedBars {
     }
 }
 
-/// Draws a grouped bar chart on any plotters drawing area.
+/// Width of the legend column right of a grouped bar chart \[px\].
+const LEGEND_WIDTH: u32 = 190;
+
+/// Draws a grouped bar chart on any plotters drawing area: title, bars, and the legend in a
+/// column of its own on the right (inside the chart it covered bars).
 pub fn draw_grouped_bars<DB: DrawingBackend>(
     area: &DrawingArea<DB, Shift>,
     chart: &GroupedBars,
@@ -131,11 +135,15 @@ pub fn draw_grouped_bars<DB: DrawingBackend>(
     area.fill(&WHITE).map_err(plot_err)?;
     let top = (chart.max_value() * 1.15).max(1e-3);
     let groups = chart.groups.len().max(1);
-    let mut ctx = ChartBuilder::on(area)
-        .caption(&chart.title, ("sans-serif", 20))
-        .margin(12)
-        .x_label_area_size(34)
-        .y_label_area_size(56)
+    let body = area
+        .titled(&chart.title, ("sans-serif", 19))
+        .map_err(plot_err)?;
+    let (w, _) = body.dim_in_pixel();
+    let (plot, legend) = body.split_horizontally(w.saturating_sub(LEGEND_WIDTH));
+    let mut ctx = ChartBuilder::on(&plot)
+        .margin(10)
+        .x_label_area_size(36)
+        .y_label_area_size(54)
         .build_cartesian_2d(0.0..groups as f64, 0.0..top)
         .map_err(plot_err)?;
     let labels = chart.groups.clone();
@@ -152,14 +160,17 @@ pub fn draw_grouped_bars<DB: DrawingBackend>(
             }
         })
         .y_desc(&chart.y_label)
+        .label_style(("sans-serif", 16))
+        .axis_desc_style(("sans-serif", 17))
         .draw()
         .map_err(plot_err)?;
+    let mut entries = Vec::new();
     for (s, series) in chart.series.iter().enumerate() {
         let color = RGBColor(series.color.0, series.color.1, series.color.2);
-        let style = if series.outline {
-            color.stroke_width(2)
+        let (style, mark) = if series.outline {
+            (color.stroke_width(2), Mark::Outline(color))
         } else {
-            color.filled()
+            (color.filled(), Mark::Box(color))
         };
         let bars: Vec<Rectangle<(f64, f64)>> = series
             .values
@@ -171,17 +182,10 @@ pub fn draw_grouped_bars<DB: DrawingBackend>(
                 Some(Rectangle::new([(l, 0.0), (r, v)], style))
             })
             .collect();
-        ctx.draw_series(bars)
-            .map_err(plot_err)?
-            .label(&series.label)
-            .legend(move |(x, y)| Rectangle::new([(x, y - 5), (x + 14, y + 5)], style));
+        ctx.draw_series(bars).map_err(plot_err)?;
+        entries.push(Entry::new(mark, &series.label));
     }
-    ctx.configure_series_labels()
-        .position(SeriesLabelPosition::UpperLeft)
-        .background_style(WHITE.mix(0.85))
-        .border_style(BLACK.mix(0.3))
-        .draw()
-        .map_err(plot_err)?;
+    draw_legend(&legend.margin(20, 0, 0, 0), &entries)?;
     area.present().map_err(plot_err)?;
     Ok(())
 }
@@ -204,185 +208,6 @@ pub fn grouped_bars_png(
 ) -> Result<(), PlotError> {
     let area = BitMapBackend::new(path, size).into_drawing_area();
     draw_grouped_bars(&area, chart)
-}
-
-/// One top-down map of a matched run, for side-by-side panels: the floor plan's walls (grey),
-/// the matched scans' points placed with the (aligned) estimates, the true path (green) and the
-/// estimated path (blue).
-#[derive(Clone, Debug, PartialEq, Default)]
-pub struct MapPanel {
-    pub title: String,
-    /// Wall segments of the true floor plan, `[x0, y0, x1, y1]` \[m\].
-    pub walls: Vec<[f64; 4]>,
-    /// Scan points in the world \[m\].
-    pub points: Vec<[f64; 2]>,
-    /// True positions in time order \[m\].
-    pub truth: Vec<[f64; 2]>,
-    /// Estimated positions in time order \[m\].
-    pub estimate: Vec<[f64; 2]>,
-}
-
-impl MapPanel {
-    /// Bounds of walls and paths (not the points: a failed match can throw them far away,
-    /// and the map should still show the building) as `(min, max)`, with a margin.
-    pub fn view_bounds(&self) -> ([f64; 2], [f64; 2]) {
-        let mut lo = [f64::INFINITY; 2];
-        let mut hi = [f64::NEG_INFINITY; 2];
-        let walls = self.walls.iter().flat_map(|w| [[w[0], w[1]], [w[2], w[3]]]);
-        for p in walls.chain(self.truth.iter().copied()) {
-            for d in 0..2 {
-                lo[d] = lo[d].min(p[d]);
-                hi[d] = hi[d].max(p[d]);
-            }
-        }
-        if !lo[0].is_finite() {
-            return ([-1.0, -1.0], [1.0, 1.0]);
-        }
-        let margin = 0.05 * (hi[0] - lo[0]).max(hi[1] - lo[1]).max(1.0);
-        (
-            [lo[0] - margin, lo[1] - margin],
-            [hi[0] + margin, hi[1] + margin],
-        )
-    }
-}
-
-/// Stretches `(lo, hi)` so its aspect ratio matches `width / height` pixels: metres stay square.
-pub fn equal_aspect(lo: [f64; 2], hi: [f64; 2], width: u32, height: u32) -> ([f64; 2], [f64; 2]) {
-    let (w, h) = (hi[0] - lo[0], hi[1] - lo[1]);
-    let target = f64::from(width.max(1)) / f64::from(height.max(1));
-    let c = [(lo[0] + hi[0]) / 2.0, (lo[1] + hi[1]) / 2.0];
-    let (w, h) = if w / h > target {
-        (w, w / target)
-    } else {
-        (h * target, h)
-    };
-    (
-        [c[0] - w / 2.0, c[1] - h / 2.0],
-        [c[0] + w / 2.0, c[1] + h / 2.0],
-    )
-}
-
-/// Draws one map panel on a drawing area.
-pub fn draw_map<DB: DrawingBackend>(
-    area: &DrawingArea<DB, Shift>,
-    panel: &MapPanel,
-) -> Result<(), PlotError> {
-    area.fill(&WHITE).map_err(plot_err)?;
-    let (w, h) = area.dim_in_pixel();
-    // The plotting area loses the caption and a small margin; keep metres square inside it.
-    let (lo, hi) = panel.view_bounds();
-    let (lo, hi) = equal_aspect(lo, hi, w.saturating_sub(24), h.saturating_sub(56));
-    let mut ctx = ChartBuilder::on(area)
-        .caption(&panel.title, ("sans-serif", 18))
-        .margin(12)
-        .build_cartesian_2d(lo[0]..hi[0], lo[1]..hi[1])
-        .map_err(plot_err)?;
-    let grey = RGBColor(150, 150, 150);
-    for wall in &panel.walls {
-        ctx.draw_series(LineSeries::new(
-            [(wall[0], wall[1]), (wall[2], wall[3])],
-            grey.stroke_width(2),
-        ))
-        .map_err(plot_err)?;
-    }
-    let inside = |p: &[f64; 2]| p[0] >= lo[0] && p[0] <= hi[0] && p[1] >= lo[1] && p[1] <= hi[1];
-    let scan_color = RGBColor(200, 30, 30).mix(0.55);
-    ctx.draw_series(
-        panel
-            .points
-            .iter()
-            .filter(|p| inside(p))
-            .map(|p| Circle::new((p[0], p[1]), 1, scan_color.filled())),
-    )
-    .map_err(plot_err)?;
-    let green = RGBColor(0, 140, 60);
-    let blue = RGBColor(20, 70, 220);
-    for (path, color, label) in [
-        (&panel.truth, green, "true path"),
-        (&panel.estimate, blue, "estimated path"),
-    ] {
-        let pts: Vec<(f64, f64)> = path.iter().map(|p| (p[0], p[1])).collect();
-        ctx.draw_series(LineSeries::new(pts.clone(), color.stroke_width(2)))
-            .map_err(plot_err)?
-            .label(label)
-            .legend(move |(x, y)| PathElement::new([(x, y), (x + 16, y)], color.stroke_width(2)));
-        ctx.draw_series(pts.iter().map(|&p| Circle::new(p, 3, color.filled())))
-            .map_err(plot_err)?;
-    }
-    ctx.configure_series_labels()
-        .position(SeriesLabelPosition::LowerRight)
-        .background_style(WHITE.mix(0.85))
-        .border_style(BLACK.mix(0.3))
-        .draw()
-        .map_err(plot_err)?;
-    Ok(())
-}
-
-/// Panels side by side in one picture.
-pub fn draw_side_by_side<DB: DrawingBackend>(
-    area: &DrawingArea<DB, Shift>,
-    panels: &[MapPanel],
-) -> Result<(), PlotError> {
-    area.fill(&WHITE).map_err(plot_err)?;
-    for (sub, panel) in area
-        .split_evenly((1, panels.len().max(1)))
-        .iter()
-        .zip(panels)
-    {
-        draw_map(sub, panel)?;
-    }
-    area.present().map_err(plot_err)?;
-    Ok(())
-}
-
-/// Map panels side by side as a PNG file.
-pub fn map_panels_png(panels: &[MapPanel], path: &Path, size: (u32, u32)) -> Result<(), PlotError> {
-    let area = BitMapBackend::new(path, size).into_drawing_area();
-    draw_side_by_side(&area, panels)
-}
-
-/// Map panels side by side as SVG text.
-pub fn map_panels_svg(panels: &[MapPanel], size: (u32, u32)) -> Result<String, PlotError> {
-    let mut svg = String::new();
-    {
-        let area = SVGBackend::with_string(&mut svg, size).into_drawing_area();
-        draw_side_by_side(&area, panels)?;
-    }
-    Ok(svg)
-}
-
-/// A top-down map of one matched run (paper Figs. 8-10): the plan's walls, every scan placed at
-/// its estimate after the ATE alignment, and the true and estimated paths.
-pub fn run_map_panel(plan: &Plan, run: &RunResult, truth: &[Pose2]) -> MapPanel {
-    let mode = match run.mode {
-        crate::matching::Mode::Pairwise => "pairwise",
-        crate::matching::Mode::Metascan => "metascan",
-    };
-    let ate = run
-        .ate
-        .map(|a| format!("ATE {:.3} m", a.rmse))
-        .unwrap_or_default();
-    MapPanel {
-        title: format!("{} scans, {mode}: {ate}", run.kind.label()),
-        walls: plan
-            .segments()
-            .iter()
-            .map(|s| [s.a.x, s.a.y, s.b.x, s.b.y])
-            .collect(),
-        points: run
-            .aligned
-            .iter()
-            .zip(&run.points)
-            .flat_map(|(pose, pts)| {
-                pts.iter().map(|p| {
-                    let w = pose.transform_point(p);
-                    [w.x, w.y]
-                })
-            })
-            .collect(),
-        truth: truth.iter().map(|p| [p.x, p.y]).collect(),
-        estimate: run.aligned.iter().map(|p| [p.x, p.y]).collect(),
-    }
 }
 
 #[cfg(test)]
@@ -463,47 +288,5 @@ mod tests {
         assert!(svg.starts_with("<svg"));
         // The one bar and its legend swatch are the rectangles filled in that colour.
         assert_eq!(svg.matches("fill=\"#0A141E\"").count(), 2, "{svg}");
-    }
-
-    #[test]
-    fn equal_aspect_keeps_metres_square_and_contains_the_box() {
-        let (lo, hi) = equal_aspect([0.0, 0.0], [10.0, 2.0], 400, 400);
-        assert_eq!(hi[0] - lo[0], hi[1] - lo[1]);
-        assert!(lo[1] <= 0.0 && hi[1] >= 2.0 && lo[0] == 0.0 && hi[0] == 10.0);
-        let (lo, hi) = equal_aspect([0.0, 0.0], [2.0, 10.0], 800, 400);
-        assert_eq!((hi[0] - lo[0]) / (hi[1] - lo[1]), 2.0);
-        assert!(lo[0] <= 0.0 && hi[0] >= 2.0);
-    }
-
-    #[test]
-    fn map_view_follows_walls_and_truth_not_stray_points() {
-        let panel = MapPanel {
-            walls: vec![[0.0, 0.0, 10.0, 0.0], [10.0, 0.0, 10.0, 8.0]],
-            points: vec![[500.0, -300.0]],
-            truth: vec![[1.0, 1.0]],
-            ..MapPanel::default()
-        };
-        let (lo, hi) = panel.view_bounds();
-        assert!(lo[0] < 0.0 && lo[0] > -1.0 && hi[0] > 10.0 && hi[0] < 11.0);
-        assert!(hi[1] > 8.0 && hi[1] < 9.0);
-    }
-
-    #[test]
-    fn side_by_side_svg_has_both_titles() {
-        let a = MapPanel {
-            title: "raw".into(),
-            truth: vec![[0.0, 0.0], [1.0, 0.0]],
-            estimate: vec![[0.0, 0.0], [1.0, 0.5]],
-            points: vec![[0.5, 0.5]],
-            ..MapPanel::default()
-        };
-        let b = MapPanel {
-            title: "leveled".into(),
-            ..a.clone()
-        };
-        let svg = map_panels_svg(&[a, b], (800, 400)).unwrap();
-        let raw = svg.find(">\nraw\n<").unwrap();
-        let leveled = svg.find(">\nleveled\n<").unwrap();
-        assert!(raw < leveled);
     }
 }

@@ -6,7 +6,8 @@
 //! with its ATE) come before anything else. Every section has a stable `id` (`summary`,
 //! `matching`, `accuracy`, `viewer`, `maps`, ...) so tests and links can find it.
 
-use super::html::{Scene, escape_html, page_head_assets, viewer_fragment};
+use super::html::{escape_html, page_head_assets, viewer_fragment};
+use super::scene::Scene;
 use serde::Serialize;
 
 /// A figure as the page embeds it.
@@ -47,6 +48,8 @@ pub enum Block {
     /// A command line, shown verbatim.
     Code(String),
     Table(Table),
+    /// Terms and what they mean (a table's columns), as a definition list.
+    Definitions(Vec<(String, String)>),
     /// Panels side by side.
     Panels(Vec<Panel>),
     /// An interactive 3D viewer.
@@ -153,6 +156,19 @@ fn table_html(t: &Table) -> String {
     s
 }
 
+fn definitions_html(terms: &[(String, String)]) -> String {
+    let mut s = String::from("<dl class=\"lsr-defs\">\n");
+    for (term, meaning) in terms {
+        s.push_str(&format!(
+            "<dt>{}</dt><dd>{}</dd>\n",
+            escape_html(term),
+            escape_html(meaning)
+        ));
+    }
+    s.push_str("</dl>\n");
+    s
+}
+
 /// Renders the whole page.
 pub fn render(report: &Report) -> String {
     let mut body = String::new();
@@ -193,6 +209,7 @@ pub fn render(report: &Report) -> String {
                     escape_html(c)
                 )),
                 Block::Table(t) => body.push_str(&table_html(t)),
+                Block::Definitions(d) => body.push_str(&definitions_html(d)),
                 Block::Panels(p) => body.push_str(&panels_html(p, "")),
                 Block::Viewer(scene) => {
                     viewers += 1;

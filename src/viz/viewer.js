@@ -3,7 +3,8 @@
  * GPU. Scene data (see src/viz/html.rs) is in integer millimetres.
  *
  * Controls: drag to orbit (pan in top-down mode), right-drag or shift-drag to pan, wheel to zoom,
- * double-click to reset. One checkbox per layer. */
+ * double-click to reset. One checkbox per layer. A scale bar (bottom left) gives metres at the
+ * view's centre; the floor grid's step is named beside it. */
 (function (global) {
   "use strict";
 
@@ -140,8 +141,16 @@
     bar.appendChild(modeButton);
     bar.appendChild(resetButton);
     root.appendChild(bar);
+    var stage = el("div", "lsv-stage");
     var canvas = el("canvas", "lsv-canvas");
-    root.appendChild(canvas);
+    stage.appendChild(canvas);
+    var scaleBox = el("div", "lsv-scale");
+    var scaleBar = el("div", "lsv-scale-bar");
+    var scaleLabel = el("span", "lsv-scale-label");
+    scaleBox.appendChild(scaleBar);
+    scaleBox.appendChild(scaleLabel);
+    stage.appendChild(scaleBox);
+    root.appendChild(stage);
     var foot = el("div", "lsv-notes");
     (scene.notes || []).forEach(function (n) { foot.appendChild(el("div", "lsv-note", n)); });
     foot.appendChild(el("div", "lsv-help", "Drag: orbit (top-down: pan) \u00b7 right-drag or shift-drag: pan \u00b7 wheel: zoom \u00b7 double-click: reset"));
@@ -267,6 +276,33 @@
       ctx.stroke();
     }
 
+    // A length that reads well (1, 2 or 5 times a power of ten) drawn at most maxPx long.
+    function niceLength(pxPerMetre, maxPx) {
+      var raw = maxPx / pxPerMetre;
+      var p = Math.pow(10, Math.floor(Math.log10(raw)));
+      var best = p;
+      [1, 2, 5].forEach(function (m) { if (m * p <= raw) best = m * p; });
+      return best;
+    }
+
+    function formatLength(m) {
+      if (m >= 1) return m + " m";
+      if (m >= 0.01) return Math.round(m * 100) + " cm";
+      return Math.round(m * 1000) + " mm";
+    }
+
+    // The scale bar: pixels per metre on the screen at the view's centre (exact top down).
+    function updateScale() {
+      var focal = (height / 2) / Math.tan(FOV / 2);
+      var pxPerMetre = topDown ? cam.scale : focal / cam.dist;
+      var metres = niceLength(pxPerMetre, 140);
+      var px = metres * pxPerMetre;
+      scaleBar.style.width = px.toFixed(1) + "px";
+      scaleLabel.textContent = formatLength(metres) + (topDown ? "" : " at the centre") +
+        " \u00b7 grid " + formatLength(gridStep());
+      stats.scale = { metres: metres, pixels: px, pxPerMetre: pxPerMetre, grid: gridStep() };
+    }
+
     var stats = { draws: 0, faces: 0 };
     function draw() {
       pending = false;
@@ -306,6 +342,7 @@
       faces += drawFaces(ctx, proj, cones);
       stats.draws += 1;
       stats.faces = faces;
+      updateScale();
     }
 
     var pending = false;
