@@ -3,14 +3,14 @@
 
 use super::{open_output, progress_bar};
 use anyhow::{Context, bail};
-use levelscan::formats::{InputError, parse_plan, write_scan};
+use levelscan::formats::{InputError, read_plan_from, write_scan};
 use levelscan::geometry::Pose;
 use levelscan::plan::Plan;
 use levelscan::simulate::{
     AdaptiveParams, RandomPoseParams, ScannerParams, World, elevations_centred, odometry,
     random_poses, simulate_poses,
 };
-use std::io::{Read, Write};
+use std::io::Write;
 use std::path::PathBuf;
 
 /// Poses simulated in parallel between writes: bounds memory, and fixed so that the output
@@ -207,15 +207,6 @@ fn scanner_params(args: &Args) -> anyhow::Result<ScannerParams> {
 
 /// Reads and validates the floor plan from a file, or standard input for `None` or `-`.
 fn load_plan(path: Option<&std::path::Path>) -> anyhow::Result<(Plan, String)> {
-    let mut input = super::open_input(path)?;
-    let mut text = String::new();
-    input.reader.read_to_string(&mut text).map_err(|e| {
-        let what = if e.kind() == std::io::ErrorKind::InvalidData {
-            "is not valid UTF-8 text".to_string()
-        } else {
-            format!("cannot read: {e}")
-        };
-        InputError::new(&input.name, "", what)
-    })?;
-    Ok((parse_plan(&text, &input.name)?, input.name))
+    let input = super::open_input(path)?;
+    Ok((read_plan_from(input.reader, &input.name)?, input.name))
 }

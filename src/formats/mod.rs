@@ -17,7 +17,7 @@ pub mod wall;
 pub use carmen::{CarmenParams, CarmenReader};
 pub use scan_jsonl::{ParallelScanReader, ScanReader, parse_scan_line, write_scan};
 pub use tum::write_tum;
-pub use wall::{parse_plan, read_plan, write_plan};
+pub use wall::{parse_plan, read_plan, read_plan_from, write_plan};
 
 use crate::scan::Scan;
 use std::fmt;
