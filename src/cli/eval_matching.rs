@@ -2,7 +2,7 @@
 //! with perturbed odometry).
 
 use super::matching::MatchOptions;
-use super::open_input;
+use super::{open_input, open_output, write_file};
 use anyhow::Context;
 use levelscan::eval::matching::{ExperimentParams, matching_experiment};
 use levelscan::eval::real::{RealLog, RealResult, evaluate_real};
@@ -11,6 +11,7 @@ use levelscan::matching::{Mode, scan_points};
 use levelscan::simulate::{AdaptiveParams, ScannerParams, elevations_centred};
 use levelscan::viz::plots::{MapPanel, map_panels_png, map_panels_svg, run_map_panel};
 use std::fmt::Write as _;
+use std::io::Write as _;
 use std::path::PathBuf;
 
 #[derive(clap::Args, Debug)]
@@ -113,20 +114,26 @@ pub fn run_matching(args: MatchingArgs) -> anyhow::Result<()> {
                     .map_err(|e| anyhow::anyhow!("{name}.png: {e}"))?;
                 let svg = map_panels_svg(&panels, size)
                     .map_err(|e| anyhow::anyhow!("{name}.svg: {e}"))?;
-                std::fs::write(dir.join(format!("{name}.svg")), svg)?;
+                write_file(&dir.join(format!("{name}.svg")), svg.as_bytes())?;
             }
         }
         all.push(serde_json::json!({"plan": stem, "poses": truth.len(), "runs": runs}));
     }
-    print!("{table}");
+    write_stdout(&table, &args.plans)?;
     if let Some(dir) = &args.out {
-        std::fs::write(dir.join("matching.md"), &table)?;
-        std::fs::write(
-            dir.join("matching.json"),
-            serde_json::to_string_pretty(&all)? + "\n",
-        )?;
+        write_file(&dir.join("matching.md"), table.as_bytes())?;
+        let json = serde_json::to_string_pretty(&all)? + "\n";
+        write_file(&dir.join("matching.json"), json.as_bytes())?;
     }
     Ok(())
+}
+
+/// The table on standard output; `inputs` are the files the run read.
+fn write_stdout(table: &str, inputs: &[PathBuf]) -> anyhow::Result<()> {
+    let inputs: Vec<Option<&std::path::Path>> = inputs.iter().map(|p| Some(p.as_path())).collect();
+    let mut out = open_output(None, &inputs)?;
+    out.write_all(table.as_bytes())?;
+    out.finish()
 }
 
 fn mode_label(mode: Mode) -> &'static str {
@@ -197,15 +204,13 @@ pub fn run_real(args: RealArgs) -> anyhow::Result<()> {
         results.push(result);
     }
     let table = real_table(&results);
-    print!("{table}");
+    write_stdout(&table, &args.logs)?;
     if let Some(dir) = &args.out {
         std::fs::create_dir_all(dir)
             .with_context(|| format!("{}: cannot create", dir.display()))?;
-        std::fs::write(dir.join("real.md"), &table)?;
-        std::fs::write(
-            dir.join("real.json"),
-            serde_json::to_string_pretty(&results)? + "\n",
-        )?;
+        write_file(&dir.join("real.md"), table.as_bytes())?;
+        let json = serde_json::to_string_pretty(&results)? + "\n";
+        write_file(&dir.join("real.json"), json.as_bytes())?;
     }
     Ok(())
 }

@@ -10,7 +10,6 @@ use levelscan::simulate::{
     AdaptiveParams, RandomPoseParams, ScannerParams, World, elevations_centred, odometry,
     random_poses, simulate_poses,
 };
-use std::io::Write;
 use std::path::PathBuf;
 
 /// Poses simulated in parallel between writes: bounds memory, and fixed so that the output
@@ -163,7 +162,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         max_retakes: args.max_retakes,
         ..AdaptiveParams::default()
     });
-    let mut out = open_output(args.output.as_ref())?;
+    let mut out = open_output(args.output.as_deref(), &[args.plan.as_deref()])?;
     let bar = progress_bar(poses.len() as u64, "simulate");
     for (c, chunk) in poses.chunks(CHUNK).enumerate() {
         let first = c * CHUNK;
@@ -182,7 +181,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
         bar.inc(chunk.len() as u64);
     }
-    out.flush()?;
+    out.finish()?;
     bar.finish_and_clear();
     Ok(())
 }
