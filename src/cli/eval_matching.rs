@@ -102,30 +102,51 @@ pub fn run_matching(args: MatchingArgs) -> anyhow::Result<()> {
             );
         }
         if let Some(dir) = &args.out {
-            for mode in [Mode::Pairwise, Mode::Metascan] {
-                let panels: Vec<MapPanel> = runs
-                    .iter()
-                    .filter(|r| r.mode == mode)
-                    .map(|r| run_map_panel(&plan, r, &truth))
-                    .collect();
-                let name = format!("{stem}_{}", mode_label(mode));
-                let size = (600 * panels.len() as u32, 520);
-                map_panels_png(&panels, &dir.join(format!("{name}.png")), size)
-                    .map_err(|e| anyhow::anyhow!("{name}.png: {e}"))?;
-                let svg = map_panels_svg(&panels, size)
-                    .map_err(|e| anyhow::anyhow!("{name}.svg: {e}"))?;
-                write_file(&dir.join(format!("{name}.svg")), svg.as_bytes())?;
-            }
+            write_maps(dir, &stem, &plan, &runs, &truth)?;
         }
         all.push(serde_json::json!({"plan": stem, "poses": truth.len(), "runs": runs}));
     }
     write_stdout(&table, &args.plans)?;
-    if let Some(dir) = &args.out {
-        write_file(&dir.join("matching.md"), table.as_bytes())?;
-        let json = serde_json::to_string_pretty(&all)? + "\n";
-        write_file(&dir.join("matching.json"), json.as_bytes())?;
+    match &args.out {
+        Some(dir) => write_tables(dir, "matching", &table, &all),
+        None => Ok(()),
+    }
+}
+
+/// The maps of one plan's runs, pairwise and metascan, as PNG and SVG in `dir`.
+fn write_maps(
+    dir: &std::path::Path,
+    stem: &str,
+    plan: &levelscan::plan::Plan,
+    runs: &[levelscan::eval::matching::RunResult],
+    truth: &[levelscan::geometry::Pose2],
+) -> anyhow::Result<()> {
+    for mode in [Mode::Pairwise, Mode::Metascan] {
+        let panels: Vec<MapPanel> = runs
+            .iter()
+            .filter(|r| r.mode == mode)
+            .map(|r| run_map_panel(plan, r, truth))
+            .collect();
+        let name = format!("{stem}_{}", mode_label(mode));
+        let size = (600 * panels.len() as u32, 520);
+        map_panels_png(&panels, &dir.join(format!("{name}.png")), size)
+            .map_err(|e| anyhow::anyhow!("{name}.png: {e}"))?;
+        let svg = map_panels_svg(&panels, size).map_err(|e| anyhow::anyhow!("{name}.svg: {e}"))?;
+        write_file(&dir.join(format!("{name}.svg")), svg.as_bytes())?;
     }
     Ok(())
+}
+
+/// `NAME.md` (the table) and `NAME.json` (`json`) in `dir`.
+fn write_tables(
+    dir: &std::path::Path,
+    name: &str,
+    table: &str,
+    json: &impl serde::Serialize,
+) -> anyhow::Result<()> {
+    write_file(&dir.join(format!("{name}.md")), table.as_bytes())?;
+    let json = serde_json::to_string_pretty(json)? + "\n";
+    write_file(&dir.join(format!("{name}.json")), json.as_bytes())
 }
 
 /// The table on standard output; `inputs` are the files the run read.
@@ -208,9 +229,7 @@ pub fn run_real(args: RealArgs) -> anyhow::Result<()> {
     if let Some(dir) = &args.out {
         std::fs::create_dir_all(dir)
             .with_context(|| format!("{}: cannot create", dir.display()))?;
-        write_file(&dir.join("real.md"), table.as_bytes())?;
-        let json = serde_json::to_string_pretty(&results)? + "\n";
-        write_file(&dir.join("real.json"), json.as_bytes())?;
+        write_tables(dir, "real", &table, &results)?;
     }
     Ok(())
 }

@@ -104,17 +104,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         Some(list) => list.iter().map(|e| e.to_radians()).collect(),
         None => elevations_centred(args.scans, args.step.to_radians()),
     };
-    if elevations.is_empty() {
-        bail!("--scans must be at least 1");
-    }
-    if elevations.iter().any(|e| !e.is_finite()) {
-        bail!("elevations must be finite numbers of degrees");
-    }
-    if let Some(h) = args.height
-        && !h.is_finite()
-    {
-        bail!("--height must be a finite number of metres");
-    }
+    check_limits(&args, &elevations)?;
 
     let (plan, name) = load_plan(args.plan.as_deref())?;
     let world = World::from_plan(&plan);
@@ -183,6 +173,48 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     out.finish()?;
     bar.finish_and_clear();
+    Ok(())
+}
+
+/// Most random poses per run: their poses and odometry are held in memory (run several seeds
+/// for more).
+const MAX_RANDOM_POSES: usize = 1_000_000;
+
+/// The elevations and sizes, checked; what the scan readers would refuse
+/// (`formats::limits`) is refused here, before simulating.
+fn check_limits(args: &Args, elevations: &[f64]) -> anyhow::Result<()> {
+    use levelscan::formats::limits::{MAX_ANGLE, MAX_POSITION, MAX_RAYS};
+    if elevations.is_empty() {
+        bail!("--scans must be at least 1");
+    }
+    if elevations.iter().any(|e| !e.is_finite()) {
+        bail!("elevations must be finite numbers of degrees");
+    }
+    if let Some(h) = args.height
+        && !h.is_finite()
+    {
+        bail!("--height must be a finite number of metres");
+    }
+    anyhow::ensure!(
+        args.rays <= MAX_RAYS,
+        "--rays {} is more than {MAX_RAYS}, the limit of rays per scan",
+        args.rays
+    );
+    anyhow::ensure!(
+        elevations.iter().all(|e| e.abs() <= MAX_ANGLE),
+        "elevations must lie within +-360 degrees"
+    );
+    let lengths = args.height.iter().chain(args.hinge_offset.iter().flatten());
+    anyhow::ensure!(
+        lengths.into_iter().all(|v| v.abs() <= MAX_POSITION),
+        "--height and --hinge-offset must lie within +-{MAX_POSITION:e} m"
+    );
+    if let Some(n) = args.random {
+        anyhow::ensure!(
+            n <= MAX_RANDOM_POSES,
+            "--random {n} is more than {MAX_RANDOM_POSES} poses per run; run several seeds"
+        );
+    }
     Ok(())
 }
 

@@ -8,8 +8,10 @@
 //! - [`carmen`]: read CARMEN logs (`FLASER`, `ROBOTLASER1`).
 //! - [`tum`]: write (and read back) TUM trajectories.
 //! - [`read_any`]: scans from either JSON Lines or CARMEN, told apart by the first character.
+//! - [`limits`]: the caps on sizes and the ranges of values every reader enforces.
 
 pub mod carmen;
+pub mod limits;
 pub mod scan_jsonl;
 pub mod tum;
 pub mod wall;

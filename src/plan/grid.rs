@@ -169,6 +169,28 @@ impl SegmentGrid {
         }
     }
 
+    /// The part `[t0, t1]` of the ray `p + t·d`, `t` in `[0, limit]`, inside the grid's box
+    /// (slab test); `None` when the ray misses the box.
+    fn clip(&self, p: &Point2<f64>, d: &Vector2<f64>, limit: f64) -> Option<(f64, f64)> {
+        let max = Point2::new(
+            self.min.x + self.nx as f64 * self.cell,
+            self.min.y + self.ny as f64 * self.cell,
+        );
+        let (mut t0, mut t1) = (0.0f64, limit);
+        for (o, dd, lo, hi) in [(p.x, d.x, self.min.x, max.x), (p.y, d.y, self.min.y, max.y)] {
+            if dd == 0.0 {
+                if o < lo || o > hi {
+                    return None;
+                }
+            } else {
+                let (ta, tb) = ((lo - o) / dd, (hi - o) / dd);
+                t0 = t0.max(ta.min(tb));
+                t1 = t1.min(ta.max(tb));
+            }
+        }
+        (t0 <= t1).then_some((t0, t1))
+    }
+
     /// The smallest range `t <= limit` at which the unit ray meets a segment at a height the
     /// wall covers (`z_ok(t)`), walking the cells along the ray in order.
     pub(crate) fn nearest(
@@ -184,29 +206,7 @@ impl SegmentGrid {
         }
         let p = Point2::new(origin.x, origin.y);
         let d2 = Vector2::new(d.x, d.y);
-        let max = Point2::new(
-            self.min.x + self.nx as f64 * self.cell,
-            self.min.y + self.ny as f64 * self.cell,
-        );
-        // Clip [0, limit] to the grid's box (slab test).
-        let (mut t0, mut t1) = (0.0f64, limit);
-        for (o, dd, lo, hi) in [
-            (p.x, d2.x, self.min.x, max.x),
-            (p.y, d2.y, self.min.y, max.y),
-        ] {
-            if dd == 0.0 {
-                if o < lo || o > hi {
-                    return None;
-                }
-            } else {
-                let (ta, tb) = ((lo - o) / dd, (hi - o) / dd);
-                t0 = t0.max(ta.min(tb));
-                t1 = t1.min(ta.max(tb));
-            }
-        }
-        if t0 > t1 {
-            return None;
-        }
+        let (t0, t1) = self.clip(&p, &d2, limit)?;
         let start = p + d2 * t0;
         let (mut ix, mut iy) = (self.index_x(start.x), self.index_y(start.y));
         // Exit ranges are computed from the cell index each step, not accumulated, so

@@ -49,9 +49,10 @@ fn plan_error(path: impl Into<String>, message: impl Into<String>) -> PlanError 
     }
 }
 
-/// A number for a message: huge ones in exponent form (Rust prints every digit otherwise).
+/// A number for a message: huge ones in exponent form (Rust prints every digit otherwise),
+/// as `formats::limits` does.
 fn show(v: f64) -> String {
-    if v.is_finite() && v.abs() >= 1e9 {
+    if v.is_finite() && v.abs() >= 1e7 {
         format!("{v:e}")
     } else {
         v.to_string()
@@ -209,7 +210,7 @@ mod tests {
         plan.walls[0][2].y = 2e7;
         assert_eq!(
             err(&plan),
-            "walls[0][2][1]: 20000000 m is beyond the limit of +-1e7 m for a plan"
+            "walls[0][2][1]: 2e7 m is beyond the limit of +-1e7 m for a plan"
         );
         let mut plan = box_plan(10.0, 8.0, 1e300, false);
         assert!(err(&plan).starts_with("wallheight: 1e300 m is beyond"));
@@ -220,7 +221,7 @@ mod tests {
         );
         let mut plan = box_plan(10.0, 8.0, 3.0, false);
         plan.poses.push(Pose::new(1.0, -1e8, 0.4, 0.0, 0.0, 0.0));
-        assert!(err(&plan).starts_with("poses[0][1]: -100000000 m is beyond"));
+        assert!(err(&plan).starts_with("poses[0][1]: -1e8 m is beyond"));
         plan.poses[0] = Pose::new(1.0, 1.0, 0.4, 0.0, f64::INFINITY, 0.0);
         assert_eq!(
             err(&plan),
