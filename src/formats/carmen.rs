@@ -53,26 +53,39 @@ pub fn flaser_bearings(n: usize) -> Vec<f64> {
 struct Fields<'a> {
     kind: &'a str,
     items: Vec<&'a str>,
-}
-
-fn is_number(text: &str) -> bool {
-    text.parse::<f64>().is_ok()
+    /// Each item read as a number, once (`None`: not one).
+    values: Vec<Option<f64>>,
 }
 
 impl<'a> Fields<'a> {
+    fn new(kind: &'a str, items: Vec<&'a str>) -> Self {
+        let values = items.iter().map(|t| t.parse::<f64>().ok()).collect();
+        Fields {
+            kind,
+            items,
+            values,
+        }
+    }
+
     fn number(&self, i: usize, what: &str) -> Result<f64, String> {
-        let text = self.items.get(i).ok_or_else(|| {
-            format!(
-                "{}: the line ends before {what} (field {})",
+        self.number_with(i, || what.to_string())
+    }
+
+    /// [`Fields::number`] naming the field only when it is wrong.
+    fn number_with(&self, i: usize, what: impl Fn() -> String) -> Result<f64, String> {
+        match self.values.get(i) {
+            Some(Some(v)) if v.is_finite() => Ok(*v),
+            Some(_) => Err(format!(
+                "{}: {} (field {}) is not a number: `{}`",
                 self.kind,
-                i + 1
-            )
-        })?;
-        match text.parse::<f64>() {
-            Ok(v) if v.is_finite() => Ok(v),
-            _ => Err(format!(
-                "{}: {what} (field {}) is not a number: `{text}`",
+                what(),
+                i + 1,
+                self.items[i]
+            )),
+            None => Err(format!(
+                "{}: the line ends before {} (field {})",
                 self.kind,
+                what(),
                 i + 1
             )),
         }
@@ -111,19 +124,18 @@ impl<'a> Fields<'a> {
     /// too few numbers and no host may be cut short instead, and the field it ends before is
     /// the better message.
     fn miscounted(&self, expected: usize) -> Option<usize> {
-        let k = self.items.iter().take_while(|t| is_number(t)).count();
+        let k = self.values.iter().take_while(|v| v.is_some()).count();
+        let host = self.items.len() == k + 2 && self.values[k + 1].is_some();
         let tail = &self.items[k..];
-        let host = tail.len() == 2 && is_number(tail[1]);
         ((host && k != expected) || (tail.is_empty() && k > expected)).then_some(k)
     }
 
     /// After the last field (index `end`), only `host logger_timestamp` may follow.
     fn check_end(&self, end: usize) -> Result<(), String> {
+        let values = &self.values[end.min(self.values.len())..];
         match &self.items[end.min(self.items.len())..] {
             [] => Ok(()),
-            [host, time] if !is_number(host) && time.parse::<f64>().is_ok_and(f64::is_finite) => {
-                Ok(())
-            }
+            [_, _] if values[0].is_none() && values[1].is_some_and(f64::is_finite) => Ok(()),
             rest => Err(format!(
                 "{}: {} more field(s) after the timestamp (field {end}), from `{}`; the line \
                  must end with the timestamp, or with `host logger_timestamp`",
@@ -169,10 +181,7 @@ pub fn parse_carmen_line(line: &str, flaser_max_range: f64) -> Result<Option<Sca
             ));
         }
     };
-    let f = Fields {
-        kind,
-        items: items.collect(),
-    };
+    let f = Fields::new(kind, items.collect());
     let scan = if kind == "FLASER" {
         flaser(&f, flaser_max_range)?
     } else {
@@ -194,7 +203,7 @@ fn flaser(f: &Fields, max_range: f64) -> Result<Scan, String> {
         ));
     }
     let ranges = (0..n)
-        .map(|i| f.number(1 + i, &format!("reading {}", i + 1)))
+        .map(|i| f.number_with(1 + i, || format!("reading {}", i + 1)))
         .collect::<Result<Vec<_>, _>>()?;
     let at = 1 + n;
     let v = f.numbers(
@@ -246,7 +255,7 @@ fn robotlaser1(f: &Fields) -> Result<Scan, String> {
         .and_then(|()| limits::check_angle("the last bearing (from angular_resolution)", last))
         .map_err(|m| format!("ROBOTLASER1: {m}"))?;
     let ranges = (0..n)
-        .map(|i| f.number(8 + i, &format!("reading {}", i + 1)))
+        .map(|i| f.number_with(8 + i, || format!("reading {}", i + 1)))
         .collect::<Result<Vec<_>, _>>()?;
     let m = f.count(8 + n, "num_remissions")?;
     let at = 9 + n + m;

@@ -60,7 +60,10 @@ pub(crate) fn check_angle(what: &str, v: f64) -> Result<(), String> {
 
 /// Every bearing of a scan (see [`check_angle`]); the error names the first bad one.
 pub(crate) fn check_bearings(field: &str, theta: &[f64]) -> Result<(), String> {
-    match theta.iter().position(|t| !(t.abs() <= MAX_ANGLE)) {
+    match theta
+        .iter()
+        .position(|t| !(t.is_finite() && t.abs() <= MAX_ANGLE))
+    {
         None => Ok(()),
         Some(i) => check_angle(&format!("{field}[{i}]"), theta[i]),
     }
