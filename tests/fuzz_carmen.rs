@@ -146,7 +146,6 @@ fn check_fields(scan: &Scan, line: &str) -> Result<(), String> {
 }
 
 fn oracle(input: &[u8]) -> Result<Outcome, String> {
-    let lines = line_count(input);
     let items: Vec<_> =
         CarmenReader::new(Cursor::new(input), FILE, CarmenParams::default()).collect();
     let first = input.iter().find(|b| !b.is_ascii_whitespace());
@@ -158,37 +157,15 @@ fn oracle(input: &[u8]) -> Result<Outcome, String> {
             return Err(format!("read_any {any:?}\nCARMEN reader {items:?}"));
         }
     }
-    let mut records = 0;
-    for (k, item) in items.iter().enumerate() {
-        match item {
-            Ok((line, scan)) => {
-                check_scan(scan).map_err(|e| format!("line {line}: {e}"))?;
-                let text = input.split(|&b| b == b'\n').nth(line - 1).unwrap_or(b"");
-                check_fields(scan, &String::from_utf8_lossy(text))
-                    .map_err(|e| format!("line {line}: {e}"))?;
-                records += 1;
-            }
-            Err(e) => {
-                if k + 1 != items.len() {
-                    return Err(format!("read on after an error: {e}"));
-                }
-                check_message(&e.to_string(), FILE, lines)?;
-                return Ok(Outcome::Refused(records));
-            }
-        }
-    }
-    Ok(Outcome::Accepted(records))
+    check_records(&items, input, FILE, |scan, line| {
+        check_fields(scan, &String::from_utf8_lossy(line))
+    })
 }
 
 #[test]
 fn fuzz_carmen() {
     let seeds = corpus("carmen");
-    for s in &seeds {
-        assert!(
-            matches!(oracle(s), Ok(Outcome::Accepted(n)) if n > 0),
-            "seeds are valid"
-        );
-    }
+    check_seeds(&seeds, oracle);
     run(
         "carmen",
         inputs(seeds.clone(), ALPHABET, TOKENS, structured(seeds)),

@@ -267,6 +267,7 @@ fn step(i: usize, d: f64, n: usize) -> Option<usize> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::plan::segment::seg;
     use proptest::prelude::*;
 
     proptest! {
@@ -298,13 +299,6 @@ mod tests {
                     .collect();
                 prop_assert_eq!(fast, slow, "crossings from {:?}", p);
             }
-        }
-    }
-
-    fn seg(ax: f64, ay: f64, bx: f64, by: f64) -> Segment {
-        Segment {
-            a: Point2::new(ax, ay),
-            b: Point2::new(bx, by),
         }
     }
 

@@ -98,16 +98,18 @@ pub(crate) fn end_points(segments: &[Segment]) -> impl Iterator<Item = Point2<f6
     segments.iter().flat_map(|s| [s.a, s.b])
 }
 
+/// The segment from (ax, ay) to (bx, by): the unit tests' shorthand.
+#[cfg(test)]
+pub(crate) fn seg(ax: f64, ay: f64, bx: f64, by: f64) -> Segment {
+    Segment {
+        a: Point2::new(ax, ay),
+        b: Point2::new(bx, by),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    fn seg(ax: f64, ay: f64, bx: f64, by: f64) -> Segment {
-        Segment {
-            a: Point2::new(ax, ay),
-            b: Point2::new(bx, by),
-        }
-    }
 
     #[test]
     fn segment_distance_known_values() {

@@ -193,14 +193,8 @@ fn unit(v: &Vector3<f64>) -> Option<Vector3<f64>> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::plan::segment::seg;
     use proptest::prelude::*;
-
-    fn seg(ax: f64, ay: f64, bx: f64, by: f64) -> Segment {
-        Segment {
-            a: Point2::new(ax, ay),
-            b: Point2::new(bx, by),
-        }
-    }
 
     fn box_room(w: f64, h: f64, height: f64, ceiling: bool) -> World {
         World::from_plan(&crate::plan::box_plan(w, h, height, ceiling))

@@ -462,3 +462,49 @@ pub fn check_scan(scan: &Scan) -> Result<(), String> {
         Err(e) => Err(format!("written back as {text}, does not read back: {e}")),
     }
 }
+
+/// The text of 1-based line `n` of `input`.
+pub fn line_text(input: &[u8], n: usize) -> &[u8] {
+    input.split(|&b| b == b'\n').nth(n - 1).unwrap_or(b"")
+}
+
+/// Checks what a scan reader made of `input`: each scan passes [`check_scan`] and `more`
+/// (given its line number and the line's text), and an error comes last, as a message
+/// [`check_message`] takes.
+pub fn check_records(
+    items: &[Result<(usize, Scan), levelscan::formats::InputError>],
+    input: &[u8],
+    file: &str,
+    more: impl Fn(&Scan, &[u8]) -> Result<(), String>,
+) -> Result<Outcome, String> {
+    let mut records = 0;
+    for (k, item) in items.iter().enumerate() {
+        match item {
+            Ok((line, scan)) => {
+                check_scan(scan)
+                    .and_then(|()| more(scan, line_text(input, *line)))
+                    .map_err(|e| format!("line {line}: {e}"))?;
+                records += 1;
+            }
+            Err(e) => {
+                if k + 1 != items.len() {
+                    return Err(format!("read on after an error: {e}"));
+                }
+                check_message(&e.to_string(), file, line_count(input))?;
+                return Ok(Outcome::Refused(records));
+            }
+        }
+    }
+    Ok(Outcome::Accepted(records))
+}
+
+/// Every seed of a scan target is read whole, into at least one record.
+pub fn check_seeds(seeds: &[Vec<u8>], oracle: impl Fn(&[u8]) -> Result<Outcome, String>) {
+    for (i, s) in seeds.iter().enumerate() {
+        let got = oracle(s);
+        assert!(
+            matches!(got, Ok(Outcome::Accepted(n)) if n > 0),
+            "seed {i} is not read whole: {got:?}"
+        );
+    }
+}
