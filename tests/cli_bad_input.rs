@@ -535,8 +535,13 @@ fn a_full_disk_is_an_error_naming_the_output_never_a_panic() {
             .open("/dev/full")
             .unwrap()
     };
-    let stdout_cases: [(&str, Vec<&str>); 7] = [
+    let demo_dir = d.path("demo");
+    let stdout_cases: [(&str, Vec<&str>); 8] = [
         ("simulate", vec!["simulate", &plan]),
+        (
+            "demo",
+            vec!["demo", "--out", &demo_dir, "--accuracy-poses", "2"],
+        ),
         ("level", vec!["level", &input]),
         ("match", vec!["match", &input]),
         ("info", vec!["info", &input]),

@@ -279,7 +279,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .with_context(|| format!("{}: cannot write", json_path.display()))?;
     stages.inc(1);
     stages.finish_and_clear();
-    print_summary(&data, &report_path);
+    print_summary(&data, &report_path)?;
     Ok(())
 }
 
@@ -858,9 +858,14 @@ fn build_report(
     }
 }
 
-fn print_summary(data: &DemoData, report: &Path) {
+/// The run in a few lines on standard output (written with `open_output`: a full disk is an
+/// error naming `<stdout>`, not a panic).
+fn print_summary(data: &DemoData, report: &Path) -> anyhow::Result<()> {
+    use std::fmt::Write as _;
     let s = &data.settings;
-    println!(
+    let mut text = String::new();
+    let _ = writeln!(
+        text,
         "levelscan demo: {} poses through {}, {} scans each, {:.0} mm noise, seed {}",
         s.poses,
         s.plan,
@@ -868,8 +873,9 @@ fn print_summary(data: &DemoData, report: &Path) {
         s.noise_m * 1000.0,
         s.seed
     );
-    println!("  robot:    {}", s.robot);
-    println!(
+    let _ = writeln!(text, "  robot:    {}", s.robot);
+    let _ = writeln!(
+        text,
         "  level:    {} of {} poses leveled, mean attitude error {} deg",
         data.level.leveled,
         data.level.poses,
@@ -878,7 +884,8 @@ fn print_summary(data: &DemoData, report: &Path) {
             .map_or("-".into(), |e| format!("{e:.3}"))
     );
     for mode in ["pairwise", "metascan"] {
-        println!(
+        let _ = writeln!(
+            text,
             "  {mode:<9} ATE: raw {} m, leveled {} m, level floor {} m",
             fmt_m(ate_of(data, "raw", mode)),
             fmt_m(ate_of(data, "leveled", mode)),
@@ -897,6 +904,9 @@ fn print_summary(data: &DemoData, report: &Path) {
             )
         })
         .collect();
-    println!("  Table I mean error [deg]: {}", cells.join(", "));
-    println!("report: {}", report.display());
+    let _ = writeln!(text, "  Table I mean error [deg]: {}", cells.join(", "));
+    let _ = writeln!(text, "report: {}", report.display());
+    let mut out = super::open_output(None, &[])?;
+    std::io::Write::write_all(&mut out, text.as_bytes())?;
+    out.finish()
 }
