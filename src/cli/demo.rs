@@ -701,6 +701,7 @@ fn build_report(
                 percent(c.leveled_fraction, 0),
                 c.wrong_over_5_deg.to_string(),
                 percent(c.phantom_rate, 2),
+                percent(c.floor_kept_rate, 2),
                 percent(c.coverage, 0),
             ]
         })
@@ -729,6 +730,7 @@ fn build_report(
                     "leveled",
                     "ok but > 5 deg",
                     "phantoms",
+                    "floor/ceiling kept",
                     "coverage",
                 ]
                 .map(String::from)

@@ -2,9 +2,10 @@
 
 use super::{LevelArgs, open_output, write_file};
 use anyhow::Context;
-use levelscan::eval::accuracy::{AccuracyParams, CellStats, run_accuracy};
+use levelscan::eval::accuracy::{AccuracyParams, CellStats, Efficiency, run_accuracy};
 use levelscan::formats::read_plan;
 use levelscan::level::{Estimator, LevelParams};
+use levelscan::simulate::NoiseModel;
 use levelscan::viz::histogram::{Series, write_histogram};
 use std::fmt::Write as _;
 use std::io::Write as _;
@@ -18,9 +19,18 @@ pub struct Args {
     /// Scan counts per pose.
     #[arg(long, value_delimiter = ',', default_value = "3,4,5")]
     pub scans: Vec<usize>,
-    /// Range noise sigmas \[m\].
+    /// Range noise \[m\]: Gaussian sigmas, or with `--noise-model uniform` the full widths of
+    /// uniform noise.
     #[arg(long, value_delimiter = ',', default_value = "0.01,0.05,0.10")]
     pub noise: Vec<f64>,
+    /// What --noise means: `gaussian` (a standard deviation) or `uniform` (alias `paper`: a
+    /// peak-to-peak width, the paper's "range of about 1 cm", appendix C).
+    #[arg(long, value_enum, default_value_t = NoiseModel::Gaussian)]
+    pub noise_model: NoiseModel,
+    /// Coplanarity tolerance of the paper's quads (sect. 5.2), in sigmas of the range noise
+    /// (estimated from the data).
+    #[arg(long, default_value_t = LevelParams::default().coplanar_k)]
+    pub quad_tolerance: f64,
     /// Estimators to compare.
     #[arg(
         long,
@@ -61,6 +71,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         args.noise.iter().all(|n| n.is_finite() && *n >= 0.0),
         "--noise must list non-negative sigmas in metres"
     );
+    anyhow::ensure!(
+        args.quad_tolerance.is_finite() && args.quad_tolerance > 0.0,
+        "--quad-tolerance must be a positive number of sigmas"
+    );
     let plans = args
         .plans
         .iter()
@@ -69,13 +83,17 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let params = AccuracyParams {
         scans: args.scans.clone(),
         noise: args.noise.clone(),
+        noise_model: args.noise_model,
         estimators: args.estimators.clone(),
         poses_per_plan: args.poses,
         seed: args.seed,
         step_deg: args.step,
         tilt_deg: args.tilt,
         adaptive: args.adaptive,
-        level: args.leveling.apply(LevelParams::default()),
+        level: LevelParams {
+            coplanar_k: args.quad_tolerance,
+            ..args.leveling.apply(LevelParams::default())
+        },
         ..AccuracyParams::default()
     };
     let stats = run_accuracy(&plans, &params)?;
@@ -93,6 +111,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             "seed": args.seed,
             "step_deg": args.step,
             "tilt_deg": args.tilt,
+            "noise_model": args.noise_model.to_string(),
+            "quad_tolerance": args.quad_tolerance,
             "adaptive": args.adaptive,
             "cells": stats,
         });
@@ -101,34 +121,38 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             &dir.join("poses.jsonl"),
             pose_lines(&stats, &args.plans).as_bytes(),
         )?;
-        // Fig. 6 at the noise nearest 5 cm, one file per estimator.
-        let fig_noise = params
-            .noise
-            .iter()
-            .copied()
-            .min_by(|a, b| (a - 0.05).abs().total_cmp(&(b - 0.05).abs()));
-        if let Some(noise) = fig_noise {
-            for est in &params.estimators {
-                let series: Vec<Series> = stats
-                    .iter()
-                    .filter(|s| s.noise == noise && s.estimator == est.to_string())
-                    .map(|s| Series {
-                        label: format!("{} scans", s.scans),
-                        errors_deg: s.errors_deg.clone(),
-                    })
-                    .collect();
-                let title = format!(
-                    "Level estimation error, {} cm noise, {est} estimator",
-                    noise * 100.0
-                );
-                if let Err(e) = write_histogram(dir, &format!("fig6_{est}"), &title, &series) {
-                    eprintln!("warning: histogram not written: {e}");
-                }
-            }
-        }
+        write_fig6(dir, &stats, &params);
         eprintln!("wrote {}", path.display());
     }
     Ok(())
+}
+
+/// Fig. 6 at the noise nearest 5 cm, one file per estimator (a warning when one cannot be
+/// written: the tables are the result).
+fn write_fig6(dir: &std::path::Path, stats: &[CellStats], params: &AccuracyParams) {
+    let fig_noise = params
+        .noise
+        .iter()
+        .copied()
+        .min_by(|a, b| (a - 0.05).abs().total_cmp(&(b - 0.05).abs()));
+    let Some(noise) = fig_noise else { return };
+    for est in &params.estimators {
+        let series: Vec<Series> = stats
+            .iter()
+            .filter(|s| s.noise == noise && s.estimator == est.to_string())
+            .map(|s| Series {
+                label: format!("{} scans", s.scans),
+                errors_deg: s.errors_deg.clone(),
+            })
+            .collect();
+        let title = format!(
+            "Level estimation error, {} cm noise, {est} estimator",
+            noise * 100.0
+        );
+        if let Err(e) = write_histogram(dir, &format!("fig6_{est}"), &title, &series) {
+            eprintln!("warning: histogram not written: {e}");
+        }
+    }
 }
 
 /// One JSON line per pose, cell and estimator: what it was, what the leveler said, how far
@@ -149,8 +173,21 @@ fn pose_lines(stats: &[CellStats], plans: &[PathBuf]) -> String {
                 "estimate_deg": o.estimate_deg,
                 "sigma_deg": o.sigma_deg,
                 "error_deg": o.error_deg,
+                "sigmas_deg": o.sigmas_deg,
                 "bound_deg": o.bound_deg.filter(|b| b.is_finite()),
+                "error_over_bound": o.error_over_bound(),
+                "sigma_over_bound": o.sigma_over_bound(),
+                "efficient_over_bound": o.efficient_over_bound,
                 "segmented_deg": o.segmented_deg.filter(|b| b.is_finite()),
+                "true_segments_ml": o.true_segments.map(|f| serde_json::json!({
+                    "estimate_deg": f.attitude.map(f64::to_degrees),
+                    "sigmas_deg": f.sigmas.map(f64::to_degrees),
+                    "inflation": f.inflation,
+                    "converged": f.converged,
+                })),
+                "pseudo_valid": o.pseudo_valid,
+                "phantoms": o.phantoms,
+                "floor_kept": o.floor_kept,
             });
             let _ = writeln!(out, "{line}");
         }
@@ -161,14 +198,6 @@ fn pose_lines(stats: &[CellStats], plans: &[PathBuf]) -> String {
 fn fmt_deg(x: f64) -> String {
     if x.is_finite() {
         format!("{x:.3}")
-    } else {
-        "-".to_string()
-    }
-}
-
-fn fmt_ratio(x: f64) -> String {
-    if x.is_finite() {
-        format!("{x:.1}x")
     } else {
         "-".to_string()
     }
@@ -220,7 +249,7 @@ fn markdown(stats: &[CellStats], params: &AccuracyParams) -> String {
     let _ = writeln!(s, "### Every cell\n");
     let _ = writeln!(
         s,
-        "| estimator | scans | noise [m] | leveled | mean | median | p95 | max | ok > 5 deg | within 3 sigma | phantom | coverage | bound | bound within gate | true segments within gate | sigma / bound | failures |"
+        "| estimator | scans | noise [m] | leveled | mean | median | p95 | max | ok > 5 deg | within 3 sigma | phantom | floor/ceiling kept | coverage | bound | bound within gate | true segments within gate | failures |"
     );
     let _ = writeln!(
         s,
@@ -244,13 +273,74 @@ fn markdown(stats: &[CellStats], params: &AccuracyParams) -> String {
             c.wrong_over_5_deg,
             fmt_pct(c.within_3_sigma),
             fmt_pct(c.phantom_rate),
+            fmt_pct(c.floor_kept_rate),
             fmt_pct(c.coverage),
             fmt_deg(c.bound_median_deg),
             fmt_pct(c.bound_within_gate),
             fmt_pct(c.segmented_within_gate),
-            fmt_ratio(c.sigma_over_bound),
             failures.join(", ")
         );
     }
+    s.push('\n');
+    s.push_str(&efficiency_table(stats));
     s
+}
+
+/// Per-pose efficiency against the Cramér-Rao bound: each estimator over its leveled poses,
+/// then the maximum-likelihood core told the true segmentation over every pose (once a cell).
+fn efficiency_table(stats: &[CellStats]) -> String {
+    let mut s = String::new();
+    let _ = writeln!(
+        s,
+        "### Against each pose's bound (medians; normal: 68.3/95.4/99.7%)\n"
+    );
+    let _ = writeln!(
+        s,
+        "| estimator | scans | noise [m] | poses | error / bound | sigma / bound | efficient estimator | within 1 sigma x/y | 2 sigma x/y | 3 sigma x/y |"
+    );
+    let _ = writeln!(s, "|---|---|---|---|---|---|---|---|---|---|");
+    let row = |s: &mut String, name: &str, c: &CellStats, e: &Efficiency| {
+        let within = |k: usize| {
+            format!(
+                "{}/{}",
+                fmt_pct(e.within_sigma[k][0]),
+                fmt_pct(e.within_sigma[k][1])
+            )
+        };
+        let _ = writeln!(
+            s,
+            "| {name} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
+            c.scans,
+            c.noise,
+            e.efficiency_poses,
+            fmt_two(e.error_over_bound),
+            fmt_two(e.sigma_over_bound),
+            fmt_two(e.efficient_over_bound),
+            within(0),
+            within(1),
+            within(2)
+        );
+    };
+    for (i, c) in stats.iter().enumerate() {
+        row(&mut s, &c.estimator, c, &c.efficiency);
+        let last_of_cell = stats
+            .get(i + 1)
+            .is_none_or(|n| n.scans != c.scans || n.noise != c.noise);
+        if last_of_cell && c.true_segments_ml.efficiency_poses > 0 {
+            let name = format!(
+                "ml, true segments ({} within gate)",
+                fmt_pct(c.true_segments_ml_within_gate)
+            );
+            row(&mut s, &name, c, &c.true_segments_ml);
+        }
+    }
+    s
+}
+
+fn fmt_two(x: f64) -> String {
+    if x.is_finite() {
+        format!("{x:.2}")
+    } else {
+        "-".to_string()
+    }
 }

@@ -7,8 +7,8 @@ use levelscan::formats::{InputError, read_plan_from, write_scan};
 use levelscan::geometry::Pose;
 use levelscan::plan::Plan;
 use levelscan::simulate::{
-    AdaptiveParams, RandomPoseParams, ScannerParams, World, elevations_centred, odometry,
-    random_poses, simulate_poses,
+    AdaptiveParams, NoiseModel, RandomPoseParams, ScannerParams, World, elevations_centred,
+    odometry, random_poses, simulate_poses,
 };
 use std::path::PathBuf;
 
@@ -31,9 +31,14 @@ pub struct Args {
     /// Longest range that returns \[m\]; rays that meet nothing within it are invalid.
     #[arg(long, default_value_t = 30.0)]
     pub max_range: f64,
-    /// Standard deviation of the Gaussian range noise \[m\].
+    /// Range noise \[m\]: the Gaussian's standard deviation, or with `--noise-model uniform`
+    /// the full width of uniform noise.
     #[arg(long, default_value_t = 0.01)]
     pub noise: f64,
+    /// What --noise means: `gaussian` (a standard deviation) or `uniform` (alias `paper`: a
+    /// peak-to-peak width, the paper's "range of about 1 cm", appendix C).
+    #[arg(long, value_enum, default_value_t = NoiseModel::Gaussian)]
+    pub noise_model: NoiseModel,
     /// Random seed: the same seed gives the same output bytes, whatever the thread count.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
@@ -229,6 +234,7 @@ fn scanner_params(args: &Args) -> anyhow::Result<ScannerParams> {
         fov: args.fov.to_radians(),
         max_range: args.max_range,
         noise_sigma: args.noise,
+        noise_model: args.noise_model,
         hinge_offset,
         write_sigma: args.with_sigma,
     };

@@ -20,9 +20,10 @@
 //!
 //! Pure: rays in, sigmas out; [`pose_rays`] builds the rays from the simulator's world.
 
-use crate::geometry::{Pose, beam_direction, beam_origin, rot_x, rot_y};
+use crate::geometry::{Pose, beam_direction, beam_origin};
 use crate::level::LevelParams;
 use crate::level::grid::{GridPoint, PlaneAccumulator, PlaneFit};
+use crate::level::ml::model::Rotations;
 use crate::level::up::{self, PlaneObs, UpSolution};
 use crate::plan::Segment;
 use crate::scan::{Hit, Scan};
@@ -190,14 +191,10 @@ struct Linearization {
 
 impl Linearization {
     fn at(truth: &Pose) -> Self {
-        let (sx, cx) = truth.rx.sin_cos();
-        let (sy, cy) = truth.ry.sin_cos();
-        let d_rot_x = Matrix3::new(0.0, 0.0, 0.0, 0.0, -sx, -cx, 0.0, cx, -sx);
-        let d_rot_y = Matrix3::new(-sy, 0.0, cy, 0.0, 0.0, 0.0, -cy, 0.0, -sy);
-        let (rot_x, rot_y) = (*rot_x(truth.rx).matrix(), *rot_y(truth.ry).matrix());
+        let rot = Rotations::at(&Vector2::new(truth.rx, truth.ry));
         Linearization {
-            level_from_robot: rot_y * rot_x,
-            by_theta: [rot_y * d_rot_x, d_rot_y * rot_x],
+            level_from_robot: rot.level_from_robot,
+            by_theta: rot.by_theta,
             unyaw: (-truth.rz).sin_cos(),
         }
     }
@@ -222,6 +219,13 @@ impl Linearization {
 /// the rays cannot fix the attitude (a corridor's parallel walls alone) or `sigma` is not
 /// positive.
 pub fn attitude_bound(rays: &[BoundRay], truth: &Pose, sigma: f64) -> Option<[f64; 2]> {
+    let cov = attitude_bound_cov(rays, truth, sigma)?;
+    Some([cov[(0, 0)].sqrt(), cov[(1, 1)].sqrt()])
+}
+
+/// The bound's whole 2x2 covariance of `(theta_x, theta_y)` \[rad^2\] (the axes are
+/// correlated); `None` as for [`attitude_bound`].
+pub fn attitude_bound_cov(rays: &[BoundRay], truth: &Pose, sigma: f64) -> Option<Matrix2<f64>> {
     if sigma.is_nan() || sigma <= 0.0 {
         return None;
     }
@@ -262,8 +266,7 @@ pub fn attitude_bound(rays: &[BoundRay], truth: &Pose, sigma: f64) -> Option<[f6
     if eig.min() <= scale * 1e-10 {
         return None;
     }
-    let cov = info.try_inverse()? * (sigma * sigma);
-    Some([cov[(0, 0)].sqrt(), cov[(1, 1)].sqrt()])
+    Some(info.try_inverse()? * (sigma * sigma))
 }
 
 /// Before [`segmented_solution`] fits a surface, the scan with its second most points must

@@ -5,3 +5,4 @@ pub mod bound;
 pub mod matching;
 pub mod metrics;
 pub mod real;
+pub mod true_segments;

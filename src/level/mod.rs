@@ -12,6 +12,7 @@
 
 pub mod eigen3;
 pub mod grid;
+pub(crate) mod ml;
 pub mod noise;
 pub mod patches;
 pub mod polygons;

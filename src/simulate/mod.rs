@@ -10,12 +10,14 @@
 //! run's output depends on its seed only, never on the thread count.
 
 pub mod adaptive;
+pub mod noise_model;
 pub mod odometry;
 pub mod random_poses;
 pub mod raycast;
 pub mod scanner;
 
 pub use adaptive::{AdaptiveParams, simulate_pose_adaptive};
+pub use noise_model::NoiseModel;
 pub use odometry::{OdometryParams, odometry};
 pub use random_poses::{RandomPoseParams, is_free, random_poses};
 pub use raycast::{RayHit, World};

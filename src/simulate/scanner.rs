@@ -1,12 +1,12 @@
 //! The tilting laser scanner: one scan per hinge elevation at a pose (paper sect. 5.1, 7.2.1).
 
 use super::SimulateError;
+use super::noise_model::NoiseModel;
 use super::raycast::World;
 use crate::geometry::{Pose, beam_direction, beam_origin};
 use crate::scan::{Hit, Scan, even_bearings};
 use nalgebra::Vector3;
 use rand::Rng;
-use rand_distr::{Distribution, StandardNormal};
 
 /// The scanner's parameters.
 #[derive(Clone, Debug, PartialEq)]
@@ -17,9 +17,11 @@ pub struct ScannerParams {
     pub fov: f64,
     /// Longest range that still returns \[m\]; farther surfaces give no reading. Default 30.
     pub max_range: f64,
-    /// Standard deviation of the Gaussian noise added to each range \[m\]. Default 0.01
-    /// (a SICK LMS 200, the paper's appendix C).
+    /// Range noise \[m\]: the standard deviation of Gaussian noise, or the full width of
+    /// uniform noise (`noise_model`). Default 0.01 (a SICK LMS 200, the paper's appendix C).
     pub noise_sigma: f64,
+    /// What `noise_sigma` means. Default Gaussian.
+    pub noise_model: NoiseModel,
     /// Hinge offset `o` \[m\]: the scanner's origin seen from the hinge axis point, in the
     /// scanner's tilted frame (contract). Default none (the hinge passes through the origin).
     pub hinge_offset: Option<[f64; 3]>,
@@ -35,6 +37,7 @@ impl Default for ScannerParams {
             fov: std::f64::consts::PI,
             max_range: 30.0,
             noise_sigma: 0.01,
+            noise_model: NoiseModel::Gaussian,
             hinge_offset: None,
             write_sigma: false,
         }
@@ -45,6 +48,11 @@ impl ScannerParams {
     /// The bearing of every ray \[rad\], from `-fov/2` to `+fov/2`.
     pub fn bearings(&self) -> Vec<f64> {
         even_bearings(self.rays, -self.fov / 2.0, self.fov / 2.0)
+    }
+
+    /// The standard deviation of the range noise \[m\] (what `readings_sigma` holds).
+    pub fn range_sigma(&self) -> f64 {
+        self.noise_model.sigma(self.noise_sigma)
     }
 
     pub fn validate(&self) -> Result<(), SimulateError> {
@@ -111,8 +119,7 @@ pub fn simulate_pose<R: Rng + ?Sized>(
                 let direction = iso * beam_direction(e, phi);
                 match world.cast(&origin, &direction, params.max_range) {
                     Some(h) => {
-                        let noise: f64 = StandardNormal.sample(rng);
-                        let r = h.range + params.noise_sigma * noise;
+                        let r = h.range + params.noise_model.draw(params.noise_sigma, rng);
                         readings.push((r > 0.0).then_some(r));
                         valid.push(r > 0.0);
                         hits.push(h.hit);
@@ -133,7 +140,7 @@ pub fn simulate_pose<R: Rng + ?Sized>(
                 true_pose: Some(*world_from_robot),
                 readings_sigma: params
                     .write_sigma
-                    .then(|| vec![Some(params.noise_sigma); bearings.len()]),
+                    .then(|| vec![Some(params.range_sigma()); bearings.len()]),
                 hinge_offset: params.hinge_offset,
                 hit: Some(hits),
                 ..Scan::default()

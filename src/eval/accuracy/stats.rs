@@ -1,0 +1,234 @@
+//! One cell of Table I for one estimator: its poses' outcomes pooled into statistics.
+
+use super::efficiency::{AxisRecord, Efficiency};
+use super::paper_mean;
+use super::pose::PoseOutcome;
+use crate::eval::metrics::{median, nearest_rank};
+use crate::level::Estimator;
+use std::collections::BTreeMap;
+
+/// Statistics of one cell of Table I for one estimator.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct CellStats {
+    pub scans: usize,
+    /// The noise figure \[m\] (a sigma, or a uniform width: the run's noise model).
+    pub noise: f64,
+    pub estimator: String,
+    pub poses: usize,
+    pub leveled: usize,
+    pub leveled_fraction: f64,
+    /// Mean, median, 95th percentile and maximum error over leveled poses \[deg\].
+    pub mean_deg: f64,
+    pub median_deg: f64,
+    pub p95_deg: f64,
+    pub max_deg: f64,
+    /// Leveled poses with an error above 5 degrees.
+    pub wrong_over_5_deg: usize,
+    /// Fraction of leveled poses whose error lies within 3 reported sigmas.
+    pub within_3_sigma: f64,
+    /// Phantom pseudo-level points (farther than `phantom_distance` from every wall) over all
+    /// valid pseudo-level points (leveled poses).
+    pub phantom_rate: f64,
+    /// Pseudo-level points whose ray met the floor or ceiling (the simulator's labels) over
+    /// all valid pseudo-level points (leveled poses).
+    pub floor_kept_rate: f64,
+    /// Valid pseudo-level points over wall hits of each pose's best scan (leveled poses).
+    pub coverage: f64,
+    /// Where coverage goes: the base scan's wall hits over the best scan's ...
+    pub base_wall_share: f64,
+    /// ... and the base scan's wall hits kept in the pseudo-level scan over its wall hits ...
+    pub walls_kept_rate: f64,
+    /// ... and of those it left out, the share within `LOW_BAND` of the floor or ceiling.
+    pub walls_dropped_low_share: f64,
+    /// The paper's mean for this cell \[deg\], when it has one.
+    pub paper_mean_deg: Option<f64>,
+    /// Median over all poses of the larger Cramér-Rao bound on the attitude \[deg\]: what no
+    /// leveler can beat ([`crate::eval::bound`]).
+    pub bound_median_deg: f64,
+    /// Poses whose bound lies within the leveling gate (`max_sigma`): the most a leveler with
+    /// honest sigmas and that gate could level.
+    pub bound_within_gate: f64,
+    /// Poses whose sigma from the true segmentation lies within the leveling gate: what this
+    /// estimator could level if it found every surface and nothing else.
+    pub segmented_within_gate: f64,
+    /// The estimator's efficiency over its leveled poses ([`Efficiency`]).
+    #[serde(flatten)]
+    pub efficiency: Efficiency,
+    /// The maximum-likelihood core told the true segmentation, over every pose it fixes up
+    /// at (the same for every estimator of a cell).
+    pub true_segments_ml: Efficiency,
+    /// Poses whose maximum-likelihood sigma on the true segmentation lies within the gate.
+    pub true_segments_ml_within_gate: f64,
+    /// Failed poses by reason.
+    pub failures: BTreeMap<String, usize>,
+    /// Every leveled pose's error \[deg\], in pose order (for histograms).
+    pub errors_deg: Vec<f64>,
+    /// Every pose's outcome, in pose order (written apart, as `poses.jsonl`).
+    #[serde(skip)]
+    pub outcomes: Vec<PoseOutcome>,
+}
+
+fn ratio(a: usize, b: usize) -> f64 {
+    if b == 0 {
+        f64::NAN
+    } else {
+        a as f64 / b as f64
+    }
+}
+
+fn sorted_copy(v: &[f64]) -> Vec<f64> {
+    let mut v = v.to_vec();
+    v.sort_by(f64::total_cmp);
+    v
+}
+
+pub(crate) fn cell_stats(
+    scans: usize,
+    noise: f64,
+    estimator: Estimator,
+    gate_deg: f64,
+    o: &[&PoseOutcome],
+) -> CellStats {
+    let errors: Vec<f64> = o.iter().filter_map(|p| p.error_deg).collect();
+    let sorted = sorted_copy(&errors);
+    let n = sorted.len();
+    let bounds: Vec<f64> = o.iter().filter_map(|p| p.bound_deg).collect();
+    let segmented: Vec<f64> = o.iter().filter_map(|p| p.segmented_deg).collect();
+    let ml_sigmas: Vec<f64> = o
+        .iter()
+        .filter(|p| p.bound_deg.is_some())
+        .map(|p| {
+            p.true_segments
+                .map_or(f64::INFINITY, |f| f.sigmas[0].max(f.sigmas[1]).to_degrees())
+        })
+        .collect();
+    let mut failures = BTreeMap::new();
+    for p in o {
+        if let Some(f) = p.failure {
+            *failures.entry(f.as_str().to_string()).or_insert(0) += 1;
+        }
+    }
+    let leveled: Vec<&&PoseOutcome> = o.iter().filter(|p| p.error_deg.is_some()).collect();
+    let sum = |f: fn(&PoseOutcome) -> usize| leveled.iter().map(|p| f(p)).sum::<usize>();
+    let valid = sum(|p| p.pseudo_valid);
+    let within_gate = |sigmas: &[f64]| {
+        ratio(
+            sigmas.iter().filter(|&&s| s <= gate_deg).count(),
+            sigmas.len(),
+        )
+    };
+    let records = |f: fn(&PoseOutcome) -> Option<AxisRecord>| -> Vec<AxisRecord> {
+        o.iter().filter_map(|p| f(p)).collect()
+    };
+    CellStats {
+        scans,
+        noise,
+        estimator: estimator.to_string(),
+        poses: o.len(),
+        leveled: n,
+        leveled_fraction: ratio(n, o.len()),
+        mean_deg: if n == 0 {
+            f64::NAN
+        } else {
+            errors.iter().sum::<f64>() / n as f64
+        },
+        median_deg: median(&sorted),
+        p95_deg: nearest_rank(&sorted, 0.95),
+        max_deg: sorted.last().copied().unwrap_or(f64::NAN),
+        wrong_over_5_deg: errors.iter().filter(|&&e| e > 5.0).count(),
+        within_3_sigma: ratio(leveled.iter().filter(|p| p.within_3_sigma).count(), n),
+        phantom_rate: ratio(sum(|p| p.phantoms), valid),
+        floor_kept_rate: ratio(sum(|p| p.floor_kept), valid),
+        coverage: ratio(valid, sum(|p| p.best_wall_hits)),
+        base_wall_share: ratio(sum(|p| p.base_wall_hits), sum(|p| p.best_wall_hits)),
+        walls_kept_rate: ratio(sum(|p| p.walls_kept), sum(|p| p.base_wall_hits)),
+        walls_dropped_low_share: ratio(
+            sum(|p| p.walls_dropped_low),
+            sum(|p| p.base_wall_hits) - sum(|p| p.walls_kept),
+        ),
+        paper_mean_deg: paper_mean(scans, noise),
+        bound_median_deg: median(&sorted_copy(&bounds)),
+        bound_within_gate: within_gate(&bounds),
+        segmented_within_gate: within_gate(&segmented),
+        efficiency: Efficiency::of(&records(AxisRecord::of_leveled)),
+        true_segments_ml: Efficiency::of(&records(AxisRecord::of_true_segments)),
+        true_segments_ml_within_gate: within_gate(&ml_sigmas),
+        failures,
+        errors_deg: errors,
+        outcomes: o.iter().map(|&p| p.clone()).collect(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::eval::true_segments::TrueSegmentsFit;
+    use crate::level::FailReason;
+
+    #[test]
+    fn cell_stats_on_known_errors() {
+        let mk = |e: Option<f64>| PoseOutcome {
+            estimate_deg: e.map(|x| [x, 0.0]),
+            failure: if e.is_none() {
+                Some(FailReason::ParallelWalls)
+            } else {
+                None
+            },
+            error_deg: e,
+            within_3_sigma: e.is_some_and(|x| x < 2.0),
+            pseudo_valid: 10,
+            phantoms: 1,
+            floor_kept: 2,
+            walls_kept: 8,
+            best_wall_hits: 20,
+            base_wall_hits: 16,
+            walls_dropped_low: 4,
+            sigmas_deg: e.map(|x| [x / 2.0, x / 4.0]),
+            sigma_deg: e.map(|x| x / 2.0),
+            bound_deg: Some(if e.is_none() { f64::INFINITY } else { 0.25 }),
+            efficient_over_bound: e.map(|_| 0.8),
+            segmented_deg: Some(if e == Some(1.0) { 0.5 } else { 2.0 }),
+            true_segments: Some(TrueSegmentsFit {
+                attitude: [0.01, 0.0],
+                sigmas: [0.02, 0.01],
+                inflation: 1.0,
+                converged: true,
+            }),
+            ..PoseOutcome::default()
+        };
+        let outcomes = [mk(Some(1.0)), mk(Some(3.0)), mk(None), mk(Some(6.0))];
+        let refs: Vec<&PoseOutcome> = outcomes.iter().collect();
+        let s = cell_stats(3, 0.01, Estimator::Robust, 1.5, &refs);
+        assert_eq!(s.leveled, 3);
+        assert!((s.mean_deg - 10.0 / 3.0).abs() < 1e-12);
+        assert_eq!(s.median_deg, 3.0);
+        assert_eq!(s.max_deg, 6.0);
+        assert_eq!(s.wrong_over_5_deg, 1);
+        assert_eq!(s.failures.get("parallel_walls"), Some(&1));
+        assert!((s.phantom_rate - 0.1).abs() < 1e-12);
+        assert!((s.floor_kept_rate - 0.2).abs() < 1e-12);
+        assert!((s.coverage - 0.5).abs() < 1e-12);
+        assert!((s.base_wall_share - 0.8).abs() < 1e-12);
+        assert!((s.walls_kept_rate - 0.5).abs() < 1e-12);
+        assert!((s.walls_dropped_low_share - 0.5).abs() < 1e-12);
+        // Bounds 0.25, 0.25, inf, 0.25: three of four within the gate.
+        assert_eq!(s.bound_median_deg, 0.25);
+        assert!((s.bound_within_gate - 0.75).abs() < 1e-12);
+        // From the true segmentation 0.5, 2, 2, 2: one of four.
+        assert!((s.segmented_within_gate - 0.25).abs() < 1e-12);
+        // Errors 1, 3, 6 and sigmas 0.5, 1.5, 3.0 over 0.25; x errors at 2 sigmas, y at 0.
+        let e = &s.efficiency;
+        assert_eq!(e.efficiency_poses, 3);
+        assert!((e.error_over_bound - 12.0).abs() < 1e-12);
+        assert!((e.sigma_over_bound - 6.0).abs() < 1e-12);
+        assert_eq!(e.efficient_over_bound, 0.8);
+        assert_eq!(e.within_sigma[0], [0.0, 1.0]);
+        assert_eq!(e.within_sigma[1], [1.0, 1.0]);
+        // The core on true segments: three poses with a finite bound; its error 0.01 rad.
+        let ml = &s.true_segments_ml;
+        assert_eq!(ml.efficiency_poses, 3);
+        let err = 0.01f64.to_degrees();
+        assert!((ml.error_over_bound - err / 0.25).abs() < 1e-9);
+        assert!((s.true_segments_ml_within_gate - 1.0).abs() < 1e-12);
+    }
+}

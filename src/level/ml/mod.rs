@@ -1,0 +1,175 @@
+//! Maximum-likelihood refinement of up, once a segmentation is chosen (issue 26, items 1-2).
+//!
+//! Given which surface every point belongs to (a wall `k`, the floor, the ceiling), the
+//! attitude and every surface's placement are estimated jointly from the ranges, with the
+//! range noise along each ray: a wall is a vertical plane of the level frame (a 2D line), the
+//! floor and ceiling level planes at unknown heights (the world the paper assumes, sect. 3:
+//! vertical walls on a level floor). This is the model of the Cramér-Rao bound
+//! ([`crate::eval::bound`]), so on the true segmentation the estimate is efficient to first
+//! order and its covariance from the information matrix is the bound at the estimate.
+//!
+//! - [`model`]: the predicted range of a ray and its derivatives;
+//! - [`solve`]: Levenberg-Marquardt with a Huber kernel, the walls and heights eliminated per
+//!   step by the Schur complement (each point meets one surface, so the system is an arrow),
+//!   the attitude covariance with every placement marginalised, and the residuals' chi-square
+//!   test that decides any inflation.
+//!
+//! Up lives on the sphere; it is charted by `(theta_x, theta_y)` (`up = L^T z`,
+//! [`crate::geometry::Attitude::up_in_robot`]), a chart of the whole sphere less the two points
+//! `up = +-x` (pitch of 90 degrees), so the step is taken in the attitude the bound and the
+//! leveler report. Pure: plain points in, an estimate out.
+
+pub(crate) mod model;
+pub(crate) mod solve;
+#[cfg(test)]
+mod tests;
+
+use nalgebra::{Point3, Vector3};
+pub(crate) use solve::refine;
+
+/// The surface a point belongs to.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
+pub(crate) enum Surface {
+    /// A vertical wall plane, by the caller's index (points of one index share one plane).
+    Wall(usize),
+    Floor,
+    Ceiling,
+}
+
+/// One labelled range reading.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct LabelledPoint {
+    /// The ray's origin in the robot frame \[m\] (the hinge offset applied).
+    pub origin: Point3<f64>,
+    /// The ray's unit direction in the robot frame.
+    pub dir: Vector3<f64>,
+    /// The measured range \[m\].
+    pub range: f64,
+    /// The range noise's standard deviation \[m\].
+    pub sigma: f64,
+    pub surface: Surface,
+}
+
+/// Parameters of the refinement.
+#[derive(Clone, Debug, PartialEq)]
+pub(crate) struct MlParams {
+    /// Most Levenberg-Marquardt iterations. Default 50 (from 20 degrees off, with the true
+    /// segmentation, 5-8 suffice).
+    pub max_iterations: usize,
+    /// Converged when the attitude step is below this \[rad\]. Default 1e-10.
+    pub step_tolerance: f64,
+    /// Huber kernel threshold, in sigmas of the point's range noise \[1\]. Default 3: a
+    /// Gaussian point passes it 99.7% of the time, so the estimate keeps 99.9% of the
+    /// efficiency of least squares, and a point that does not belong (a floor hit taken for a
+    /// wall) pulls with a bounded force.
+    pub huber_k: f64,
+    /// A surface with fewer points is left out \[points\]. Default 3 (a wall's line needs two).
+    pub min_surface_points: usize,
+    /// A point whose ray meets its plane at an incidence `|n . L u|` below this is left out
+    /// \[1\]. Default 0.02 (within 1.1 degrees of grazing): such a range moves by metres for a
+    /// tenth of a degree of attitude, so it is not linear over the attitude's uncertainty and
+    /// its information is not there to be had; and while approaching from a wrong attitude a
+    /// floor seen by one scan lies in that scan's plane, which would make the plane through it
+    /// the scan's own.
+    pub min_incidence: f64,
+    /// The covariance is inflated by the residuals' chi-square per degree of freedom when that
+    /// exceeds its expectation by more than this many of its standard deviations \[1\].
+    /// Default 3 (a right model is inflated 0.13% of the time).
+    pub inflation_z: f64,
+    /// An estimate tilted further than this from the robot's up is refused \[deg\]. Default
+    /// 60: the paper's robot never tilts beyond 45 degrees (sect. 5.2), and the chart of up
+    /// by `(theta_x, theta_y)` degenerates at 90 (a refinement that ran there left its basin).
+    pub max_tilt_deg: f64,
+    /// A floor or ceiling fitted closer than this to the scanner's height is refused \[m\].
+    /// Default 0.1. Seen by one scan, a floor or ceiling is a line in that scan's plane, and
+    /// an attitude that levels the scan's plane puts the line at the scanner's height, where
+    /// its rays graze it and fit any range: a false optimum (traced: a ceiling pose at 10 cm
+    /// noise refined to the upper scan's elevation with a sigma of 0.15 degrees).
+    pub min_level_clearance: f64,
+}
+
+impl Default for MlParams {
+    fn default() -> Self {
+        Self {
+            max_iterations: 50,
+            step_tolerance: 1e-10,
+            huber_k: 3.0,
+            min_surface_points: 3,
+            min_incidence: 0.02,
+            inflation_z: 3.0,
+            max_tilt_deg: 60.0,
+            min_level_clearance: 0.1,
+        }
+    }
+}
+
+/// A wall's line in the level frame: `(cos a, sin a) . (x, y) = offset`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct WallLine {
+    pub surface: Surface,
+    pub azimuth: f64,
+    pub offset: f64,
+}
+
+/// How one surface fits: its points (those used), their clipped chi-square and its degrees of
+/// freedom.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct SurfaceFit {
+    pub surface: Surface,
+    pub points: usize,
+    pub chi2: f64,
+    pub dof: f64,
+}
+
+/// The refined estimate.
+#[derive(Clone, Debug, PartialEq)]
+pub(crate) struct MlSolution {
+    /// `(theta_x, theta_y)` \[rad\].
+    pub attitude: [f64; 2],
+    /// Up in the robot frame (unit).
+    pub up: Vector3<f64>,
+    /// Covariance of `(theta_x, theta_y)` \[rad^2\] from the information matrix with every
+    /// placement marginalised, times `inflation`.
+    pub covariance: [[f64; 2]; 2],
+    /// 1 unless the chi-square test failed; then the chi-square per degree of freedom.
+    pub inflation: f64,
+    pub walls: Vec<WallLine>,
+    /// Heights of the floor and ceiling planes in the level frame (scanner at 0) \[m\].
+    pub floor: Option<f64>,
+    pub ceiling: Option<f64>,
+    /// Per input point: its normalised residual `(r - r^) / sigma` at the estimate, `None` for
+    /// a point left out (on a surface with too few points, or grazing its plane).
+    pub residuals: Vec<Option<f64>>,
+    /// Sum over used points of `min(rho^2, huber_k^2)` and its degrees of freedom (points less
+    /// parameters).
+    pub chi2: f64,
+    pub dof: f64,
+    /// The chi-square a right model gives on average and its standard deviation.
+    pub chi2_expected: f64,
+    pub chi2_spread: f64,
+    pub surfaces: Vec<SurfaceFit>,
+    pub iterations: usize,
+    pub converged: bool,
+}
+
+impl MlSolution {
+    /// The 1-sigma of `theta_x` and `theta_y` \[rad\].
+    pub fn sigmas(&self) -> [f64; 2] {
+        [self.covariance[0][0].sqrt(), self.covariance[1][1].sqrt()]
+    }
+}
+
+/// Why no estimate.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, thiserror::Error)]
+pub(crate) enum MlError {
+    #[error("fewer points than parameters")]
+    TooFewPoints,
+    #[error("the surfaces do not fix the attitude (parallel walls alone)")]
+    Unobservable,
+    #[error("a point has a non-finite or non-positive range or sigma")]
+    BadPoint,
+    #[error("the refinement left the tilts a robot can have (beyond max_tilt_deg)")]
+    Diverged,
+    #[error("the floor or ceiling came out at the scanner's height (a scan's own plane)")]
+    ScanPlane,
+}
