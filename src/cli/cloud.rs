@@ -8,7 +8,6 @@ use levelscan::formats::carmen::CarmenParams;
 use levelscan::formats::ply::{pose_cloud, write_ply};
 use levelscan::formats::read_any;
 use levelscan::scan::Scan;
-use std::io::Write;
 use std::path::{Path, PathBuf};
 
 #[derive(clap::Args, Debug)]
@@ -43,10 +42,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             elevations.join(" ")
         ),
     ];
-    let mut out = open_output(Some(&args.output))?;
+    let mut out = open_output(Some(&args.output), &[args.input.as_deref()])?;
     write_ply(&mut out, &points, &comments, args.ascii)
-        .and_then(|_| out.flush())
         .with_context(|| format!("{}: cannot write", args.output.display()))?;
+    out.finish()?;
     eprintln!(
         "levelscan cloud: sequence {sequence}: {} points from {} scans; wrote {}",
         points.len(),

@@ -101,7 +101,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     write(&dir.join("report.json"), &(json + "\n"))?;
     stages.inc(1);
     stages.finish_and_clear();
-    print_summary(&demo.data, &report_path);
+    print_summary(&demo.data, &report_path)?;
     Ok(())
 }
 
@@ -151,9 +151,14 @@ fn write_jsonl<'a>(path: &Path, scans: impl Iterator<Item = &'a Scan>) -> anyhow
         .with_context(|| format!("{}: cannot write", path.display()))
 }
 
-fn print_summary(data: &DemoData, report: &Path) {
+/// The run in a few lines on standard output (written with `open_output`: a full disk is an
+/// error naming `<stdout>`, not a panic).
+fn print_summary(data: &DemoData, report: &Path) -> anyhow::Result<()> {
+    use std::fmt::Write as _;
+    let mut text = String::new();
     let s = &data.settings;
-    println!(
+    let _ = writeln!(
+        text,
         "levelscan demo: {} poses through {}, {} scans each, {:.0} mm noise, seed {}",
         s.poses,
         s.plan,
@@ -161,8 +166,9 @@ fn print_summary(data: &DemoData, report: &Path) {
         s.noise_m * 1000.0,
         s.seed
     );
-    println!("  robot:    {}", s.robot);
-    println!(
+    let _ = writeln!(text, "  robot:    {}", s.robot);
+    let _ = writeln!(
+        text,
         "  level:    {} of {} poses leveled, mean attitude error {} deg",
         data.level.leveled,
         data.level.poses,
@@ -171,7 +177,8 @@ fn print_summary(data: &DemoData, report: &Path) {
             .map_or("-".into(), |e| format!("{e:.3}"))
     );
     for mode in ["pairwise", "metascan"] {
-        println!(
+        let _ = writeln!(
+            text,
             "  {mode:<9} ATE: raw {} m, leveled {} m, level floor {} m",
             fmt_m(data.ate_rmse("raw", mode)),
             fmt_m(data.ate_rmse("leveled", mode)),
@@ -190,6 +197,9 @@ fn print_summary(data: &DemoData, report: &Path) {
             )
         })
         .collect();
-    println!("  Table I mean error [deg]: {}", cells.join(", "));
-    println!("report: {}", report.display());
+    let _ = writeln!(text, "  Table I mean error [deg]: {}", cells.join(", "));
+    let _ = writeln!(text, "report: {}", report.display());
+    let mut out = super::open_output(None, &[])?;
+    std::io::Write::write_all(&mut out, text.as_bytes())?;
+    out.finish()
 }

@@ -1,6 +1,6 @@
 //! `levelscan eval accuracy PLAN...`: the paper's Table I and Fig. 6 (sect. 8.1).
 
-use super::LevelArgs;
+use super::{LevelArgs, open_output, write_file};
 use anyhow::Context;
 use levelscan::eval::accuracy::{AccuracyParams, CellStats, Efficiency, run_accuracy};
 use levelscan::formats::read_plan;
@@ -8,7 +8,8 @@ use levelscan::level::{Estimator, LevelParams};
 use levelscan::simulate::NoiseModel;
 use levelscan::viz::histogram::{Series, write_histogram};
 use std::fmt::Write as _;
-use std::path::PathBuf;
+use std::io::Write as _;
+use std::path::{Path, PathBuf};
 
 #[derive(clap::Args, Debug)]
 pub struct Args {
@@ -96,7 +97,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         ..AccuracyParams::default()
     };
     let stats = run_accuracy(&plans, &params)?;
-    print!("{}", markdown(&stats, &params));
+    let inputs: Vec<Option<&Path>> = args.plans.iter().map(|p| Some(p.as_path())).collect();
+    let mut out = open_output(None, &inputs)?;
+    out.write_all(markdown(&stats, &params).as_bytes())?;
+    out.finish()?;
     if let Some(dir) = &args.out {
         std::fs::create_dir_all(dir)
             .with_context(|| format!("{}: cannot create", dir.display()))?;
@@ -112,11 +116,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             "adaptive": args.adaptive,
             "cells": stats,
         });
-        std::fs::write(&path, serde_json::to_string_pretty(&json)?)
-            .with_context(|| format!("{}: cannot write", path.display()))?;
-        let poses_path = dir.join("poses.jsonl");
-        std::fs::write(&poses_path, pose_lines(&stats, &args.plans))
-            .with_context(|| format!("{}: cannot write", poses_path.display()))?;
+        write_file(&path, serde_json::to_string_pretty(&json)?.as_bytes())?;
+        write_file(
+            &dir.join("poses.jsonl"),
+            pose_lines(&stats, &args.plans).as_bytes(),
+        )?;
         write_fig6(dir, &stats, &params);
         eprintln!("wrote {}", path.display());
     }

@@ -2,7 +2,7 @@
 //! with perturbed odometry).
 
 use super::matching::MatchOptions;
-use super::open_input;
+use super::{open_input, open_output, write_file};
 use anyhow::Context;
 use levelscan::eval::matching::{ExperimentParams, matching_experiment};
 use levelscan::eval::real::{RealLog, RealResult, evaluate_real};
@@ -11,6 +11,7 @@ use levelscan::matching::{Mode, scan_points};
 use levelscan::simulate::{AdaptiveParams, ScannerParams, elevations_centred};
 use levelscan::viz::plots::{MapPanel, map_panels_png, map_panels_svg, run_map_panel};
 use std::fmt::Write as _;
+use std::io::Write as _;
 use std::path::PathBuf;
 
 #[derive(clap::Args, Debug)]
@@ -101,32 +102,59 @@ pub fn run_matching(args: MatchingArgs) -> anyhow::Result<()> {
             );
         }
         if let Some(dir) = &args.out {
-            for mode in [Mode::Pairwise, Mode::Metascan] {
-                let panels: Vec<MapPanel> = runs
-                    .iter()
-                    .filter(|r| r.mode == mode)
-                    .map(|r| run_map_panel(&plan, r, &truth))
-                    .collect();
-                let name = format!("{stem}_{}", mode_label(mode));
-                let size = (600 * panels.len() as u32, 520);
-                map_panels_png(&panels, &dir.join(format!("{name}.png")), size)
-                    .map_err(|e| anyhow::anyhow!("{name}.png: {e}"))?;
-                let svg = map_panels_svg(&panels, size)
-                    .map_err(|e| anyhow::anyhow!("{name}.svg: {e}"))?;
-                std::fs::write(dir.join(format!("{name}.svg")), svg)?;
-            }
+            write_maps(dir, &stem, &plan, &runs, &truth)?;
         }
         all.push(serde_json::json!({"plan": stem, "poses": truth.len(), "runs": runs}));
     }
-    print!("{table}");
-    if let Some(dir) = &args.out {
-        std::fs::write(dir.join("matching.md"), &table)?;
-        std::fs::write(
-            dir.join("matching.json"),
-            serde_json::to_string_pretty(&all)? + "\n",
-        )?;
+    write_stdout(&table, &args.plans)?;
+    match &args.out {
+        Some(dir) => write_tables(dir, "matching", &table, &all),
+        None => Ok(()),
+    }
+}
+
+/// The maps of one plan's runs, pairwise and metascan, as PNG and SVG in `dir`.
+fn write_maps(
+    dir: &std::path::Path,
+    stem: &str,
+    plan: &levelscan::plan::Plan,
+    runs: &[levelscan::eval::matching::RunResult],
+    truth: &[levelscan::geometry::Pose2],
+) -> anyhow::Result<()> {
+    for mode in [Mode::Pairwise, Mode::Metascan] {
+        let panels: Vec<MapPanel> = runs
+            .iter()
+            .filter(|r| r.mode == mode)
+            .map(|r| run_map_panel(plan, r, truth))
+            .collect();
+        let name = format!("{stem}_{}", mode_label(mode));
+        let size = (600 * panels.len() as u32, 520);
+        map_panels_png(&panels, &dir.join(format!("{name}.png")), size)
+            .map_err(|e| anyhow::anyhow!("{name}.png: {e}"))?;
+        let svg = map_panels_svg(&panels, size).map_err(|e| anyhow::anyhow!("{name}.svg: {e}"))?;
+        write_file(&dir.join(format!("{name}.svg")), svg.as_bytes())?;
     }
     Ok(())
+}
+
+/// `NAME.md` (the table) and `NAME.json` (`json`) in `dir`.
+fn write_tables(
+    dir: &std::path::Path,
+    name: &str,
+    table: &str,
+    json: &impl serde::Serialize,
+) -> anyhow::Result<()> {
+    write_file(&dir.join(format!("{name}.md")), table.as_bytes())?;
+    let json = serde_json::to_string_pretty(json)? + "\n";
+    write_file(&dir.join(format!("{name}.json")), json.as_bytes())
+}
+
+/// The table on standard output; `inputs` are the files the run read.
+fn write_stdout(table: &str, inputs: &[PathBuf]) -> anyhow::Result<()> {
+    let inputs: Vec<Option<&std::path::Path>> = inputs.iter().map(|p| Some(p.as_path())).collect();
+    let mut out = open_output(None, &inputs)?;
+    out.write_all(table.as_bytes())?;
+    out.finish()
 }
 
 fn mode_label(mode: Mode) -> &'static str {
@@ -197,15 +225,11 @@ pub fn run_real(args: RealArgs) -> anyhow::Result<()> {
         results.push(result);
     }
     let table = real_table(&results);
-    print!("{table}");
+    write_stdout(&table, &args.logs)?;
     if let Some(dir) = &args.out {
         std::fs::create_dir_all(dir)
             .with_context(|| format!("{}: cannot create", dir.display()))?;
-        std::fs::write(dir.join("real.md"), &table)?;
-        std::fs::write(
-            dir.join("real.json"),
-            serde_json::to_string_pretty(&results)? + "\n",
-        )?;
+        write_tables(dir, "real", &table, &results)?;
     }
     Ok(())
 }

@@ -52,11 +52,15 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .with_context(|| format!("{}: cannot write", path.display()))?;
     let deg = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{v:.3}"));
     let rmse = eval.attitude_rmse_deg;
-    println!(
+    use std::fmt::Write as _;
+    let mut table = String::new();
+    let _ = writeln!(
+        table,
         "| poses | leveled | roll RMSE [deg] | pitch RMSE [deg] | max [deg] | within 3 sigma | ATE [m] |"
     );
-    println!("|---|---|---|---|---|---|---|");
-    println!(
+    let _ = writeln!(table, "|---|---|---|---|---|---|---|");
+    let _ = writeln!(
+        table,
         "| {} | {} | {} | {} | {} | {} | {} |",
         eval.poses,
         eval.leveled,
@@ -67,6 +71,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             .map_or("-".into(), |w| format!("{:.1}%", 100.0 * w)),
         deg(eval.ate.map(|a| a.rmse)),
     );
+    let mut out = super::open_output(None, &[])?;
+    std::io::Write::write_all(&mut out, table.as_bytes())?;
+    out.finish()?;
     eprintln!(
         "levelscan eval run: wrote {} (attitude, trajectory_error, run.json)",
         dir.display()

@@ -38,10 +38,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if let Value::Object(m) = summary.into_json() {
         report.extend(m);
     }
-    let mut out = open_output(None)?;
-    serde_json::to_writer(&mut out, &report)?;
-    out.write_all(b"\n")?;
-    out.flush()?;
+    let mut out = open_output(None, &[args.scans.as_deref()])?;
+    out.write_all((Value::Object(report).to_string() + "\n").as_bytes())?;
+    out.finish()?;
     Ok(())
 }
 

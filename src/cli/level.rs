@@ -2,7 +2,6 @@
 //! order, as the contract's "Output of level" lays it out.
 
 use super::{LevelArgs, open_input, open_output};
-use anyhow::Context;
 use levelscan::formats::level_record::level_record;
 use levelscan::formats::{InputError, ParallelScanReader, write_scan};
 use levelscan::level::{BearingTrigCache, Estimator, LevelParams, level_pose_with};
@@ -71,7 +70,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     };
     let input = open_input(args.input.as_deref())?;
     let name = input.name.clone();
-    let mut out = open_output(args.output.as_ref())?;
+    let mut out = open_output(args.output.as_deref(), &[args.input.as_deref()])?;
     // Reading and grouping run on their own thread, a couple of batches ahead, so that the
     // serial part of reading overlaps with leveling (both use the rayon pool for the heavy work).
     let (tx, rx) = std::sync::mpsc::sync_channel::<(Vec<Vec<Scan>>, Option<InputError>)>(2);
@@ -120,10 +119,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             break;
         }
     }
-    let flushed = out.flush().context("cannot write output");
     // The reader ends on its own once the channel is dropped.
     drop(reader_thread);
-    result.and(flushed)
+    // A failed run leaves an `-o` file as it was (standard output keeps what was written).
+    result.and_then(|()| out.finish())
 }
 
 fn write_batch(
@@ -145,7 +144,7 @@ fn write_batch(
         })
         .collect();
     for l in lines {
-        out.write_all(&l).context("cannot write output")?;
+        out.write_all(&l)?;
     }
     Ok(())
 }

@@ -2,7 +2,6 @@
 //! the contract's `match` object to each record, streaming (one record in, one record out).
 
 use super::{open_input, open_output};
-use anyhow::Context;
 use clap::ValueEnum;
 use levelscan::formats::{CarmenParams, read_any, write_tum};
 use levelscan::geometry::Pose;
@@ -12,7 +11,6 @@ use levelscan::matching::{
 };
 use levelscan::scan::Scan;
 use serde_json::json;
-use std::io::Write;
 use std::path::PathBuf;
 
 #[derive(ValueEnum, Clone, Copy, Debug)]
@@ -240,9 +238,12 @@ pub struct Args {
 pub fn run(args: Args) -> anyhow::Result<()> {
     let params = args.options.params()?;
     let input = open_input(args.scans.as_deref())?;
-    let mut out = open_output(args.output.as_ref())?;
+    let mut out = open_output(args.output.as_deref(), &[args.scans.as_deref()])?;
     let mut tum = match &args.trajectory {
-        Some(p) => Some(open_output(Some(p))?),
+        Some(p) => Some(open_output(
+            Some(p),
+            &[args.scans.as_deref(), args.output.as_deref()],
+        )?),
         None => None,
     };
     let mut matcher = Matcher::new(params);
@@ -256,12 +257,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         levelscan::formats::write_scan(&mut out, &scan)?;
         if let Some(t) = tum.as_mut() {
             let time = scan.timestamp.map_or(index as f64, |t| t.seconds());
-            write_tum(t, time, &report.estimate).context("cannot write the trajectory")?;
+            write_tum(t, time, &report.estimate)?;
         }
     }
-    out.flush()?;
-    if let Some(mut t) = tum {
-        t.flush()?;
+    out.finish()?;
+    if let Some(t) = tum {
+        t.finish()?;
     }
     Ok(())
 }

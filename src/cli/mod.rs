@@ -10,6 +10,7 @@ mod info;
 mod level;
 mod map;
 mod matching;
+mod output;
 mod simulate;
 mod view;
 
@@ -19,8 +20,10 @@ use indicatif::{ProgressBar, ProgressStyle};
 use levelscan::level::LevelParams;
 use levelscan::simulate::OdometryParams;
 use std::fs::File;
-use std::io::{self, BufRead, BufReader, BufWriter, Read, Write};
-use std::path::{Path, PathBuf};
+use std::io::{self, BufRead, BufReader, Read};
+use std::path::Path;
+
+pub use output::{open_output, write_file};
 
 /// Planar laser localization on uneven floors: simulate tilted scans, level them, match them.
 #[derive(Parser, Debug)]
@@ -176,16 +179,6 @@ pub fn open_input(path: Option<&Path>) -> anyhow::Result<Input> {
         Box::new(buffered)
     };
     Ok(Input { name, reader })
-}
-
-/// Standard output, buffered; or a file when `path` is given and not `-`.
-pub fn open_output(path: Option<&PathBuf>) -> anyhow::Result<Box<dyn Write>> {
-    Ok(match path {
-        Some(p) if p.as_os_str() != "-" => Box::new(BufWriter::new(
-            File::create(p).with_context(|| format!("{}: cannot create", p.display()))?,
-        )),
-        _ => Box::new(BufWriter::with_capacity(1 << 16, io::stdout().lock())),
-    })
 }
 
 /// A progress bar on standard error; indicatif hides it when standard error is not a terminal.

@@ -3,14 +3,13 @@
 
 use super::{open_output, progress_bar};
 use anyhow::{Context, bail};
-use levelscan::formats::{InputError, parse_plan, write_scan};
+use levelscan::formats::{InputError, read_plan_from, write_scan};
 use levelscan::geometry::Pose;
 use levelscan::plan::Plan;
 use levelscan::simulate::{
     AdaptiveParams, NoiseModel, RandomPoseParams, ScannerParams, World, elevations_centred,
     odometry, random_poses, simulate_poses,
 };
-use std::io::{Read, Write};
 use std::path::PathBuf;
 
 /// Poses simulated in parallel between writes: bounds memory, and fixed so that the output
@@ -110,17 +109,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         Some(list) => list.iter().map(|e| e.to_radians()).collect(),
         None => elevations_centred(args.scans, args.step.to_radians()),
     };
-    if elevations.is_empty() {
-        bail!("--scans must be at least 1");
-    }
-    if elevations.iter().any(|e| !e.is_finite()) {
-        bail!("elevations must be finite numbers of degrees");
-    }
-    if let Some(h) = args.height
-        && !h.is_finite()
-    {
-        bail!("--height must be a finite number of metres");
-    }
+    check_limits(&args, &elevations)?;
 
     let (plan, name) = load_plan(args.plan.as_deref())?;
     let world = World::from_plan(&plan);
@@ -168,7 +157,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         max_retakes: args.max_retakes,
         ..AdaptiveParams::default()
     });
-    let mut out = open_output(args.output.as_ref())?;
+    let mut out = open_output(args.output.as_deref(), &[args.plan.as_deref()])?;
     let bar = progress_bar(poses.len() as u64, "simulate");
     for (c, chunk) in poses.chunks(CHUNK).enumerate() {
         let first = c * CHUNK;
@@ -187,8 +176,50 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
         bar.inc(chunk.len() as u64);
     }
-    out.flush()?;
+    out.finish()?;
     bar.finish_and_clear();
+    Ok(())
+}
+
+/// Most random poses per run: their poses and odometry are held in memory (run several seeds
+/// for more).
+const MAX_RANDOM_POSES: usize = 1_000_000;
+
+/// The elevations and sizes, checked; what the scan readers would refuse
+/// (`formats::limits`) is refused here, before simulating.
+fn check_limits(args: &Args, elevations: &[f64]) -> anyhow::Result<()> {
+    use levelscan::formats::limits::{MAX_ANGLE, MAX_POSITION, MAX_RAYS};
+    if elevations.is_empty() {
+        bail!("--scans must be at least 1");
+    }
+    if elevations.iter().any(|e| !e.is_finite()) {
+        bail!("elevations must be finite numbers of degrees");
+    }
+    if let Some(h) = args.height
+        && !h.is_finite()
+    {
+        bail!("--height must be a finite number of metres");
+    }
+    anyhow::ensure!(
+        args.rays <= MAX_RAYS,
+        "--rays {} is more than {MAX_RAYS}, the limit of rays per scan",
+        args.rays
+    );
+    anyhow::ensure!(
+        elevations.iter().all(|e| e.abs() <= MAX_ANGLE),
+        "elevations must lie within +-360 degrees"
+    );
+    let lengths = args.height.iter().chain(args.hinge_offset.iter().flatten());
+    anyhow::ensure!(
+        lengths.into_iter().all(|v| v.abs() <= MAX_POSITION),
+        "--height and --hinge-offset must lie within +-{MAX_POSITION:e} m"
+    );
+    if let Some(n) = args.random {
+        anyhow::ensure!(
+            n <= MAX_RANDOM_POSES,
+            "--random {n} is more than {MAX_RANDOM_POSES} poses per run; run several seeds"
+        );
+    }
     Ok(())
 }
 
@@ -213,15 +244,6 @@ fn scanner_params(args: &Args) -> anyhow::Result<ScannerParams> {
 
 /// Reads and validates the floor plan from a file, or standard input for `None` or `-`.
 fn load_plan(path: Option<&std::path::Path>) -> anyhow::Result<(Plan, String)> {
-    let mut input = super::open_input(path)?;
-    let mut text = String::new();
-    input.reader.read_to_string(&mut text).map_err(|e| {
-        let what = if e.kind() == std::io::ErrorKind::InvalidData {
-            "is not valid UTF-8 text".to_string()
-        } else {
-            format!("cannot read: {e}")
-        };
-        InputError::new(&input.name, "", what)
-    })?;
-    Ok((parse_plan(&text, &input.name)?, input.name))
+    let input = super::open_input(path)?;
+    Ok((read_plan_from(input.reader, &input.name)?, input.name))
 }

@@ -122,10 +122,16 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         eprintln!("levelscan view: {note}");
     }
     let page = viewer_page(&scene);
-    let mut out = open_output(Some(&args.output))?;
-    out.write_all(page.as_bytes())
-        .and_then(|_| out.flush())
-        .with_context(|| format!("{}: cannot write", args.output.display()))?;
+    // The inputs read (standard input, `None`, when no file was given).
+    let mut inputs: Vec<Option<&std::path::Path>> =
+        args.files.iter().map(|p| Some(p.as_path())).collect();
+    inputs.extend(args.plan.as_deref().map(Some));
+    if inputs.is_empty() {
+        inputs.push(None);
+    }
+    let mut out = open_output(Some(&args.output), &inputs)?;
+    out.write_all(page.as_bytes())?;
+    out.finish()?;
     if args.output.as_os_str() != "-" {
         eprintln!(
             "levelscan view: wrote {} ({} KB)",

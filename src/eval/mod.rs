@@ -8,4 +8,3 @@ pub mod metrics;
 pub mod real;
 pub mod run;
 pub mod true_segments;
-

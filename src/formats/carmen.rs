@@ -20,7 +20,7 @@
 //! for `ROBOTLASER1`; for `FLASER` the reader's [`CarmenParams::max_range`], else the log's
 //! `PARAM robot_front_laser_max`, else [`DEFAULT_FLASER_MAX_RANGE`].
 
-use super::InputError;
+use super::{InputError, limits};
 use crate::geometry::Pose;
 use crate::scan::{Scan, Timestamp};
 use std::f64::consts::PI;
@@ -53,22 +53,39 @@ pub fn flaser_bearings(n: usize) -> Vec<f64> {
 struct Fields<'a> {
     kind: &'a str,
     items: Vec<&'a str>,
+    /// Each item read as a number, once (`None`: not one).
+    values: Vec<Option<f64>>,
 }
 
 impl<'a> Fields<'a> {
+    fn new(kind: &'a str, items: Vec<&'a str>) -> Self {
+        let values = items.iter().map(|t| t.parse::<f64>().ok()).collect();
+        Fields {
+            kind,
+            items,
+            values,
+        }
+    }
+
     fn number(&self, i: usize, what: &str) -> Result<f64, String> {
-        let text = self.items.get(i).ok_or_else(|| {
-            format!(
-                "{}: the line ends before {what} (field {})",
+        self.number_with(i, || what.to_string())
+    }
+
+    /// [`Fields::number`] naming the field only when it is wrong.
+    fn number_with(&self, i: usize, what: impl Fn() -> String) -> Result<f64, String> {
+        match self.values.get(i) {
+            Some(Some(v)) if v.is_finite() => Ok(*v),
+            Some(_) => Err(format!(
+                "{}: {} (field {}) is not a number: `{}`",
                 self.kind,
-                i + 1
-            )
-        })?;
-        match text.parse::<f64>() {
-            Ok(v) if v.is_finite() => Ok(v),
-            _ => Err(format!(
-                "{}: {what} (field {}) is not a number: `{text}`",
+                what(),
+                i + 1,
+                self.items[i]
+            )),
+            None => Err(format!(
+                "{}: the line ends before {} (field {})",
                 self.kind,
+                what(),
                 i + 1
             )),
         }
@@ -84,6 +101,48 @@ impl<'a> Fields<'a> {
                 self.kind,
                 i + 1
             ))
+        }
+    }
+
+    /// The numbers `names` name, from field `at` on.
+    fn numbers(&self, at: usize, names: &[&str]) -> Result<Vec<f64>, String> {
+        (0..names.len())
+            .map(|k| self.number(at + k, names[k]))
+            .collect()
+    }
+
+    /// The count of rays at field `i`: at least one, at most [`limits::MAX_RAYS`].
+    fn rays(&self, i: usize, what: &str) -> Result<usize, String> {
+        let n = self.count(i, what)?;
+        limits::check_rays(what, n).map_err(|m| format!("{}: {m}", self.kind))?;
+        Ok(n)
+    }
+
+    /// How many numbers the line has, when they would disagree with `expected`, the count
+    /// its counts of readings give: a wrong count would take range values for the pose. Only
+    /// for lines shaped right (numbers, then nothing or `host logger_timestamp`); a line of
+    /// too few numbers and no host may be cut short instead, and the field it ends before is
+    /// the better message.
+    fn miscounted(&self, expected: usize) -> Option<usize> {
+        let k = self.values.iter().take_while(|v| v.is_some()).count();
+        let host = self.items.len() == k + 2 && self.values[k + 1].is_some();
+        let tail = &self.items[k..];
+        ((host && k != expected) || (tail.is_empty() && k > expected)).then_some(k)
+    }
+
+    /// After the last field (index `end`), only `host logger_timestamp` may follow.
+    fn check_end(&self, end: usize) -> Result<(), String> {
+        let values = &self.values[end.min(self.values.len())..];
+        match &self.items[end.min(self.items.len())..] {
+            [] => Ok(()),
+            [_, _] if values[0].is_none() && values[1].is_some_and(f64::is_finite) => Ok(()),
+            rest => Err(format!(
+                "{}: {} more field(s) after the timestamp (field {end}), from `{}`; the line \
+                 must end with the timestamp, or with `host logger_timestamp`",
+                self.kind,
+                rest.len(),
+                rest[0].chars().take(20).collect::<String>()
+            )),
         }
     }
 }
@@ -122,97 +181,126 @@ pub fn parse_carmen_line(line: &str, flaser_max_range: f64) -> Result<Option<Sca
             ));
         }
     };
-    let f = Fields {
-        kind,
-        items: items.collect(),
-    };
+    let f = Fields::new(kind, items.collect());
     let scan = if kind == "FLASER" {
-        let n = f.count(0, "the number of readings")?;
-        if n == 0 {
-            return Err("FLASER: the number of readings must be > 0".into());
-        }
-        let ranges = (0..n)
-            .map(|i| f.number(1 + i, &format!("reading {}", i + 1)))
-            .collect::<Result<Vec<_>, _>>()?;
-        let at = 1 + n;
-        let v = (0..7)
-            .map(|k| {
-                let what = [
-                    "x",
-                    "y",
-                    "theta",
-                    "odom_x",
-                    "odom_y",
-                    "odom_theta",
-                    "timestamp",
-                ][k];
-                f.number(at + k, what)
-            })
-            .collect::<Result<Vec<_>, _>>()?;
-        let theta = flaser_bearings(n);
-        let mut scan = Scan {
-            readings: vec![None; n],
-            valid: vec![false; n],
-            theta,
-            true_pose: Some(Pose::planar(v[0], v[1], v[2])),
-            odometry: Some(Pose::planar(v[3], v[4], v[5])),
-            timestamp: Some(Timestamp::from_seconds(v[6])),
-            ..Scan::default()
-        };
-        set_ranges(&mut scan, &ranges, flaser_max_range);
-        scan
+        flaser(&f, flaser_max_range)?
     } else {
-        let start = f.number(1, "start_angle")?;
-        let res = f.number(3, "angular_resolution")?;
-        let max_range = f.number(4, "maximum_range")?;
-        let n = f.count(7, "num_readings")?;
-        if n == 0 {
-            return Err("ROBOTLASER1: num_readings must be > 0".into());
-        }
-        let ranges = (0..n)
-            .map(|i| f.number(8 + i, &format!("reading {}", i + 1)))
-            .collect::<Result<Vec<_>, _>>()?;
-        let m = f.count(8 + n, "num_remissions")?;
-        let at = 9 + n + m;
-        let names = [
-            "laser_x",
-            "laser_y",
-            "laser_theta",
-            "robot_x",
-            "robot_y",
-            "robot_theta",
-            "tv",
-            "rv",
-            "forward_safety",
-            "side_safety",
-            "turn_axis",
-            "timestamp",
-        ];
-        let v = names
-            .iter()
-            .enumerate()
-            .map(|(k, what)| f.number(at + k, what))
-            .collect::<Result<Vec<_>, _>>()?;
-        // A max range of 0 means "not given" in some loggers: then only <= 0 is invalid.
-        let max_range = if max_range > 0.0 {
-            max_range
-        } else {
-            f64::INFINITY
-        };
-        let mut scan = Scan {
-            readings: vec![None; n],
-            valid: vec![false; n],
-            theta: (0..n).map(|i| start + res * i as f64).collect(),
-            odometry: Some(Pose::planar(v[0], v[1], v[2])),
-            timestamp: Some(Timestamp::from_seconds(v[11])),
-            ..Scan::default()
-        };
-        scan.extra
-            .insert("robot_pose".into(), serde_json::json!([v[3], v[4], v[5]]));
-        set_ranges(&mut scan, &ranges, max_range);
-        scan
+        robotlaser1(&f)?
     };
+    limits::check_scan(&scan).map_err(|m| format!("{kind}: {m}"))?;
     Ok(Some(scan))
+}
+
+/// `FLASER n r1 .. rn x y theta odom_x odom_y odom_theta timestamp [host logger_timestamp]`.
+fn flaser(f: &Fields, max_range: f64) -> Result<Scan, String> {
+    let n = f.rays(0, "the number of readings")?;
+    // The count, n readings, and 7 numbers.
+    if let Some(k) = f.miscounted(n + 8).filter(|&k| k >= 8) {
+        return Err(format!(
+            "FLASER: the count says {n} readings but the line has {} (before x y theta odom_x \
+             odom_y odom_theta timestamp [host logger_timestamp])",
+            k - 8
+        ));
+    }
+    let ranges = (0..n)
+        .map(|i| f.number_with(1 + i, || format!("reading {}", i + 1)))
+        .collect::<Result<Vec<_>, _>>()?;
+    let at = 1 + n;
+    let v = f.numbers(
+        at,
+        &[
+            "x",
+            "y",
+            "theta",
+            "odom_x",
+            "odom_y",
+            "odom_theta",
+            "timestamp",
+        ],
+    )?;
+    f.check_end(at + 7)?;
+    let mut scan = Scan {
+        readings: vec![None; n],
+        valid: vec![false; n],
+        theta: flaser_bearings(n),
+        true_pose: Some(Pose::planar(v[0], v[1], v[2])),
+        odometry: Some(Pose::planar(v[3], v[4], v[5])),
+        timestamp: Some(timestamp("FLASER", v[6])?),
+        ..Scan::default()
+    };
+    set_ranges(&mut scan, &ranges, max_range);
+    Ok(scan)
+}
+
+/// `ROBOTLASER1 laser_type start_angle fov angular_res max_range accuracy remission_mode n
+/// r1 .. rn m e1 .. em laser_x laser_y laser_theta robot_x robot_y robot_theta tv rv
+/// forward_safety side_safety turn_axis timestamp [host logger_timestamp]`.
+fn robotlaser1(f: &Fields) -> Result<Scan, String> {
+    let start = f.number(1, "start_angle")?;
+    let res = f.number(3, "angular_resolution")?;
+    let max_range = f.number(4, "maximum_range")?;
+    let n = f.rays(7, "num_readings")?;
+    // 8 fields to num_readings, n readings, num_remissions, m remissions, 12 numbers.
+    if let Ok(m) = f.count(8 + n, "num_remissions")
+        && let Some(k) = f.miscounted(n + m + 21)
+    {
+        return Err(format!(
+            "ROBOTLASER1: the counts say {n} readings and {m} remissions, so {} numbers are \
+             expected before the host name, but the line has {k}",
+            n + m + 21
+        ));
+    }
+    let last = start + res * (n - 1) as f64;
+    limits::check_angle("start_angle", start)
+        .and_then(|()| limits::check_angle("the last bearing (from angular_resolution)", last))
+        .map_err(|m| format!("ROBOTLASER1: {m}"))?;
+    let ranges = (0..n)
+        .map(|i| f.number_with(8 + i, || format!("reading {}", i + 1)))
+        .collect::<Result<Vec<_>, _>>()?;
+    let m = f.count(8 + n, "num_remissions")?;
+    let at = 9 + n + m;
+    let names = [
+        "laser_x",
+        "laser_y",
+        "laser_theta",
+        "robot_x",
+        "robot_y",
+        "robot_theta",
+        "tv",
+        "rv",
+        "forward_safety",
+        "side_safety",
+        "turn_axis",
+        "timestamp",
+    ];
+    let v = f.numbers(at, &names)?;
+    f.check_end(at + names.len())?;
+    // A max range of 0 means "not given" in some loggers: then only <= 0 is invalid.
+    let max_range = if max_range > 0.0 {
+        max_range
+    } else {
+        f64::INFINITY
+    };
+    let mut scan = Scan {
+        readings: vec![None; n],
+        valid: vec![false; n],
+        theta: (0..n).map(|i| start + res * i as f64).collect(),
+        odometry: Some(Pose::planar(v[0], v[1], v[2])),
+        timestamp: Some(timestamp("ROBOTLASER1", v[11])?),
+        ..Scan::default()
+    };
+    limits::check_pose("robot_pose", &Pose::planar(v[3], v[4], v[5]))
+        .map_err(|m| format!("ROBOTLASER1: {m}"))?;
+    scan.extra
+        .insert("robot_pose".into(), serde_json::json!([v[3], v[4], v[5]]));
+    set_ranges(&mut scan, &ranges, max_range);
+    Ok(scan)
+}
+
+/// A CARMEN time in seconds, within [`limits::MAX_SECONDS`].
+fn timestamp(kind: &str, t: f64) -> Result<Timestamp, String> {
+    limits::check_seconds("timestamp", t).map_err(|m| format!("{kind}: {m}"))?;
+    Ok(Timestamp::from_seconds(t))
 }
 
 /// Reads the scans of a CARMEN log, one line at a time. Yields `(line number, scan)`; stops
@@ -256,7 +344,7 @@ impl<R: BufRead> Iterator for CarmenReader<R> {
     fn next(&mut self) -> Option<Self::Item> {
         while !self.done {
             self.buf.clear();
-            match self.reader.read_line(&mut self.buf) {
+            match super::limits::read_line_capped(&mut self.reader, &mut self.buf) {
                 Ok(0) => self.done = true,
                 Ok(_) => {
                     self.line += 1;
@@ -379,6 +467,90 @@ mod tests {
         assert_eq!(e, "FLASER: the line ends before theta (field 7)");
         let e = parse_carmen_line("FLASER -2 1 2", 50.0).unwrap_err();
         assert!(e.contains("must be a whole number"), "{e}");
+    }
+
+    #[test]
+    fn a_flaser_count_that_disagrees_with_its_readings_names_both() {
+        // Three readings given, the count says 2 or 4: the pose would be read from ranges.
+        let e = parse_carmen_line("FLASER 2 1 2 3 0 0 0 0 0 0 1.5 host 1.5", 50.0).unwrap_err();
+        assert_eq!(
+            e,
+            "FLASER: the count says 2 readings but the line has 3 (before x y theta odom_x \
+             odom_y odom_theta timestamp [host logger_timestamp])"
+        );
+        let e = parse_carmen_line("FLASER 4 1 2 3 0 0 0 0 0 0 1.5 host 1.5", 50.0).unwrap_err();
+        assert!(
+            e.starts_with("FLASER: the count says 4 readings but the line has 3"),
+            "{e}"
+        );
+        // Without host and logger time, too; but a line of too few numbers may be cut short.
+        let e = parse_carmen_line("FLASER 3 1 2 0 0 0 0 0 0 1.5", 50.0).unwrap_err();
+        assert_eq!(e, "FLASER: the line ends before timestamp (field 11)");
+        let e = parse_carmen_line("FLASER 1 1 2 0 0 0 0 0 0 1.5", 50.0).unwrap_err();
+        assert!(
+            e.starts_with("FLASER: the count says 1 readings but the line has 2"),
+            "{e}"
+        );
+        assert!(parse_carmen_line("FLASER 2 1 2 0 0 0 0 0 0 1.5", 50.0).is_ok());
+    }
+
+    #[test]
+    fn trailing_tokens_say_what_is_expected() {
+        let e = parse_carmen_line("FLASER 2 1 2 0 0 0 0 0 0 1.5 host 1.5 extra", 50.0).unwrap_err();
+        assert_eq!(
+            e,
+            "FLASER: 3 more field(s) after the timestamp (field 10), from `host`; the line must \
+             end with the timestamp, or with `host logger_timestamp`"
+        );
+        let e = parse_carmen_line("FLASER 2 1 2 0 0 0 0 0 0 1.5 host", 50.0).unwrap_err();
+        assert!(
+            e.starts_with("FLASER: 1 more field(s) after the timestamp"),
+            "{e}"
+        );
+        let e = parse_carmen_line("FLASER 2 1 2 0 0 0 0 0 0 1.5 host later", 50.0).unwrap_err();
+        assert!(e.contains("from `host`"), "{e}");
+        let line = "ROBOTLASER1 0 -1.5 3.0 1.0 20 0.01 0 4 1 2 25 0 2 7 8 \
+                    1 2 0.1 0.9 2 0.1 0 0 0.5 0.3 0 100.5 host 100.5 x";
+        let e = parse_carmen_line(line, 50.0).unwrap_err();
+        assert!(
+            e.starts_with("ROBOTLASER1: 3 more field(s) after the timestamp"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn a_robotlaser1_count_that_disagrees_names_the_counts() {
+        // 4 readings announced, 5 given (and 2 remissions).
+        let line = "ROBOTLASER1 0 -1.5 3.0 1.0 20 0.01 0 4 1 2 25 0 9 2 7 8 \
+                    1 2 0.1 0.9 2 0.1 0 0 0.5 0.3 0 100.5 host 100.5";
+        let e = parse_carmen_line(line, 50.0).unwrap_err();
+        assert!(
+            e.starts_with("ROBOTLASER1: the counts say 4 readings and 9 remissions"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn absurd_sizes_and_values_are_refused() {
+        let e = parse_carmen_line("FLASER 1000000 1 2", 50.0).unwrap_err();
+        assert_eq!(
+            e,
+            "FLASER: the number of readings is 1000000, more than the limit of 100000 rays per \
+             scan"
+        );
+        let e = parse_carmen_line("FLASER 0 0 0 0 0 0 0 1.5", 50.0).unwrap_err();
+        assert_eq!(e, "FLASER: the number of readings must be > 0");
+        let e = parse_carmen_line("FLASER 1 1 0 0 0 0 0 0 1e300", 50.0).unwrap_err();
+        assert!(
+            e.starts_with("FLASER: timestamp is 1e300 s, beyond the limit"),
+            "{e}"
+        );
+        let e = parse_carmen_line("FLASER 1 1 3e7 0 0 0 0 0 1.5", 50.0).unwrap_err();
+        assert!(e.starts_with("FLASER: true_pose: x is 3e7 m"), "{e}");
+        let line = "ROBOTLASER1 0 -1.5 3.0 1e10 20 0.01 0 4 1 2 25 0 0 \
+                    1 2 0.1 0.9 2 0.1 0 0 0.5 0.3 0 100.5";
+        let e = parse_carmen_line(line, 50.0).unwrap_err();
+        assert!(e.starts_with("ROBOTLASER1: the last bearing"), "{e}");
     }
 
     #[test]

@@ -8,9 +8,11 @@
 //! - [`carmen`]: read CARMEN logs (`FLASER`, `ROBOTLASER1`).
 //! - [`tum`]: write (and read back) TUM trajectories.
 //! - [`read_any`]: scans from either JSON Lines or CARMEN, told apart by the first character.
+//! - [`limits`]: the caps on sizes and the ranges of values every reader enforces.
 
 pub mod carmen;
 pub mod level_record;
+pub mod limits;
 pub mod pgm_map;
 pub mod ply;
 pub mod scan_jsonl;
@@ -20,7 +22,7 @@ pub mod wall;
 pub use carmen::{CarmenParams, CarmenReader};
 pub use scan_jsonl::{ParallelScanReader, ScanReader, parse_scan_line, write_scan};
 pub use tum::write_tum;
-pub use wall::{parse_plan, read_plan, write_plan};
+pub use wall::{parse_plan, read_plan, read_plan_from, write_plan};
 
 use crate::scan::Scan;
 use std::fmt;

@@ -7,7 +7,7 @@
 //! kept, in order, in [`Scan::extra`], so CSM's own logs (`true_alpha`, `cov_alpha`, `cluster`,
 //! ...) pass through untouched.
 
-use super::{InputError, json_error_message};
+use super::{InputError, json_error_message, limits};
 use crate::geometry::Pose;
 use crate::scan::{Hit, Scan, Timestamp, even_bearings};
 use rayon::prelude::*;
@@ -69,7 +69,7 @@ impl<R: BufRead> Iterator for ScanReader<R> {
     fn next(&mut self) -> Option<Self::Item> {
         while !self.done {
             self.buf.clear();
-            match self.reader.read_line(&mut self.buf) {
+            match limits::read_line_capped(&mut self.reader, &mut self.buf) {
                 Ok(0) => self.done = true,
                 Ok(_) => {
                     self.line += 1;
@@ -93,7 +93,9 @@ impl<R: BufRead> Iterator for ScanReader<R> {
 }
 
 pub(crate) fn read_error(name: &str, line: usize, e: &io::Error) -> InputError {
-    let what = if e.kind() == io::ErrorKind::InvalidData {
+    let what = if limits::is_line_too_long(e) {
+        e.to_string()
+    } else if e.kind() == io::ErrorKind::InvalidData {
         "is not valid UTF-8 text".to_string()
     } else {
         format!("cannot read: {e}")
@@ -151,7 +153,7 @@ impl<R: BufRead> LineSource<R> {
             }
             let slot = &mut batch.lines[batch.used];
             slot.1.clear();
-            match self.reader.read_line(&mut slot.1) {
+            match limits::read_line_capped(&mut self.reader, &mut slot.1) {
                 Ok(0) => {
                     batch.last = true;
                     return;
@@ -290,9 +292,7 @@ impl RawScan {
             // Tolerate hand-written scans without `nrays`: the readings say how many rays.
             None => readings.len(),
         };
-        if nrays == 0 {
-            return Err("nrays must be > 0".to_string());
-        }
+        limits::check_rays("nrays", nrays)?;
         let check_len = |field: &str, len: usize| {
             if len == nrays {
                 Ok(())
@@ -301,6 +301,9 @@ impl RawScan {
             }
         };
         check_len("readings", readings.len())?;
+        for (field, v) in [("min_theta", self.min_theta), ("max_theta", self.max_theta)] {
+            v.map_or(Ok(()), |v| limits::check_angle(field, v))?;
+        }
         let theta = match (self.theta, self.min_theta, self.max_theta) {
             (Some(t), _, _) => {
                 check_len("theta", t.len())?;
@@ -324,7 +327,7 @@ impl RawScan {
         if let Some(n) = self.hit.as_ref().map(Vec::len).or(self.hit_len) {
             check_len("hit", n)?;
         }
-        Ok(Scan {
+        let scan = Scan {
             sequence: self.sequence,
             elevation: self.elevation,
             theta,
@@ -338,7 +341,9 @@ impl RawScan {
             hinge_offset: self.hinge_offset,
             hit: self.hit,
             extra: self.extra,
-        })
+        };
+        limits::check_scan(&scan)?;
+        Ok(scan)
     }
 }
 
@@ -618,6 +623,13 @@ fn each_element<'de, A: SeqAccess<'de>, T: Deserialize<'de>>(
     let mut i = 0;
     loop {
         match seq.next_element::<T>() {
+            // Bounds the memory of one line whatever its length.
+            Ok(Some(_)) if i == limits::MAX_RAYS => {
+                return Err(de::Error::custom(format!(
+                    "more than {} entries, the limit of rays per scan",
+                    limits::MAX_RAYS
+                )));
+            }
             Ok(Some(v)) => f(v),
             Ok(None) => return Ok(()),
             Err(e) => return Err(in_field(&format!("[{i}]"), e)),
@@ -781,13 +793,14 @@ impl<'de> Deserialize<'de> for Stamp {
                 }
             }
             fn visit_f64<E: de::Error>(self, v: f64) -> Result<Timestamp, E> {
+                limits::check_seconds("the time", v).map_err(E::custom)?;
                 Ok(Timestamp::from_seconds(v))
             }
             fn visit_u64<E: de::Error>(self, v: u64) -> Result<Timestamp, E> {
-                Ok(Timestamp::from_seconds(v as f64))
+                self.visit_f64(v as f64)
             }
             fn visit_i64<E: de::Error>(self, v: i64) -> Result<Timestamp, E> {
-                Ok(Timestamp::from_seconds(v as f64))
+                self.visit_f64(v as f64)
             }
         }
         d.deserialize_any(V).map(Stamp)
@@ -1239,11 +1252,31 @@ mod tests {
         ]
     }
 
+    /// Bearings and elevations: within one turn (`limits::MAX_ANGLE`).
+    fn arb_angle() -> impl Strategy<Value = f64> {
+        let max = limits::MAX_ANGLE;
+        prop_oneof![-max..=max, Just(0.0), Just(-0.0), Just(max), Just(-max)]
+    }
+
+    /// Positions: within `limits::MAX_POSITION`.
+    fn arb_position() -> impl Strategy<Value = f64> {
+        let max = limits::MAX_POSITION;
+        prop_oneof![-1e3f64..1e3, -max..=max, Just(0.0), Just(-0.0), Just(max)]
+    }
+
+    /// Noise sigmas: any finite number >= 0.
+    fn arb_sigma() -> impl Strategy<Value = f64> {
+        arb_f64().prop_map(f64::abs)
+    }
+
     fn arb_pose() -> impl Strategy<Value = Option<Pose>> {
+        let xyz = || (arb_position(), arb_position(), arb_position());
         prop_oneof![
             Just(None),
-            (arb_f64(), arb_f64(), arb_f64()).prop_map(|(x, y, t)| Some(Pose::planar(x, y, t))),
-            prop::array::uniform6(arb_f64()).prop_map(|a| Some(Pose::from_array(a))),
+            (arb_position(), arb_position(), arb_f64())
+                .prop_map(|(x, y, t)| Some(Pose::planar(x, y, t))),
+            (xyz(), (arb_f64(), arb_f64(), arb_f64()))
+                .prop_map(|((x, y, z), (rz, ry, rx))| Some(Pose::new(x, y, z, rz, ry, rx))),
         ]
     }
 
@@ -1252,16 +1285,16 @@ mod tests {
             (
                 (
                     prop::option::of(any::<u64>()),
-                    prop::option::of(arb_f64()),
-                    prop::collection::vec(arb_f64(), n),
+                    prop::option::of(arb_angle()),
+                    prop::collection::vec(arb_angle(), n),
                     prop::collection::vec(prop::option::of(arb_f64()), n),
                     prop::collection::vec(any::<bool>(), n),
                 ),
                 (arb_pose(), arb_pose(), arb_pose()),
                 (
                     prop::option::of((any::<i32>(), 0i64..1_000_000)),
-                    prop::option::of(prop::collection::vec(prop::option::of(arb_f64()), n)),
-                    prop::option::of(prop::array::uniform3(arb_f64())),
+                    prop::option::of(prop::collection::vec(prop::option::of(arb_sigma()), n)),
+                    prop::option::of(prop::array::uniform3(arb_position())),
                     prop::option::of(prop::collection::vec(0u64..4, n)),
                     prop::collection::vec(("[a-z_]{1,8}", any::<i32>()), 0..3),
                 ),

@@ -12,23 +12,50 @@ use crate::plan::Plan;
 use nalgebra::Point2;
 use serde_json::Value;
 use std::fmt::Write as _;
+use std::io::Read;
 use std::path::Path;
 
 /// The only version there is (the paper's).
 pub const WALL_VERSION: &str = "w0.1";
 
+/// Largest `.wall` file read \[bytes\]: 256 MiB. A plan of a million wall segments takes
+/// about 40 MB; a larger file is not a floor plan.
+pub const MAX_PLAN_BYTES: u64 = 256 << 20;
+
 /// Reads and validates a `.wall` file. The error's file is `path` as given.
 pub fn read_plan(path: &Path) -> Result<Plan, InputError> {
     let name = path.display().to_string();
-    let text = std::fs::read_to_string(path).map_err(|e| {
-        let what = if e.kind() == std::io::ErrorKind::InvalidData {
-            "is not valid UTF-8 text".to_string()
-        } else {
-            format!("cannot open: {e}")
-        };
-        InputError::new(&name, "", what)
-    })?;
-    parse_plan(&text, &name)
+    let file = std::fs::File::open(path)
+        .map_err(|e| InputError::new(&name, "", format!("cannot open: {e}")))?;
+    read_plan_from(file, &name)
+}
+
+/// Reads and validates a `.wall` plan from `reader` (at most [`MAX_PLAN_BYTES`]); `name` is
+/// used in error messages.
+pub fn read_plan_from(reader: impl Read, name: &str) -> Result<Plan, InputError> {
+    let mut text = String::new();
+    reader
+        .take(MAX_PLAN_BYTES + 1)
+        .read_to_string(&mut text)
+        .map_err(|e| {
+            let what = if e.kind() == std::io::ErrorKind::InvalidData {
+                "is not valid UTF-8 text".to_string()
+            } else {
+                format!("cannot read: {e}")
+            };
+            InputError::new(name, "", what)
+        })?;
+    if text.len() as u64 > MAX_PLAN_BYTES {
+        return Err(InputError::new(
+            name,
+            "",
+            format!(
+                "is larger than {} MiB, the limit for a floor plan",
+                MAX_PLAN_BYTES >> 20
+            ),
+        ));
+    }
+    parse_plan(&text, name)
 }
 
 /// Parses and validates the text of a `.wall` file; `name` is used in error messages.
@@ -54,7 +81,6 @@ pub fn parse_plan(text: &str, name: &str) -> Result<Plan, InputError> {
             ));
         }
     }
-
     let wall_height = match top.get("wallheight") {
         None => {
             return Err(err(
@@ -64,31 +90,41 @@ pub fn parse_plan(text: &str, name: &str) -> Result<Plan, InputError> {
         }
         Some(v) => number(v).ok_or_else(|| err("wallheight", expected("a number", v)))?,
     };
-    if !(wall_height > 0.0 && wall_height.is_finite()) {
-        return Err(err(
-            "wallheight",
-            format!("must be a positive number of metres, not {wall_height}"),
-        ));
-    }
-
     let walls_value = top
         .get("walls")
         .ok_or_else(|| err("walls", "missing: a list of polylines [[x, y], ...]".into()))?;
-    let walls_list = walls_value
+    let walls = walls(walls_value, name)?;
+    let poses = match top.get("poses") {
+        None | Some(Value::Null) => Vec::new(),
+        Some(v) => poses(v, name)?,
+    };
+    let ceiling = match top.get("ceiling") {
+        None | Some(Value::Null) => false,
+        Some(Value::Bool(b)) => *b,
+        Some(v) => return Err(err("ceiling", expected("true or false", v))),
+    };
+    let plan = Plan {
+        wall_height,
+        walls,
+        ceiling,
+        poses,
+    };
+    plan.validate()
+        .map_err(|e| InputError::new(name, e.path, e.message))?;
+    Ok(plan)
+}
+
+/// `walls`: polylines of `[x, y]` points (their sizes are checked by [`Plan::validate`]).
+fn walls(value: &Value, name: &str) -> Result<Vec<Vec<Point2<f64>>>, InputError> {
+    let list = value
         .as_array()
-        .ok_or_else(|| err("walls", expected("an array of polylines", walls_value)))?;
-    let mut walls = Vec::with_capacity(walls_list.len());
-    for (i, wall) in walls_list.iter().enumerate() {
+        .ok_or_else(|| InputError::new(name, "walls", expected("an array of polylines", value)))?;
+    let mut walls = Vec::with_capacity(list.len());
+    for (i, wall) in list.iter().enumerate() {
         let path = format!("walls[{i}]");
-        let points = wall
-            .as_array()
-            .ok_or_else(|| err(&path, expected("an array of [x, y] points", wall)))?;
-        if points.len() < 2 {
-            return Err(err(
-                &path,
-                format!("a wall needs at least 2 points, this has {}", points.len()),
-            ));
-        }
+        let points = wall.as_array().ok_or_else(|| {
+            InputError::new(name, &path, expected("an array of [x, y] points", wall))
+        })?;
         let mut polyline = Vec::with_capacity(points.len());
         for (j, p) in points.iter().enumerate() {
             let [x, y] = numbers::<2>(p, &format!("{path}[{j}]"), name, "an [x, y] point")?;
@@ -96,43 +132,32 @@ pub fn parse_plan(text: &str, name: &str) -> Result<Plan, InputError> {
         }
         walls.push(polyline);
     }
+    Ok(walls)
+}
 
-    let mut poses = Vec::new();
-    match top.get("poses") {
-        None | Some(Value::Null) => {}
-        Some(Value::Array(list)) => {
-            for (i, p) in list.iter().enumerate() {
-                let [x, y, z, rz, ry, rx] = numbers::<6>(
-                    p,
-                    &format!("poses[{i}]"),
-                    name,
-                    "a pose [x, y, z, rz, ry, rx] (metres, degrees)",
-                )?;
-                poses.push(Pose::new(
-                    x,
-                    y,
-                    z,
-                    rz.to_radians(),
-                    ry.to_radians(),
-                    rx.to_radians(),
-                ));
-            }
-        }
-        Some(v) => return Err(err("poses", expected("an array of poses", v))),
+/// `poses`: `[x, y, z, rz, ry, rx]` in metres and degrees, angles made radians.
+fn poses(value: &Value, name: &str) -> Result<Vec<Pose>, InputError> {
+    let list = value
+        .as_array()
+        .ok_or_else(|| InputError::new(name, "poses", expected("an array of poses", value)))?;
+    let mut poses = Vec::with_capacity(list.len());
+    for (i, p) in list.iter().enumerate() {
+        let [x, y, z, rz, ry, rx] = numbers::<6>(
+            p,
+            &format!("poses[{i}]"),
+            name,
+            "a pose [x, y, z, rz, ry, rx] (metres, degrees)",
+        )?;
+        poses.push(Pose::new(
+            x,
+            y,
+            z,
+            rz.to_radians(),
+            ry.to_radians(),
+            rx.to_radians(),
+        ));
     }
-
-    let ceiling = match top.get("ceiling") {
-        None | Some(Value::Null) => false,
-        Some(Value::Bool(b)) => *b,
-        Some(v) => return Err(err("ceiling", expected("true or false", v))),
-    };
-
-    Ok(Plan {
-        wall_height,
-        walls,
-        ceiling,
-        poses,
-    })
+    Ok(poses)
 }
 
 /// Writes a plan as `.wall` text (pose angles in degrees), one wall and one pose per line.

@@ -1,7 +1,7 @@
 //! The laser scan simulator (paper sect. 7.2.1): tilted 2D scans of a floor plan.
 //!
-//! - [`raycast`]: the scene ([`World`]) and its ray caster, with the hit conventions;
-//! - `grid`: the uniform grid that keeps ray casting fast on big plans;
+//! - [`raycast`]: the scene ([`World`]) and its ray caster, with the hit conventions (over
+//!   the plan's spatial index, `plan::grid`, which keeps ray casting fast on big plans);
 //! - [`scanner`]: the tilting scanner ([`ScannerParams`], [`simulate_pose`]);
 //! - [`random_poses`](mod@random_poses): poses in a plan's free space;
 //! - [`odometry`](mod@odometry): drifting planar dead reckoning.
@@ -10,7 +10,6 @@
 //! run's output depends on its seed only, never on the thread count.
 
 pub mod adaptive;
-mod grid;
 pub mod noise_model;
 pub mod odometry;
 pub mod random_poses;

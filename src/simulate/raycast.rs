@@ -7,23 +7,20 @@
 //! - The floor and the ceiling are unbounded planes, hit from either side.
 //! - When a wall and the floor or ceiling are met at the same range (the ray meets the corner
 //!   line), the wall wins.
-//! - A hit exactly at a segment's end counts; the ends are extended by a relative `END_SLACK`
+//! - A hit exactly at a segment's end counts; the ends are extended by a relative `END_SLACK` (`plan::segment`)
 //!   so a ray through the joint of two segments of a polyline cannot slip between them by
 //!   rounding.
 //! - A ray that runs exactly along a wall (seen edge-on) hits the wall's nearer end; a ray that
 //!   starts on a surface ignores that surface (ranges below `MIN_RANGE` do not count).
 //! - A hit farther than the maximum range is no hit.
 
-use super::grid::SegmentGrid;
-use super::random_poses::{closed_polylines, outline_is_closed};
-use crate::plan::{Plan, Segment};
+use crate::plan::Plan;
+use crate::plan::Segment;
+use crate::plan::grid::SegmentGrid;
+use crate::plan::outline::{Polylines, closed_polylines, outline_is_closed};
+use crate::plan::segment::{MIN_RANGE, ray_segment};
 use crate::scan::Hit;
 use nalgebra::{Point2, Point3, Vector2, Vector3};
-
-/// Relative extension of each segment at both ends (fraction of its length).
-pub(crate) const END_SLACK: f64 = 1e-9;
-/// Smallest range that counts as a hit \[m\]: a ray starting on a surface does not hit it.
-pub(crate) const MIN_RANGE: f64 = 1e-9;
 
 /// What a ray met first, and how far along it.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -38,8 +35,8 @@ pub struct RayHit {
 #[derive(Clone, Debug)]
 pub struct World {
     segments: Vec<Segment>,
-    /// Segments of the closed polylines only (first point == last point), for inside tests.
-    closed_segments: Vec<Segment>,
+    /// The closed polylines only (first point == last point), for inside tests.
+    closed: Polylines,
     /// True when the closed polylines outline the whole plan (every other wall lies within
     /// them): free space is then inside an odd number of them, else an even number.
     outline_closed: bool,
@@ -48,40 +45,11 @@ pub struct World {
     grid: SegmentGrid,
 }
 
-fn cross(a: &Vector2<f64>, b: &Vector2<f64>) -> f64 {
-    a.x * b.y - a.y * b.x
-}
-
-/// Range `t >= MIN_RANGE` at which the 2D ray `p + t·d` meets segment `s`, if it does.
-/// `d` is the horizontal part of a unit 3D direction, so `t` is the 3D range.
-pub(crate) fn ray_segment(p: &Point2<f64>, d: &Vector2<f64>, s: &Segment) -> Option<f64> {
-    let e = s.b - s.a;
-    let ap = s.a - p;
-    let denom = cross(d, &e);
-    if denom != 0.0 {
-        // p + t·d = a + u·e, solved with 2D cross products.
-        let t = cross(&ap, &e) / denom;
-        let u = cross(&ap, d) / denom;
-        (t >= MIN_RANGE && (-END_SLACK..=1.0 + END_SLACK).contains(&u)).then_some(t)
-    } else {
-        // Parallel: only a ray along the wall's own line meets it, at the nearer end (the
-        // wall seen edge-on). A ray starting on the wall itself passes along it unhindered.
-        let dd = d.norm_squared();
-        if dd == 0.0 || cross(&ap, d) != 0.0 {
-            return None;
-        }
-        let ta = ap.dot(d) / dd;
-        let tb = (s.b - p).dot(d) / dd;
-        let near = ta.min(tb);
-        (near >= MIN_RANGE).then_some(near)
-    }
-}
-
 impl World {
     /// Builds the scene of a plan (zero-length wall pieces are skipped).
     pub fn from_plan(plan: &Plan) -> World {
         let mut world = World::from_segments(plan.segments(), plan.wall_height, plan.ceiling);
-        world.closed_segments = closed_polylines(plan).into_iter().flatten().collect();
+        world.closed = Polylines::new(closed_polylines(plan));
         world.outline_closed = outline_is_closed(plan);
         world
     }
@@ -91,7 +59,7 @@ impl World {
         let grid = SegmentGrid::build(&segments);
         World {
             segments,
-            closed_segments: Vec::new(),
+            closed: Polylines::default(),
             outline_closed: false,
             wall_height,
             ceiling,
@@ -103,8 +71,21 @@ impl World {
         &self.segments
     }
 
+    /// The segments of the closed polylines.
     pub fn closed_segments(&self) -> &[Segment] {
-        &self.closed_segments
+        self.closed.segments()
+    }
+
+    /// Whether `p` is inside an odd number of the closed polylines (crossing parity).
+    pub(crate) fn inside_odd_closed(&self, p: &Point2<f64>) -> bool {
+        self.closed.odd_crossings(p)
+    }
+
+    /// Whether some wall comes closer to `p` than `clearance`, through the spatial index.
+    pub(crate) fn wall_within(&self, p: &Point2<f64>, clearance: f64) -> bool {
+        self.grid.any_near(p, clearance, |s| {
+            self.segments[s as usize].distance_to(p) < clearance
+        })
     }
 
     /// Whether the plan's closed polylines outline all of it (see [`super::is_free`]).
@@ -212,14 +193,8 @@ fn unit(v: &Vector3<f64>) -> Option<Vector3<f64>> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::plan::segment::seg;
     use proptest::prelude::*;
-
-    fn seg(ax: f64, ay: f64, bx: f64, by: f64) -> Segment {
-        Segment {
-            a: Point2::new(ax, ay),
-            b: Point2::new(bx, by),
-        }
-    }
 
     fn box_room(w: f64, h: f64, height: f64, ceiling: bool) -> World {
         World::from_plan(&crate::plan::box_plan(w, h, height, ceiling))

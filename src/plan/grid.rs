@@ -1,13 +1,13 @@
-//! A uniform 2D grid over wall segments, walked cell by cell along a ray (Amanatides & Woo
-//! 1987, "A fast voxel traversal algorithm for ray tracing").
+//! A uniform 2D grid over wall segments, the spatial index of a plan: walked cell by cell
+//! along a ray (Amanatides & Woo 1987, "A fast voxel traversal algorithm for ray tracing"),
+//! searched around a point, and along a row for the inside tests' crossings.
 //!
 //! Walls are vertical, so the xy-projection of a 3D ray decides which walls it can meet; the
 //! walk stops at the first cell whose exit lies beyond the best hit found so far. The cell
-//! count follows the segment count, so the cost per ray depends on how crowded the plan is
-//! near the ray, not on how many segments it has in all.
+//! count follows the segment count, so the cost of a query depends on how crowded the plan is
+//! near it, not on how many segments it has in all.
 
-use super::raycast::{END_SLACK, ray_segment};
-use crate::plan::Segment;
+use super::segment::{END_SLACK, Segment, bounds, crossing_x, end_points, ray_segment};
 use nalgebra::{Point2, Point3, Vector2, Vector3};
 
 /// Cells per segment: a few segments per cell keeps both the walk and the tests short.
@@ -24,11 +24,13 @@ pub(crate) struct SegmentGrid {
     /// Cell `c`'s segments are `items[starts[c]..starts[c + 1]]` (row-major, x fastest).
     starts: Vec<u32>,
     items: Vec<u32>,
+    /// Segments indexed.
+    count: usize,
 }
 
 impl SegmentGrid {
     pub(crate) fn build(segments: &[Segment]) -> SegmentGrid {
-        let Some((lo, hi)) = bounds(segments) else {
+        let Some((lo, hi)) = bounds(end_points(segments)) else {
             return SegmentGrid::default();
         };
         let extent = (hi.x - lo.x).max(hi.y - lo.y);
@@ -51,6 +53,7 @@ impl SegmentGrid {
             ny,
             starts: Vec::new(),
             items: Vec::new(),
+            count: segments.len(),
         };
         for s in segments {
             grid.for_each_cell(s, pad, |c| counts[c] += 1);
@@ -113,6 +116,81 @@ impl SegmentGrid {
         &self.items[self.starts[c] as usize..self.starts[c + 1] as usize]
     }
 
+    /// Whether `pred` holds for some segment listed near `p`. Every segment that comes within
+    /// `r` of `p` is offered (farther ones too, and some more than once), so `pred` checks
+    /// the distance itself. Searches the cells of the box `p ± r`: a segment within `r` has a
+    /// point in that box, and is listed in the cell of that point. When the box spans more
+    /// cells than there are segments, every segment is offered instead.
+    pub(crate) fn any_near(
+        &self,
+        p: &Point2<f64>,
+        r: f64,
+        mut pred: impl FnMut(u32) -> bool,
+    ) -> bool {
+        if self.items.is_empty() {
+            return false;
+        }
+        let (ix0, ix1) = (self.index_x(p.x - r), self.index_x(p.x + r));
+        let (iy0, iy1) = (self.index_y(p.y - r), self.index_y(p.y + r));
+        if (ix1 - ix0 + 1).saturating_mul(iy1 - iy0 + 1) > self.count {
+            return (0..self.count as u32).any(pred);
+        }
+        (iy0..=iy1).any(|iy| {
+            (ix0..=ix1).any(|ix| {
+                self.cell_segments(iy * self.nx + ix)
+                    .iter()
+                    .any(|&s| pred(s))
+            })
+        })
+    }
+
+    /// Calls `f` once with every segment that the ray from `p` towards +x crosses, by
+    /// [`crossing_x`]'s half-open rule (the inside tests' crossing parity). Walks `p`'s row of
+    /// cells from `p` on; a segment is listed in the cell of its crossing point, and is taken
+    /// there only, so none is counted twice.
+    pub(crate) fn for_each_crossing(
+        &self,
+        segments: &[Segment],
+        p: &Point2<f64>,
+        mut f: impl FnMut(u32),
+    ) {
+        if self.items.is_empty() {
+            return;
+        }
+        let iy = self.index_y(p.y);
+        for ix in self.index_x(p.x)..self.nx {
+            for &si in self.cell_segments(iy * self.nx + ix) {
+                if let Some(x) = crossing_x(&segments[si as usize], p)
+                    && self.index_x(x) == ix
+                {
+                    f(si);
+                }
+            }
+        }
+    }
+
+    /// The part `[t0, t1]` of the ray `p + t·d`, `t` in `[0, limit]`, inside the grid's box
+    /// (slab test); `None` when the ray misses the box.
+    fn clip(&self, p: &Point2<f64>, d: &Vector2<f64>, limit: f64) -> Option<(f64, f64)> {
+        let max = Point2::new(
+            self.min.x + self.nx as f64 * self.cell,
+            self.min.y + self.ny as f64 * self.cell,
+        );
+        let (mut t0, mut t1) = (0.0f64, limit);
+        for (o, dd, lo, hi) in [(p.x, d.x, self.min.x, max.x), (p.y, d.y, self.min.y, max.y)] {
+            if dd == 0.0 {
+                if o < lo || o > hi {
+                    return None;
+                }
+            } else {
+                let (ta, tb) = ((lo - o) / dd, (hi - o) / dd);
+                t0 = t0.max(ta.min(tb));
+                t1 = t1.min(ta.max(tb));
+            }
+        }
+        (t0 <= t1).then_some((t0, t1))
+    }
+
     /// The smallest range `t <= limit` at which the unit ray meets a segment at a height the
     /// wall covers (`z_ok(t)`), walking the cells along the ray in order.
     pub(crate) fn nearest(
@@ -128,29 +206,7 @@ impl SegmentGrid {
         }
         let p = Point2::new(origin.x, origin.y);
         let d2 = Vector2::new(d.x, d.y);
-        let max = Point2::new(
-            self.min.x + self.nx as f64 * self.cell,
-            self.min.y + self.ny as f64 * self.cell,
-        );
-        // Clip [0, limit] to the grid's box (slab test).
-        let (mut t0, mut t1) = (0.0f64, limit);
-        for (o, dd, lo, hi) in [
-            (p.x, d2.x, self.min.x, max.x),
-            (p.y, d2.y, self.min.y, max.y),
-        ] {
-            if dd == 0.0 {
-                if o < lo || o > hi {
-                    return None;
-                }
-            } else {
-                let (ta, tb) = ((lo - o) / dd, (hi - o) / dd);
-                t0 = t0.max(ta.min(tb));
-                t1 = t1.min(ta.max(tb));
-            }
-        }
-        if t0 > t1 {
-            return None;
-        }
+        let (t0, t1) = self.clip(&p, &d2, limit)?;
         let start = p + d2 * t0;
         let (mut ix, mut iy) = (self.index_x(start.x), self.index_y(start.y));
         // Exit ranges are computed from the cell index each step, not accumulated, so
@@ -208,25 +264,41 @@ fn step(i: usize, d: f64, n: usize) -> Option<usize> {
     }
 }
 
-fn bounds(segments: &[Segment]) -> Option<(Point2<f64>, Point2<f64>)> {
-    let mut pts = segments.iter().flat_map(|s| [s.a, s.b]);
-    let first = pts.next()?;
-    Some(pts.fold((first, first), |(lo, hi), p| {
-        (
-            Point2::new(lo.x.min(p.x), lo.y.min(p.y)),
-            Point2::new(hi.x.max(p.x), hi.y.max(p.y)),
-        )
-    }))
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::plan::segment::seg;
+    use proptest::prelude::*;
 
-    fn seg(ax: f64, ay: f64, bx: f64, by: f64) -> Segment {
-        Segment {
-            a: Point2::new(ax, ay),
-            b: Point2::new(bx, by),
+    proptest! {
+        /// Searches near a point and crossings along a row, against testing every segment.
+        #[test]
+        fn queries_match_brute_force(
+            ends in prop::collection::vec(((0i32..40, 0i32..40), (-6i32..7, -6i32..7)), 1..200),
+            probes in prop::collection::vec(((-8i32..168, -8i32..168), 0u32..5), 16),
+        ) {
+            let segments: Vec<Segment> = ends
+                .iter()
+                .map(|&((x, y), (dx, dy))| {
+                    let a = Point2::new(x as f64 / 2.0, y as f64 / 2.0);
+                    seg(a.x, a.y, a.x + dx as f64 / 2.0, a.y + dy as f64 / 2.0)
+                })
+                .collect();
+            let grid = SegmentGrid::build(&segments);
+            for ((x, y), k) in probes {
+                let p = Point2::new(x as f64 / 8.0, y as f64 / 8.0);
+                let r = [0.0, 1e-9, 0.3, 1.0, 4.0][k as usize];
+                let near = |s: u32| segments[s as usize].distance_to(&p) <= r;
+                let want = (0..segments.len() as u32).any(near);
+                prop_assert_eq!(grid.any_near(&p, r, near), want, "near {:?} r {}", p, r);
+                let mut fast = Vec::new();
+                grid.for_each_crossing(&segments, &p, |s| fast.push(s));
+                fast.sort_unstable();
+                let slow: Vec<u32> = (0..segments.len() as u32)
+                    .filter(|&s| crossing_x(&segments[s as usize], &p).is_some())
+                    .collect();
+                prop_assert_eq!(fast, slow, "crossings from {:?}", p);
+            }
         }
     }
 
