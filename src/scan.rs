@@ -54,8 +54,13 @@ impl Timestamp {
 pub struct Scan {
     /// The pose this scan was taken at; scans of one pose share it.
     pub sequence: Option<u64>,
-    /// Hinge elevation \[rad\]; positive tilts the beams down.
+    /// Hinge elevation \[rad\]; positive tilts the beams down. With a hinge that moves while
+    /// it scans, the scan's nominal (mid-scan) elevation.
     pub elevation: Option<f64>,
+    /// Per-ray hinge elevation \[rad\], same sign as `elevation`, for a hinge that moves while
+    /// it scans (a nodding laser: each ray is cast at the hinge angle of its own time). When
+    /// present, it is what places each ray in 3D ([`Scan::point_in_robot`]).
+    pub ray_elevation: Option<Vec<f64>>,
     /// Bearing of each ray \[rad\].
     pub theta: Vec<f64>,
     /// Range of each ray \[m\]; `None` where there was no return.
@@ -111,12 +116,21 @@ impl Scan {
             .unwrap_or_else(Vector3::zeros)
     }
 
-    /// Ray `i` as a robot-frame 3D point, taking the elevation (0 when absent) and the hinge
-    /// offset into account (paper sect. 5.1).
+    /// The hinge elevation ray `i` was cast at \[rad\]: its own `ray_elevation` when the scan
+    /// has one, else the scan's `elevation` (0 when absent).
+    pub fn elevation_of_ray(&self, i: usize) -> f64 {
+        match &self.ray_elevation {
+            Some(e) => e[i],
+            None => self.elevation.unwrap_or(0.0),
+        }
+    }
+
+    /// Ray `i` as a robot-frame 3D point, taking its elevation ([`Scan::elevation_of_ray`])
+    /// and the hinge offset into account (paper sect. 5.1).
     pub fn point_in_robot(&self, i: usize) -> Option<Point3<f64>> {
         let r = self.range(i)?;
         Some(reading_in_robot(
-            self.elevation.unwrap_or(0.0),
+            self.elevation_of_ray(i),
             self.theta[i],
             r,
             &self.hinge_offset_vector(),
@@ -218,6 +232,28 @@ mod tests {
         let p = s.point_in_robot(1).unwrap();
         assert!((p.coords.norm() - 2.0).abs() < 1e-12);
         assert_eq!(s.valid_count(), 1);
+    }
+
+    /// A per-ray elevation places each ray at its own hinge angle; without it, the scan's
+    /// elevation does.
+    #[test]
+    fn ray_elevation_places_each_ray() {
+        let mut s = Scan::with_even_bearings(2, 0.0, 0.0);
+        s.readings = vec![Some(2.0); 2];
+        s.valid = vec![true; 2];
+        s.elevation = Some(0.1);
+        let nominal = s.point_in_robot(1).unwrap();
+        assert!(
+            (nominal - Point3::new(2.0 * 0.1f64.cos(), 0.0, -2.0 * 0.1f64.sin())).norm() < 1e-12
+        );
+        s.ray_elevation = Some(vec![0.0, 0.3]);
+        let flat = s.point_in_robot(0).unwrap();
+        let tilted = s.point_in_robot(1).unwrap();
+        assert!((flat - Point3::new(2.0, 0.0, 0.0)).norm() < 1e-12);
+        assert!(
+            (tilted - Point3::new(2.0 * 0.3f64.cos(), 0.0, -2.0 * 0.3f64.sin())).norm() < 1e-12
+        );
+        assert_eq!(s.elevation_of_ray(1), 0.3);
     }
 
     #[test]

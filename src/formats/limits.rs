@@ -117,11 +117,14 @@ pub(crate) fn check_seconds(what: &str, t: f64) -> Result<(), String> {
 }
 
 /// The checks on a scan read from a file, after the lengths of its arrays: bearings,
-/// elevation, noise sigmas, poses, hinge offset and timestamp (see the checks above).
+/// elevation (the scan's and each ray's), noise sigmas, poses, hinge offset and timestamp (see the checks above).
 pub(crate) fn check_scan(scan: &Scan) -> Result<(), String> {
     check_bearings("theta", &scan.theta)?;
     if let Some(e) = scan.elevation {
         check_angle("elevation", e)?;
+    }
+    if let Some(e) = &scan.ray_elevation {
+        check_bearings("ray_elevation", e)?;
     }
     if let Some(s) = &scan.readings_sigma {
         check_sigmas("readings_sigma", s)?;

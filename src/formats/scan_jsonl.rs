@@ -265,6 +265,7 @@ struct RawScan {
     sequence: Option<u64>,
     nrays: Option<u64>,
     elevation: Option<f64>,
+    ray_elevation: Option<Vec<f64>>,
     theta: Option<Vec<f64>>,
     readings: Option<Vec<Option<f64>>>,
     valid: Option<Vec<bool>>,
@@ -324,12 +325,16 @@ impl RawScan {
         if let Some(s) = &self.readings_sigma {
             check_len("readings_sigma", s.len())?;
         }
+        if let Some(e) = &self.ray_elevation {
+            check_len("ray_elevation", e.len())?;
+        }
         if let Some(n) = self.hit.as_ref().map(Vec::len).or(self.hit_len) {
             check_len("hit", n)?;
         }
         let scan = Scan {
             sequence: self.sequence,
             elevation: self.elevation,
+            ray_elevation: self.ray_elevation,
             theta,
             readings,
             valid,
@@ -348,10 +353,11 @@ impl RawScan {
 }
 
 /// The fields this crate knows, in the order [`write_scan`] writes them.
-const KNOWN_FIELDS: [&str; 15] = [
+const KNOWN_FIELDS: [&str; 16] = [
     "sequence",
     "nrays",
     "elevation",
+    "ray_elevation",
     "theta",
     "readings",
     "valid",
@@ -455,6 +461,9 @@ impl<'de> Visitor<'de> for RawScanVisitor {
                 "sequence" => raw.sequence = map.next_value::<Opt<Count>>().map_err(wrap)?.get(),
                 "nrays" => raw.nrays = map.next_value::<Opt<Count>>().map_err(wrap)?.get(),
                 "elevation" => raw.elevation = map.next_value::<Opt<Num>>().map_err(wrap)?.get(),
+                "ray_elevation" => {
+                    raw.ray_elevation = map.next_value::<Opt<Array<Num>>>().map_err(wrap)?.get()
+                }
                 "min_theta" => raw.min_theta = map.next_value::<Opt<Num>>().map_err(wrap)?.get(),
                 "max_theta" => raw.max_theta = map.next_value::<Opt<Num>>().map_err(wrap)?.get(),
                 "theta" => raw.theta = map.next_value::<Opt<Array<Num>>>().map_err(wrap)?.get(),
@@ -834,7 +843,7 @@ impl<'de> Deserialize<'de> for Offset {
 // Writing.
 
 /// Writes one scan as one compact JSON line and a newline. Fields come in a stable order
-/// (`sequence`, `nrays`, `elevation`, `theta`, `readings`, `valid`, `min_theta`, `max_theta`,
+/// (`sequence`, `nrays`, `elevation`, `ray_elevation`, `theta`, `readings`, `valid`, `min_theta`, `max_theta`,
 /// `odometry`, `estimate`, `true_pose`, `timestamp`, `readings_sigma`, `hinge_offset`, `hit`,
 /// then the unknown fields in their order); absent optional fields are left out. Poses are
 /// written `[x, y, rz]` when planar, else all 6. Numbers round-trip exactly; a non-finite number
@@ -889,6 +898,9 @@ impl Serialize for ScanOut<'_> {
         m.serialize_entry("nrays", &scan.nrays())?;
         if let Some(v) = scan.elevation {
             m.serialize_entry("elevation", &v)?;
+        }
+        if let Some(v) = &scan.ray_elevation {
+            m.serialize_entry("ray_elevation", v)?;
         }
         m.serialize_entry("theta", &scan.theta)?;
         m.serialize_entry("readings", &scan.readings)?;
@@ -1008,6 +1020,54 @@ mod tests {
             s.valid,
             vec![true, true],
             "valid defaults to: reading is a number"
+        );
+    }
+
+    /// `ray_elevation` (a nodding hinge's per-ray elevation) is read, written back in the
+    /// same place and checked like the other per-ray fields.
+    #[test]
+    fn ray_elevation_round_trips_and_is_checked() {
+        let line = r#"{"nrays": 3, "elevation": 0.1, "theta": [-1, 0, 1], "readings": [1, 2, 3], "ray_elevation": [0.05, 0.1, 0.15]}"#;
+        let s = parse(line);
+        assert_eq!(s.ray_elevation, Some(vec![0.05, 0.1, 0.15]));
+        assert!(s.extra.is_empty(), "ray_elevation is a known field");
+        let mut out = Vec::new();
+        write_scan(&mut out, &s).unwrap();
+        let text = String::from_utf8(out).unwrap();
+        assert!(
+            text.starts_with(
+                r#"{"nrays":3,"elevation":0.1,"ray_elevation":[0.05,0.1,0.15],"theta""#
+            ),
+            "{text}"
+        );
+        assert_eq!(parse(&text), s);
+        let without = parse(r#"{"nrays": 1, "theta": [0], "readings": [1]}"#);
+        assert_eq!(without.ray_elevation, None);
+        let mut out = Vec::new();
+        write_scan(&mut out, &without).unwrap();
+        assert!(!String::from_utf8(out).unwrap().contains("ray_elevation"));
+
+        let base = r#""nrays": 2, "theta": [0, 1], "readings": [1, 2]"#;
+        let bad = |field: &str| err(&format!("{{{base}, \"ray_elevation\": {field}}}"));
+        assert_eq!(bad("[0.1]"), "ray_elevation has 1 entries but nrays is 2");
+        assert_eq!(
+            bad("[0.1, 0.2, 0.3]"),
+            "ray_elevation has 3 entries but nrays is 2"
+        );
+        let e = bad("[0.1, 7]");
+        assert!(e.starts_with("ray_elevation[1] is 7, not an angle"), "{e}");
+        let e = bad("[0.1, -1e300]");
+        assert!(
+            e.starts_with("ray_elevation[1] is -1e300, not an angle"),
+            "{e}"
+        );
+        let e = bad("[null, 0.2]");
+        assert!(e.starts_with("ray_elevation[0]"), "{e}");
+        let e = bad(r#"[0.1, "x"]"#);
+        assert!(e.starts_with("ray_elevation[1]"), "{e}");
+        assert_eq!(
+            parse(&format!("{{{base}, \"ray_elevation\": null}}")).ray_elevation,
+            None
         );
     }
 
@@ -1298,15 +1358,18 @@ mod tests {
                     prop::option::of(prop::collection::vec(0u64..4, n)),
                     prop::collection::vec(("[a-z_]{1,8}", any::<i32>()), 0..3),
                 ),
+                prop::option::of(prop::collection::vec(arb_angle(), n)),
             )
                 .prop_map(
                     |(
                         (sequence, elevation, theta, readings, valid),
                         (odometry, estimate, true_pose),
                         (stamp, sigma, hinge_offset, hit, extra),
+                        ray_elevation,
                     )| Scan {
                         sequence,
                         elevation,
+                        ray_elevation,
                         theta,
                         readings,
                         valid,
