@@ -28,13 +28,13 @@ pub struct Args {
     /// Random seed (same seed, same report numbers).
     #[arg(long, default_value_t = DemoParams::default().seed)]
     pub seed: u64,
-    /// Range noise of the simulated scanner \[m\].
+    /// Range noise of the simulated scanner (m).
     #[arg(long, default_value_t = DemoParams::default().noise)]
     pub noise: f64,
     /// Scans per pose, at elevations --step apart centred on level.
     #[arg(long, default_value_t = DemoParams::default().scans)]
     pub scans: usize,
-    /// Elevation step between scans \[deg\].
+    /// Elevation step between scans (deg).
     #[arg(long, default_value_t = DemoParams::default().step_deg)]
     pub step: f64,
     /// Random poses per cell of Table I (the paper's 100).

@@ -19,7 +19,7 @@ pub struct Args {
     /// Scan counts per pose.
     #[arg(long, value_delimiter = ',', default_value = "3,4,5")]
     pub scans: Vec<usize>,
-    /// Range noise \[m\]: Gaussian sigmas, or with `--noise-model uniform` the full widths of
+    /// Range noise (m): Gaussian sigmas, or with `--noise-model uniform` the full widths of
     /// uniform noise.
     #[arg(long, value_delimiter = ',', default_value = "0.01,0.05,0.10")]
     pub noise: Vec<f64>,
@@ -45,10 +45,10 @@ pub struct Args {
     /// Seed of the poses and the noise.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
-    /// Elevation step between scans \[deg\].
+    /// Elevation step between scans (deg).
     #[arg(long, default_value_t = 5.0)]
     pub step: f64,
-    /// Roll and pitch uniform in +-tilt \[deg\].
+    /// Roll and pitch uniform in +-tilt (deg).
     #[arg(long, default_value_t = 20.0)]
     pub tilt: f64,
     #[command(flatten)]

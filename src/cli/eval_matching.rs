@@ -25,13 +25,13 @@ pub struct MatchingArgs {
     /// Seed of the simulation.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
-    /// Range noise of the simulated scanner \[m\].
+    /// Range noise of the simulated scanner (m).
     #[arg(long, default_value_t = ScannerParams::default().noise_sigma)]
     pub noise: f64,
     /// Scans per pose of the tilted run, at elevations --step apart centred on level.
     #[arg(long, default_value_t = 3)]
     pub scans: usize,
-    /// Elevation step between the tilted run's scans \[deg\].
+    /// Elevation step between the tilted run's scans (deg).
     #[arg(long, default_value_t = 5.0)]
     pub step: f64,
     /// Take one set of scans per pose; by default cleverRobot takes the tilted run, retaking a

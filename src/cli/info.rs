@@ -14,7 +14,7 @@ pub struct Args {
     /// Scan file: JSON Lines or a CARMEN log, optionally gzipped; standard input when absent
     /// or `-`.
     pub scans: Option<PathBuf>,
-    /// CARMEN `FLASER` maximum range \[m\]; readings at or beyond it are no return. Default: the
+    /// CARMEN `FLASER` maximum range (m); readings at or beyond it are no return. Default: the
     /// log's `PARAM robot_front_laser_max`, else 50.
     #[arg(long)]
     pub max_range: Option<f64>,

@@ -19,7 +19,7 @@ pub struct Args {
     /// Write here instead of standard output.
     #[arg(short, long)]
     pub output: Option<PathBuf>,
-    /// Range noise sigma \[m\]; default: the scans' `readings_sigma`, else estimated from the data.
+    /// Range noise sigma (m); default: the scans' `readings_sigma`, else estimated from the data.
     #[arg(long)]
     pub sigma: Option<f64>,
     /// Up-vector estimator: the paper's cross products over quads, or robust least squares
@@ -29,12 +29,12 @@ pub struct Args {
     /// Quad height [scans].
     #[arg(long, default_value_t = LevelParams::default().quad_rows)]
     pub quad_rows: usize,
-    /// Quad width \[rays\].
+    /// Quad width (rays).
     #[arg(long, default_value_t = LevelParams::default().quad_cols)]
     pub quad_cols: usize,
     #[command(flatten)]
     pub leveling: LevelArgs,
-    /// Gaps of at most this many rays between wall points are filled \[rays\].
+    /// Gaps of at most this many rays between wall points are filled (rays).
     #[arg(long, default_value_t = PseudoLevelParams::default().max_gap)]
     pub max_gap: usize,
     /// Also write `wall_polygons` (the quads) and `wall_patches` (merged walls), each a list of

@@ -49,7 +49,7 @@ pub struct Args {
     /// The map's YAML file; the PGM image is written beside it under the same name (map.pgm).
     #[arg(short, long, default_value = "map.yaml")]
     pub output: PathBuf,
-    /// Cell size \[m\].
+    /// Cell size (m).
     #[arg(long, default_value_t = GridParams::default().resolution)]
     pub resolution: f64,
     /// The pose that places each scan.

@@ -61,7 +61,7 @@ pub struct MatchOptions {
     /// ICP iteration limit.
     #[arg(long, default_value_t = IcpParams::default().max_iterations)]
     pub max_iterations: usize,
-    /// Pairs farther apart are never associated \[m\].
+    /// Pairs farther apart are never associated (m).
     #[arg(long, default_value_t = IcpParams::default().max_correspondence_distance)]
     pub max_correspondence_distance: f64,
     /// Smallest fraction of pairs trimming keeps (1 = no trimming) [0-1].
@@ -70,32 +70,32 @@ pub struct MatchOptions {
     /// Robust kernel on the residuals.
     #[arg(long, value_enum, default_value = "huber")]
     pub kernel: KernelArg,
-    /// Robust kernel scale \[m\].
+    /// Robust kernel scale (m).
     #[arg(long, default_value_t = IcpParams::default().kernel_scale)]
     pub kernel_scale: f64,
-    /// Metascan voxel size \[m\].
+    /// Metascan voxel size (m).
     #[arg(long, default_value_t = MapParams::default().voxel_size)]
     pub voxel_size: f64,
-    /// Coarse search: half-width of the translation window \[m\].
+    /// Coarse search: half-width of the translation window (m).
     #[arg(long, default_value_t = CorrelativeParams::default().window_xy)]
     pub window_xy: f64,
-    /// Coarse search: half-width of the heading window \[deg\].
+    /// Coarse search: half-width of the heading window (deg).
     #[arg(long, default_value_t = CorrelativeParams::default().window_theta.to_degrees())]
     pub window_theta: f64,
     /// Fall back to odometry with fewer kept pairs than this.
     #[arg(long, default_value_t = CheckParams::default().min_correspondences)]
     pub min_correspondences: usize,
-    /// Fall back to odometry when the RMS residual is above this \[m\].
+    /// Fall back to odometry when the RMS residual is above this (m).
     #[arg(long, default_value_t = CheckParams::default().max_residual)]
     pub max_residual: f64,
     /// Fall back (degenerate, e.g. a corridor) when the pairs' normals pin one direction less
     /// than this, as λ_min/λ_max of their scatter.
     #[arg(long, default_value_t = CheckParams::default().min_constraint_ratio)]
     pub min_constraint_ratio: f64,
-    /// Ignore readings shorter than this \[m\].
+    /// Ignore readings shorter than this (m).
     #[arg(long, default_value_t = RangeParams::default().min_range)]
     pub min_range: f64,
-    /// Ignore readings at or beyond this (CARMEN's "no return") \[m\].
+    /// Ignore readings at or beyond this (CARMEN's "no return") (m).
     #[arg(long, default_value_t = RangeParams::default().max_range)]
     pub max_range: f64,
     /// Pairwise: match each scan one way only (the default also matches the previous scan
@@ -109,16 +109,16 @@ pub struct MatchOptions {
     /// Odometry prior: translation sigma per metre of the step (x and y each).
     #[arg(long, default_value_t = OdometryPrior::default().trans_per_m)]
     pub prior_trans: f64,
-    /// Odometry prior: translation sigma added to every step \[m\].
+    /// Odometry prior: translation sigma added to every step (m).
     #[arg(long, default_value_t = OdometryPrior::default().trans_const)]
     pub prior_trans_min: f64,
     /// Odometry prior: heading sigma per radian of the step.
     #[arg(long, default_value_t = OdometryPrior::default().rot_per_rad)]
     pub prior_rot: f64,
-    /// Odometry prior: heading sigma added to every step \[deg\].
+    /// Odometry prior: heading sigma added to every step (deg).
     #[arg(long, default_value_t = OdometryPrior::default().rot_const.to_degrees())]
     pub prior_rot_min: f64,
-    /// Odometry prior: sigma of one ICP residual, the scale between scans and odometry \[m\].
+    /// Odometry prior: sigma of one ICP residual, the scale between scans and odometry (m).
     #[arg(long, default_value_t = OdometryPrior::default().residual_sigma)]
     pub prior_residual_sigma: f64,
 }

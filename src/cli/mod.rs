@@ -77,13 +77,13 @@ pub struct OdometryNoiseArgs {
     /// Odometry noise: translation sigma per step, fraction of the step's length (x and y each).
     #[arg(long, default_value_t = OdometryParams::default().trans_per_m)]
     pub odo_trans: f64,
-    /// Odometry noise: translation sigma added to every step \[m\].
+    /// Odometry noise: translation sigma added to every step (m).
     #[arg(long, default_value_t = OdometryParams::default().trans_const)]
     pub odo_trans_min: f64,
     /// Odometry noise: heading sigma per step, fraction of the step's rotation.
     #[arg(long, default_value_t = OdometryParams::default().rot_per_rad)]
     pub odo_rot: f64,
-    /// Odometry noise: heading sigma added to every step \[deg\].
+    /// Odometry noise: heading sigma added to every step (deg).
     #[arg(long, default_value_t = OdometryParams::default().rot_const.to_degrees())]
     pub odo_rot_min: f64,
 }
@@ -108,7 +108,7 @@ impl OdometryNoiseArgs {
 /// The leveling flags that `level` and `eval accuracy` share (`level::LevelParams`).
 #[derive(clap::Args, Debug, Clone)]
 pub struct LevelArgs {
-    /// A pose whose attitude sigma exceeds this fails as parallel_walls \[deg\].
+    /// A pose whose attitude sigma exceeds this fails as parallel_walls (deg).
     #[arg(long, default_value_t = LevelParams::default().max_sigma_deg)]
     pub max_sigma: f64,
     /// Use walls alone, as the paper does: do not take the floor and ceiling seen as level.

@@ -25,13 +25,13 @@ pub struct Args {
     /// Rays per scan, spread evenly over the field of view.
     #[arg(long, default_value_t = 181)]
     pub rays: usize,
-    /// Field of view centred on the robot's forward axis \[deg\].
+    /// Field of view centred on the robot's forward axis (deg).
     #[arg(long, default_value_t = 180.0)]
     pub fov: f64,
-    /// Longest range that returns \[m\]; rays that meet nothing within it are invalid.
+    /// Longest range that returns (m); rays that meet nothing within it are invalid.
     #[arg(long, default_value_t = 30.0)]
     pub max_range: f64,
-    /// Range noise \[m\]: the Gaussian's standard deviation, or with `--noise-model uniform`
+    /// Range noise (m): the Gaussian's standard deviation, or with `--noise-model uniform`
     /// the full width of uniform noise.
     #[arg(long, default_value_t = 0.01)]
     pub noise: f64,
@@ -46,7 +46,7 @@ pub struct Args {
     /// Scans per pose, at elevations --step apart centred on level.
     #[arg(long, default_value_t = 3)]
     pub scans: usize,
-    /// Elevation step between scans \[deg\]; positive elevations tilt the beams down.
+    /// Elevation step between scans (deg); positive elevations tilt the beams down.
     #[arg(long, default_value_t = 5.0)]
     pub step: f64,
     /// Explicit elevations instead of --scans/--step [deg, comma separated], e.g. -5,0,5.
@@ -56,20 +56,20 @@ pub struct Args {
     /// Simulate N random poses in the plan's free space instead of the plan's poses.
     #[arg(long, value_name = "N")]
     pub random: Option<usize>,
-    /// Random poses: roll and pitch uniform in +-TILT \[deg\].
+    /// Random poses: roll and pitch uniform in +-TILT (deg).
     #[arg(long, default_value_t = 20.0)]
     pub tilt: f64,
-    /// Random poses: smallest distance to every wall \[m\].
+    /// Random poses: smallest distance to every wall (m).
     #[arg(long, default_value_t = 0.5)]
     pub clearance: f64,
-    /// Scanner height above the floor, the pose's z \[m\] [default: 0.45 for random poses; plan
+    /// Scanner height above the floor, the pose's z (m) [default: 0.45 for random poses; plan
     /// poses keep their own z unless this is given].
     #[arg(long)]
     pub height: Option<f64>,
     /// Level floor: set every pose's roll and pitch to 0 (reference runs without tilt).
     #[arg(long)]
     pub flat: bool,
-    /// Hinge offset x,y,z \[m\]: the scanner's origin seen from the hinge axis, in the scanner's
+    /// Hinge offset x,y,z (m): the scanner's origin seen from the hinge axis, in the scanner's
     /// tilted frame (written to each scan's `hinge_offset`) [default: none].
     #[arg(
         long,

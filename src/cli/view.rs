@@ -30,7 +30,7 @@ pub struct Args {
     /// Most pose cones drawn; longer runs keep one pose in k (the robot path joins them all).
     #[arg(long, default_value_t = ViewParams::default().max_cones)]
     pub max_cones: usize,
-    /// Scanner height \[m\] for `level` output whose raw scans are not loaded alongside.
+    /// Scanner height (m) for `level` output whose raw scans are not loaded alongside.
     #[arg(long, default_value_t = ViewParams::default().default_height)]
     pub height: f64,
     /// Page title.
