@@ -95,13 +95,19 @@ pub fn pseudo_level_scan(scans: &[Scan], est: &LevelEstimate, params: &PseudoLev
     for (i, &kept) in keep.iter().enumerate() {
         let (sp, cp) = trig.map_or_else(|| base.theta[i].sin_cos(), |t| t[i]);
         let ray = Vector3::new(cp, sp, 0.0);
+        // A hinge that moved while it scanned: this ray's own elevation (`Scan::ray_elevation`).
+        let own = base.ray_elevation.as_ref().map(|e| rot_y(e[i]));
+        let robot_from_ray = own.as_ref().unwrap_or(&robot_from_scanner);
         let point = base
             .range(i)
-            .map(|r| level_from_robot * (robot_from_scanner * (offset + r * ray)));
+            .map(|r| level_from_robot * (robot_from_ray * (offset + r * ray)));
         let bearing = match &point {
             Some(p) if p.x != 0.0 || p.y != 0.0 => p.y.atan2(p.x),
             _ => {
-                let dir = level_from_scanner * ray;
+                let dir = match &own {
+                    Some(rot) => level_from_robot * (rot * ray),
+                    None => level_from_scanner * ray,
+                };
                 dir.y.atan2(dir.x)
             }
         };

@@ -142,12 +142,14 @@ pub fn pose_rays(
         let offset = scan
             .hinge_offset
             .map_or_else(Vector3::zeros, |o| Vector3::new(o[0], o[1], o[2]));
-        let origin = beam_origin(elevation, &offset);
-        let origin_world = world_from_robot * origin;
         for (i, &bearing) in scan.theta.iter().enumerate() {
             let Some(measured) = scan.range(i) else {
                 continue;
             };
+            // Each ray at its own hinge elevation when the hinge moved while it scanned.
+            let elevation = scan.ray_elevation.as_ref().map_or(elevation, |e| e[i]);
+            let origin = beam_origin(elevation, &offset);
+            let origin_world = world_from_robot * origin;
             let dir = beam_direction(elevation, bearing);
             let dir_world = world_from_robot * dir;
             let Some(hit) = world.cast(&origin_world, &dir_world, max_range) else {

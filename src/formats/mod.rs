@@ -10,6 +10,7 @@
 //! - [`read_any`]: scans from either JSON Lines or CARMEN, told apart by the first character.
 //! - [`limits`]: the caps on sizes and the ranges of values every reader enforces.
 
+pub mod bag;
 pub mod carmen;
 pub mod level_record;
 pub mod limits;

@@ -74,6 +74,41 @@ pub enum GridError {
     InconsistentScans,
 }
 
+/// Appends scan `s`'s rays as one row of points. Same geometry as `Scan::point_in_robot`
+/// (contract: `Ry(e) (o + r (cos phi, sin phi, 0))`): at the scan's elevation `e`, with the
+/// rotation built once per scan rather than once per ray; or, for a hinge that moved while it
+/// scanned, each ray at its own `ray_elevation` (the row's `e` stays the nominal one).
+fn push_row(
+    points: &mut Vec<Option<GridPoint>>,
+    s: &Scan,
+    e: f64,
+    trig: &[(f64, f64)],
+    cols: usize,
+) {
+    let offset = s.hinge_offset_vector();
+    let rays = trig.iter().zip(s.ranges()).take(cols);
+    let Some(per_ray) = &s.ray_elevation else {
+        let robot_from_scanner = rot_y(e);
+        let origin = beam_origin(e, &offset);
+        points.extend(rays.map(|(&(sp, cp), r)| {
+            r.map(|range| {
+                let dir = robot_from_scanner * Vector3::new(cp, sp, 0.0);
+                let p = origin + dir * range;
+                GridPoint { p, dir, range }
+            })
+        }));
+        return;
+    };
+    points.extend(rays.zip(per_ray).map(|((&(sp, cp), r), &e)| {
+        r.map(|range| {
+            let robot_from_scanner = rot_y(e);
+            let dir = robot_from_scanner * Vector3::new(cp, sp, 0.0);
+            let p = beam_origin(e, &offset) + dir * range;
+            GridPoint { p, dir, range }
+        })
+    }));
+}
+
 impl PoseGrid {
     /// Builds the grid. Scans without an elevation are skipped (the reader rejects them for
     /// `level`); of several scans at the same elevation only the first is used, since two rows in
@@ -114,24 +149,7 @@ impl PoseGrid {
                 trig = s.theta.iter().map(|t| t.sin_cos()).collect();
                 trig_of = Some(&s.theta[..]);
             }
-            let trig = shared_trig.unwrap_or(&trig);
-            // Same geometry as `Scan::point_in_robot` (contract: `Ry(e) (o + r (cos phi, sin
-            // phi, 0))`), with the rotation built once per scan rather than once per ray.
-            let robot_from_scanner = rot_y(e);
-            let offset = s.hinge_offset_vector();
-            let origin = beam_origin(e, &offset);
-            points.extend(
-                trig.iter()
-                    .zip(s.ranges())
-                    .take(cols)
-                    .map(|(&(sp, cp), r)| {
-                        r.map(|range| {
-                            let dir = robot_from_scanner * Vector3::new(cp, sp, 0.0);
-                            let p = origin + dir * range;
-                            GridPoint { p, dir, range }
-                        })
-                    }),
-            );
+            push_row(&mut points, s, e, shared_trig.unwrap_or(&trig), cols);
         }
         Ok(PoseGrid {
             scan_index: order.iter().map(|o| o.0).collect(),
