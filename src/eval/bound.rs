@@ -136,9 +136,9 @@ pub fn pose_rays(
     let world_from_robot = truth.world_from_robot();
     let mut rays = Vec::new();
     for (k, scan) in scans.iter().enumerate() {
-        let Some(elevation) = scan.elevation else {
+        if scan.elevation.is_none() {
             continue;
-        };
+        }
         let offset = scan
             .hinge_offset
             .map_or_else(Vector3::zeros, |o| Vector3::new(o[0], o[1], o[2]));
@@ -147,7 +147,7 @@ pub fn pose_rays(
                 continue;
             };
             // Each ray at its own hinge elevation when the hinge moved while it scanned.
-            let elevation = scan.ray_elevation.as_ref().map_or(elevation, |e| e[i]);
+            let elevation = scan.elevation_of_ray(i);
             let origin = beam_origin(elevation, &offset);
             let origin_world = world_from_robot * origin;
             let dir = beam_direction(elevation, bearing);

@@ -86,25 +86,20 @@ fn push_row(
     cols: usize,
 ) {
     let offset = s.hinge_offset_vector();
-    let rays = trig.iter().zip(s.ranges()).take(cols);
-    let Some(per_ray) = &s.ray_elevation else {
-        let robot_from_scanner = rot_y(e);
-        let origin = beam_origin(e, &offset);
-        points.extend(rays.map(|(&(sp, cp), r)| {
-            r.map(|range| {
-                let dir = robot_from_scanner * Vector3::new(cp, sp, 0.0);
-                let p = origin + dir * range;
-                GridPoint { p, dir, range }
-            })
-        }));
-        return;
-    };
-    points.extend(rays.zip(per_ray).map(|((&(sp, cp), r), &e)| {
+    let fixed = (rot_y(e), beam_origin(e, &offset));
+    let rays = trig.iter().zip(s.ranges()).take(cols).enumerate();
+    points.extend(rays.map(|(i, (&(sp, cp), r))| {
         r.map(|range| {
-            let robot_from_scanner = rot_y(e);
+            let (robot_from_scanner, origin) = match &s.ray_elevation {
+                Some(per_ray) => (rot_y(per_ray[i]), beam_origin(per_ray[i], &offset)),
+                None => fixed,
+            };
             let dir = robot_from_scanner * Vector3::new(cp, sp, 0.0);
-            let p = beam_origin(e, &offset) + dir * range;
-            GridPoint { p, dir, range }
+            GridPoint {
+                p: origin + dir * range,
+                dir,
+                range,
+            }
         })
     }));
 }
