@@ -180,6 +180,8 @@ fn convert(
                     (a.min(v), b.max(v))
                 });
             if max - min > STILL_HINGE {
+                // The scan's own elevation is its nominal, mid-scan one (Scan::elevation).
+                scan.elevation = series.at(t + 0.5 * (n - 1) as f64 * dt, f64::INFINITY);
                 scan.ray_elevation = Some(per_ray);
             }
         }
