@@ -1,6 +1,7 @@
 //! `levelscan level [SCANS]`: one pseudo-level scan per pose (paper sect. 5 and 6), in input
 //! order, as the contract's "Output of level" lays it out.
 
+use super::summary::{Kind, Outcome, Tally};
 use super::{LevelArgs, open_input, open_output};
 use levelscan::formats::level_record::level_record;
 use levelscan::formats::{InputError, ParallelScanReader, write_scan};
@@ -70,6 +71,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     };
     let input = open_input(args.input.as_deref())?;
     let name = input.name.clone();
+    let input_name = name.clone();
+    let mut tally = Tally::new(Kind::Level);
     let mut out = open_output(args.output.as_deref(), &[args.input.as_deref()])?;
     // Reading and grouping run on their own thread, a couple of batches ahead, so that the
     // serial part of reading overlaps with leveling (both use the rayon pool for the heavy work).
@@ -110,7 +113,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     });
     let mut result = Ok(());
     for (batch, failure) in rx {
-        if let Err(e) = write_batch(&mut out, &batch, &params, &pseudo, args.polygons) {
+        if let Err(e) = write_batch(
+            &mut out,
+            &batch,
+            &params,
+            &pseudo,
+            args.polygons,
+            &mut tally,
+        ) {
             result = Err(e);
             break;
         }
@@ -122,7 +132,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     // The reader ends on its own once the channel is dropped.
     drop(reader_thread);
     // A failed run leaves an `-o` file as it was (standard output keeps what was written).
-    result.and_then(|()| out.finish())
+    result.and_then(|()| out.finish())?;
+    tally.report(&input_name);
+    Ok(())
 }
 
 fn write_batch(
@@ -131,8 +143,9 @@ fn write_batch(
     params: &LevelParams,
     pseudo: &PseudoLevelParams,
     polygons: bool,
+    tally: &mut Tally,
 ) -> anyhow::Result<()> {
-    let lines: Vec<Vec<u8>> = batch
+    let lines: Vec<(Vec<u8>, Outcome)> = batch
         .par_iter()
         .map_init(BearingTrigCache::default, |cache, scans| {
             let est = level_pose_with(scans, params, cache);
@@ -140,11 +153,12 @@ fn write_batch(
             let mut buf = Vec::with_capacity(8192);
             // Writing to a Vec cannot fail.
             let _ = write_scan(&mut buf, &record);
-            buf
+            (buf, Outcome::of(&record, "level"))
         })
         .collect();
-    for l in lines {
+    for (l, outcome) in lines {
         out.write_all(&l)?;
+        tally.add(outcome);
     }
     Ok(())
 }

@@ -1,6 +1,7 @@
 //! `levelscan match`: pairwise or metascan matching of 2D scans; fills in `estimate` and adds
 //! the contract's `match` object to each record, streaming (one record in, one record out).
 
+use super::summary::{Kind, Outcome, Tally};
 use super::{open_input, open_output};
 use clap::ValueEnum;
 use levelscan::formats::{CarmenParams, read_any, write_tum};
@@ -247,6 +248,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         None => None,
     };
     let mut matcher = Matcher::new(params);
+    let mut tally = Tally::new(Kind::Match);
     let source = read_any(input.reader, &input.name, CarmenParams::default())?;
     for (index, item) in source.enumerate() {
         let (_, mut scan) = item?;
@@ -254,6 +256,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         let odometry = scan.odometry.map(|p| p.to_pose2());
         let report = matcher.push(&points, odometry);
         annotate(&mut scan, &report);
+        tally.add(Outcome::of(&scan, "match"));
         levelscan::formats::write_scan(&mut out, &scan)?;
         if let Some(t) = tum.as_mut() {
             let time = scan.timestamp.map_or(index as f64, |t| t.seconds());
@@ -264,6 +267,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if let Some(t) = tum {
         t.finish()?;
     }
+    tally.report(&input.name);
     Ok(())
 }
 

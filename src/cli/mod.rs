@@ -12,6 +12,7 @@ mod map;
 mod matching;
 mod output;
 mod simulate;
+mod summary;
 mod view;
 
 use anyhow::Context;
