@@ -3,6 +3,7 @@
 
 use super::bag_output::{BagOutput, OutputFormat, output_format};
 use super::scan_input::{BagArgs, open_bag};
+use super::summary::{Kind, Outcome, Tally};
 use super::{LevelArgs, open_input, open_output};
 use levelscan::formats::level_record::level_record;
 use levelscan::formats::{InputError, ParallelScanReader, write_scan};
@@ -89,6 +90,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             (name, Box::new(reader))
         }
     };
+    let input_name = name.clone();
+    let mut tally = Tally::new(Kind::Level);
     let out = open_output(args.output.as_deref(), &[args.input.as_deref()])?;
     let mut sink = match output_format(args.format, args.output.as_deref()) {
         OutputFormat::Jsonl => Sink::Jsonl(out),
@@ -139,7 +142,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     });
     let mut result = Ok(());
     for (batch, failure) in rx {
-        if let Err(e) = write_batch(&mut sink, &batch, &params, &pseudo, args.polygons) {
+        if let Err(e) = write_batch(
+            &mut sink,
+            &batch,
+            &params,
+            &pseudo,
+            args.polygons,
+            &mut tally,
+        ) {
             result = Err(e);
             break;
         }
@@ -151,7 +161,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     // The reader ends on its own once the channel is dropped.
     drop(reader_thread);
     // A failed run leaves an `-o` file as it was (standard output keeps what was written).
-    result.and_then(|()| sink.finish())
+    result.and_then(|()| sink.finish())?;
+    tally.report(&input_name);
+    Ok(())
 }
 
 /// Where the records go: JSON Lines, or a ROS 2 bag.
@@ -175,6 +187,7 @@ fn write_batch(
     params: &LevelParams,
     pseudo: &PseudoLevelParams,
     polygons: bool,
+    tally: &mut Tally,
 ) -> anyhow::Result<()> {
     let records: Vec<Scan> = batch
         .par_iter()
@@ -183,6 +196,9 @@ fn write_batch(
             level_record(scans, &est, pseudo, polygons)
         })
         .collect();
+    for record in &records {
+        tally.add(Outcome::of(record, "level"));
+    }
     match sink {
         Sink::Jsonl(out) => {
             let lines: Vec<Vec<u8>> = records

@@ -4,6 +4,7 @@
 use super::bag_output::{BagOutput, OutputFormat, output_format};
 use super::open_output;
 use super::scan_input::{BagArgs, open_scans};
+use super::summary::{Kind, Outcome, Tally};
 use clap::ValueEnum;
 use levelscan::formats::{CarmenParams, write_tum};
 use levelscan::geometry::Pose;
@@ -268,12 +269,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         None => None,
     };
     let mut matcher = Matcher::new(params);
+    let mut tally = Tally::new(Kind::Match);
     for (index, item) in input.source.enumerate() {
         let (_, mut scan) = item?;
         let points = scan_points(&scan, &params.ranges);
         let odometry = scan.odometry.map(|p| p.to_pose2());
         let report = matcher.push(&points, odometry);
         annotate(&mut scan, &report);
+        tally.add(Outcome::of(&scan, "match"));
         match (&mut out, &mut bag_out) {
             (Some(out), _) => levelscan::formats::write_scan(out, &scan)?,
             (None, Some(bag)) => bag.match_record(&scan)?,
@@ -293,6 +296,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if let Some(t) = tum {
         t.finish()?;
     }
+    tally.report(&input.name);
     Ok(())
 }
 

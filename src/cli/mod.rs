@@ -14,6 +14,7 @@ mod matching;
 mod output;
 mod scan_input;
 mod simulate;
+mod summary;
 mod view;
 
 use anyhow::Context;
