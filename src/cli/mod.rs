@@ -1,5 +1,6 @@
 //! Subcommands, one file each, and the input/output plumbing they share.
 
+mod bag_output;
 mod cloud;
 mod demo;
 mod eval;
