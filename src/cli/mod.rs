@@ -1,6 +1,5 @@
 //! Subcommands, one file each, and the input/output plumbing they share.
 
-mod bag_output;
 mod cloud;
 mod demo;
 mod eval;

@@ -1,10 +1,11 @@
 //! `levelscan simulate PLAN.wall`: tilted multi-elevation scans of a floor plan as scan JSON
 //! Lines (paper sect. 7.2.1), a thin layer over [`levelscan::simulate`].
 
-use super::bag_output::{OutputFormat, finish_bag, open_bag};
 use super::{open_output, progress_bar};
 use anyhow::{Context, bail};
+use levelscan::formats::bag::BagWriter;
 use levelscan::formats::bag::simulated::{self, SimMessage};
+use levelscan::formats::bag::write::NoSeek;
 use levelscan::formats::{InputError, read_plan_from, write_scan};
 use levelscan::geometry::Pose;
 use levelscan::plan::Plan;
@@ -111,6 +112,30 @@ pub struct Args {
     pub format: Option<OutputFormat>,
 }
 
+/// What simulate writes.
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum OutputFormat {
+    /// Scan JSON Lines.
+    Jsonl,
+    /// A ROS 2 bag: one MCAP file (profile ros2, CDR messages).
+    Mcap,
+}
+
+impl OutputFormat {
+    /// `--format` when given, else MCAP for an output file named `*.mcap` (any case), else
+    /// JSON Lines.
+    fn choose(asked: Option<OutputFormat>, output: Option<&std::path::Path>) -> OutputFormat {
+        let mcap = output
+            .and_then(std::path::Path::extension)
+            .is_some_and(|e| e.eq_ignore_ascii_case("mcap"));
+        asked.unwrap_or(if mcap {
+            OutputFormat::Mcap
+        } else {
+            OutputFormat::Jsonl
+        })
+    }
+}
+
 pub fn run(args: Args) -> anyhow::Result<()> {
     let scanner = scanner_params(&args)?;
     let odo = args.odometry.params()?;
@@ -188,7 +213,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 .map_or(super::output::STDOUT.to_string(), |p| {
                     p.display().to_string()
                 });
-            Sink::Bag(Box::new(open_bag(out, &name)?))
+            Sink::Bag(Box::new(BagWriter::unseekable(out, &name)?))
         }
     };
     let bar = progress_bar(poses.len() as u64, "simulate");
@@ -217,7 +242,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 /// Where the simulated scans go.
 enum Sink {
     Jsonl(super::output::Output),
-    Bag(Box<super::bag_output::OutputBag>),
+    Bag(Box<BagWriter<NoSeek<super::output::Output>>>),
 }
 
 impl Sink {
@@ -252,7 +277,7 @@ impl Sink {
     fn finish(self) -> anyhow::Result<()> {
         match self {
             Sink::Jsonl(out) => out.finish(),
-            Sink::Bag(bag) => finish_bag(*bag),
+            Sink::Bag(bag) => bag.finish()?.into_inner().finish(),
         }
     }
 }
