@@ -199,8 +199,18 @@ fn load_real_log(
         reference: Vec::new(),
     };
     let bag = input.survey.is_some();
+    let mut last_sequence = None;
     for item in input.source {
         let (line, scan) = item?;
+        // Several scans of one pose are a tilting scanner's, not a 2D log: RPE between them
+        // would be nonsense.
+        if scan.sequence.is_some() && scan.sequence == last_sequence && scan.elevation.is_some() {
+            anyhow::bail!(
+                "{name}:{line}: several scans per pose (a tilting scanner's multi-elevation scans); \
+                 eval real wants one 2D scan per pose: level them first (levelscan level {name} -o level.jsonl)"
+            );
+        }
+        last_sequence = scan.sequence;
         let reference = scan.true_pose.with_context(|| {
             if bag {
                 format!("{name}: scan {line} has no reference pose (a /ground_truth PoseStamped within 0.1 s)")
