@@ -273,7 +273,13 @@ fn help_shows_every_default() {
             b.push('\n');
         }
     }
-    let without_default = ["--trajectory", "--output", "--help", "--version"];
+    let without_default = [
+        "--trajectory",
+        "--reference-trajectory",
+        "--output",
+        "--help",
+        "--version",
+    ];
     // Switches (flags without a value) have no default to show.
     let switches = ["--odometry-prior", "--one-way"];
     let mut checked = 0;

@@ -1,6 +1,7 @@
 //! `levelscan match`: pairwise or metascan matching of 2D scans; fills in `estimate` and adds
 //! the contract's `match` object to each record, streaming (one record in, one record out).
 
+use super::reference_tum::ReferenceTum;
 use super::summary::{Kind, Outcome, Tally};
 use super::{open_input, open_output};
 use clap::ValueEnum;
@@ -231,6 +232,10 @@ pub struct Args {
     /// Also write the estimated trajectory in TUM format (`timestamp x y z qx qy qz qw`).
     #[arg(long)]
     pub trajectory: Option<PathBuf>,
+    /// Also write the reference trajectory, each record's `true_pose` (x, y, yaw as
+    /// --trajectory, at the same times), in TUM format; records without one are left out.
+    #[arg(long)]
+    pub reference_trajectory: Option<PathBuf>,
     /// Output file; standard output when absent or `-`.
     #[arg(short, long)]
     pub output: Option<PathBuf>,
@@ -247,6 +252,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         )?),
         None => None,
     };
+    let mut reference = ReferenceTum::open(
+        args.reference_trajectory.as_deref(),
+        &[args.scans.as_deref(), args.output.as_deref()],
+    )?;
     let mut matcher = Matcher::new(params);
     let mut tally = Tally::new(Kind::Match);
     let source = read_any(input.reader, &input.name, CarmenParams::default())?;
@@ -257,6 +266,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         let report = matcher.push(&points, odometry);
         annotate(&mut scan, &report);
         tally.add(Outcome::of(&scan, "match"));
+        reference.push(&scan, index)?;
         levelscan::formats::write_scan(&mut out, &scan)?;
         if let Some(t) = tum.as_mut() {
             let time = scan.timestamp.map_or(index as f64, |t| t.seconds());
@@ -267,6 +277,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if let Some(t) = tum {
         t.finish()?;
     }
+    reference.finish(&input.name)?;
     tally.report(&input.name);
     Ok(())
 }

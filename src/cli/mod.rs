@@ -11,6 +11,7 @@ mod level;
 mod map;
 mod matching;
 mod output;
+mod reference_tum;
 mod simulate;
 mod summary;
 mod view;
