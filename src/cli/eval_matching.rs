@@ -87,7 +87,9 @@ pub fn run_matching(args: MatchingArgs) -> anyhow::Result<()> {
         let stem = path
             .file_stem()
             .map_or("plan".to_string(), |s| s.to_string_lossy().into_owned());
+        let bar = super::progress::spinner(&format!("eval matching: {}", path.display()));
         let (truth, runs) = matching_experiment(&plan, &params);
+        bar.finish_and_clear();
         for r in &runs {
             let _ = writeln!(
                 table,
@@ -229,9 +231,11 @@ pub fn run_real(args: RealArgs) -> anyhow::Result<()> {
     let noise = args.odometry.params()?;
     let mut results: Vec<RealResult> = Vec::new();
     for path in &args.logs {
+        let bar = super::progress::spinner(&format!("eval real: {}", path.display()));
         let log = load_real_log(path, &params.ranges)?;
         let result = evaluate_real(&log, &params, &noise, args.seed)
             .with_context(|| format!("{}: fewer than two scans", path.display()))?;
+        bar.finish_and_clear();
         eprintln!(
             "{}: {} scans, RPE median {:.2} mm (odometry {:.2} mm)",
             result.name,
