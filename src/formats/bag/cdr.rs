@@ -129,7 +129,9 @@ impl<'a> CdrReader<'a> {
         let bytes = self.take(n * 4, 4, what)?;
         // One loop per byte order (not a function pointer), so that the conversion inlines:
         // ranges are most of a bag's bytes.
-        let words = bytes.chunks_exact(4).map(|c| <[u8; 4]>::try_from(c).expect("4 bytes"));
+        let words = bytes
+            .chunks_exact(4)
+            .map(|c| <[u8; 4]>::try_from(c).expect("4 bytes"));
         Ok(if self.little {
             words.map(f32::from_le_bytes).collect()
         } else {
