@@ -333,7 +333,7 @@ fn eval_real_scores_a_log_against_its_poses() {
     // odometry.
     let mut log = String::new();
     for k in 0..25 {
-        let x = 0.04 * k as f64;
+        let x = 0.05 * k as f64;
         let ranges: Vec<String> = (0..180)
             .map(|i| {
                 let a = -std::f64::consts::FRAC_PI_2 + std::f64::consts::PI * i as f64 / 180.0;
@@ -379,4 +379,15 @@ fn eval_real_scores_a_log_against_its_poses() {
     assert!(matched < odometry, "{table}");
     assert!(matched < 1.0, "{table}");
     assert!(closure < 1.0, "{table}");
+    // The drift table: 1.2 m of path holds 1 m segments only.
+    let drift: Vec<&str> = table
+        .lines()
+        .last()
+        .unwrap()
+        .split('|')
+        .map(str::trim)
+        .collect();
+    let one_metre: f64 = drift[2].split('/').next().unwrap().trim().parse().unwrap();
+    assert!(one_metre < 0.5, "{table}");
+    assert_eq!(&drift[3..7], &["-", "-", "-", "-"], "{table}");
 }
