@@ -125,6 +125,9 @@ pub struct Matcher {
     map: VoxelMap,
     /// Whether the current and previous scans both have odometry (for the prior).
     has_odometry: bool,
+    /// Metascan: the covariance of the keyframe's estimate relative to the map, world frame.
+    /// A step between two scans matched to the map carries both scans' errors.
+    keyframe_covariance: Matrix3<f64>,
     /// The current scan's rays per degree, which widens its covariance.
     rays_per_degree: f64,
 }
@@ -137,6 +140,7 @@ impl Matcher {
             keyframe: None,
             map: VoxelMap::new(params.map),
             has_odometry: false,
+            keyframe_covariance: Matrix3::zeros(),
             rays_per_degree: 0.0,
         }
     }
@@ -169,6 +173,7 @@ impl Matcher {
             MatchStatus::Fallback(FallbackReason::NoValidRays)
         } else {
             self.remember(points, estimate, odometry);
+            self.keyframe_covariance = Matrix3::zeros();
             MatchStatus::First
         };
         MatchReport {
@@ -502,7 +507,9 @@ impl Matcher {
         match result {
             Ok(r) => {
                 let estimate = reference.base.compose(&r.pose);
+                let (covariance, own) = self.match_covariance(&r, &reference);
                 self.remember(points, estimate, odometry);
+                self.keyframe_covariance = own;
                 MatchReport {
                     estimate,
                     status: MatchStatus::Ok,
@@ -510,7 +517,7 @@ impl Matcher {
                     correspondences: r.correspondences,
                     residual: Some(r.residual),
                     coarse,
-                    covariance: self.match_covariance(&r, &reference),
+                    covariance,
                 }
             }
             Err(reason) => {
@@ -531,18 +538,33 @@ impl Matcher {
     /// scan's frame, widened by `CovarianceParams`, fused with the odometry's when the odometry
     /// prior took part in the solve (the estimate is then the MAP of both). A match whose pairs
     /// left no covariance (cannot pass the checks, but to be safe) reports the odometry's.
-    fn match_covariance(&self, r: &IcpResult, reference: &Reference) -> Matrix3<f64> {
+    /// Metascan matches against the map, so the step from the keyframe also carries the
+    /// keyframe's own error against the map (their sum: the errors are not anticorrelated).
+    /// Returns the reported covariance and, in the ICP target's frame, this scan's own.
+    fn match_covariance(
+        &self,
+        r: &IcpResult,
+        reference: &Reference,
+    ) -> (Matrix3<f64>, Matrix3<f64>) {
         let odometry = self.odometry_model().step_covariance(&reference.step);
-        let Some(scan) = r.covariance else {
-            return odometry;
+        let own = match r.covariance {
+            Some(scan) => {
+                let k = inflation(&self.params.covariance, r.residual, self.rays_per_degree);
+                let scan = scan * k;
+                if self.params.odometry_prior.is_some() && self.has_odometry {
+                    // The odometry's is isotropic in x, y: the same in every frame.
+                    fuse(&scan, &odometry).unwrap_or(scan)
+                } else {
+                    scan
+                }
+            }
+            None => rotate_into(&odometry, -reference.theta),
         };
-        let k = inflation(&self.params.covariance, r.residual, self.rays_per_degree);
-        let scan = rotate_into(&scan, reference.theta) * k;
-        if self.params.odometry_prior.is_some() && self.has_odometry {
-            fuse(&scan, &odometry).unwrap_or(scan)
-        } else {
-            scan
-        }
+        let relative = match self.params.mode {
+            Mode::Pairwise => own,
+            Mode::Metascan => own + self.keyframe_covariance,
+        };
+        (rotate_into(&relative, reference.theta), own)
     }
 
     /// The odometry noise model: the prior's when one is set, else the default (the
@@ -562,8 +584,11 @@ impl Matcher {
         // The next scan is first matched against this one (placed by odometry), so one bad step
         // does not poison the next. Metascan keeps it out of the map, which stays clean, but its
         // first (pairwise) stage starts from this scan, the nearest in space and time.
+        let covariance = self.odometry_model().step_covariance(step);
         if !points.is_empty() {
             self.set_keyframe(points, estimate, odometry);
+            // Placed by odometry from the previous scan (isotropic in x, y: any frame).
+            self.keyframe_covariance += covariance;
         }
         MatchReport {
             estimate,
@@ -572,7 +597,7 @@ impl Matcher {
             correspondences: 0,
             residual: None,
             coarse: false,
-            covariance: self.odometry_model().step_covariance(step),
+            covariance,
         }
     }
 }
