@@ -106,7 +106,26 @@ fn simulated_run_is_matched_close_to_the_truth_in_both_modes() {
                     "{mode} {algo}: step off by {err} m: {}",
                     w[1]["match"]
                 );
+                // match.covariance: 9 numbers, symmetric, positive on the diagonal; its x, y sigmas
+                // are millimetres, below the step tolerance.
+                let c: Vec<f64> = w[1]["match"]["covariance"]
+                    .as_array()
+                    .unwrap()
+                    .iter()
+                    .map(|v| v.as_f64().unwrap())
+                    .collect();
+                assert_eq!(c.len(), 9);
+                assert!(c[1] == c[3] && c[2] == c[6] && c[5] == c[7], "{c:?}");
+                assert!(c[0] > 0.0 && c[4] > 0.0 && c[8] > 0.0, "{c:?}");
+                assert!(
+                    c[0].sqrt() < tol && c[4].sqrt() < tol,
+                    "{mode} {algo}: {c:?}"
+                );
             }
+            assert_eq!(
+                recs[0]["match"]["covariance"],
+                serde_json::json!([0.0f64; 9].to_vec())
+            );
         }
     }
 }

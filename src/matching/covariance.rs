@@ -10,7 +10,7 @@
 //!
 //! The sandwich treats pairs as independent. They are not (neighbouring rays share their
 //! reference line, trimming keeps the smallest residuals), so the matcher widens it by
-//! [`inflation`] before reporting it.
+//! `inflation` before reporting it.
 
 use super::params::CovarianceParams;
 use nalgebra::{Matrix3, Point2, Vector3};
@@ -80,7 +80,9 @@ pub fn rays_per_degree(points: &[Point2<f64>]) -> f64 {
 pub(crate) fn rotate_into(cov: &Matrix3<f64>, frame_theta: f64) -> Matrix3<f64> {
     let (s, c) = frame_theta.sin_cos();
     let j = Matrix3::new(c, s, 0.0, -s, c, 0.0, 0.0, 0.0, 1.0);
-    j * cov * j.transpose()
+    let r = j * cov * j.transpose();
+    // Exactly symmetric, as consumers of the 9 numbers expect.
+    (r + r.transpose()) * 0.5
 }
 
 /// Two independent Gaussian estimates of the same pose fused: the information adds. `None`

@@ -8,6 +8,7 @@
 //! - [`map`]: the bounded voxel map for metascan matching.
 //! - [`covariance`]: the match's covariance (sandwich estimator, Censi 2007).
 //! - [`params`]: the matcher's settings.
+//! - [`report`]: what each scan's match reports.
 //! - [`matcher`]: a run of scans, one at a time, with fallback to odometry.
 //!
 //! All of it is pure: points and poses in, poses and reports out.
@@ -19,6 +20,7 @@ pub mod map;
 pub mod matcher;
 pub mod params;
 pub mod reference;
+pub mod report;
 pub mod solve;
 
 pub use correlative::{CorrelativeParams, correlative_search};
