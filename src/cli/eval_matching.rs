@@ -2,12 +2,14 @@
 //! with perturbed odometry).
 
 use super::matching::MatchOptions;
-use super::{open_input, open_output, write_file};
+use super::scan_input::open_scans;
+use super::{open_output, write_file};
 use anyhow::Context;
 use levelscan::eval::drift::{DRIFT_LENGTHS, Drift};
 use levelscan::eval::matching::{ExperimentParams, matching_experiment};
 use levelscan::eval::real::{RealLog, RealResult, evaluate_real};
-use levelscan::formats::{CarmenParams, read_any, read_plan};
+use levelscan::formats::bag::BagOptions;
+use levelscan::formats::{CarmenParams, read_plan};
 use levelscan::matching::{Mode, scan_points};
 use levelscan::simulate::{AdaptiveParams, ScannerParams, elevations_centred};
 use levelscan::viz::plots::{MapPanel, map_panels_png, map_panels_svg, run_map_panel};
@@ -86,7 +88,9 @@ pub fn run_matching(args: MatchingArgs) -> anyhow::Result<()> {
         let stem = path
             .file_stem()
             .map_or("plan".to_string(), |s| s.to_string_lossy().into_owned());
+        let bar = super::progress::spinner(&format!("eval matching: {}", path.display()));
         let (truth, runs) = matching_experiment(&plan, &params);
+        bar.finish_and_clear();
         for r in &runs {
             let _ = writeln!(
                 table,
@@ -188,7 +192,7 @@ fn load_real_log(
     path: &std::path::Path,
     ranges: &levelscan::matching::RangeParams,
 ) -> anyhow::Result<RealLog> {
-    let input = open_input(Some(path))?;
+    let input = open_scans(Some(path), CarmenParams::default(), &BagOptions::default())?;
     let name = input.name.clone();
     let mut log = RealLog {
         name: path
@@ -197,10 +201,25 @@ fn load_real_log(
         points: Vec::new(),
         reference: Vec::new(),
     };
-    for item in read_any(input.reader, &input.name, CarmenParams::default())? {
+    let bag = input.survey.is_some();
+    let mut last_sequence = None;
+    for item in input.source {
         let (line, scan) = item?;
+        // Several scans of one pose are a tilting scanner's, not a 2D log: RPE between them
+        // would be nonsense.
+        if scan.sequence.is_some() && scan.sequence == last_sequence && scan.elevation.is_some() {
+            anyhow::bail!(
+                "{name}:{line}: several scans per pose (a tilting scanner's multi-elevation scans); \
+                 eval real wants one 2D scan per pose: level them first (levelscan level {name} -o level.jsonl)"
+            );
+        }
+        last_sequence = scan.sequence;
         let reference = scan.true_pose.with_context(|| {
-            format!("{name}:{line}: no reference pose (a CARMEN pose or `true_pose`)")
+            if bag {
+                format!("{name}: scan {line} has no reference pose (a /ground_truth PoseStamped within 0.1 s)")
+            } else {
+                format!("{name}:{line}: no reference pose (a CARMEN pose or `true_pose`)")
+            }
         })?;
         log.points.push(scan_points(&scan, ranges));
         log.reference.push(reference.to_pose2());
@@ -213,9 +232,11 @@ pub fn run_real(args: RealArgs) -> anyhow::Result<()> {
     let noise = args.odometry.params()?;
     let mut results: Vec<RealResult> = Vec::new();
     for path in &args.logs {
+        let bar = super::progress::spinner(&format!("eval real: {}", path.display()));
         let log = load_real_log(path, &params.ranges)?;
         let result = evaluate_real(&log, &params, &noise, args.seed)
             .with_context(|| format!("{}: fewer than two scans", path.display()))?;
+        bar.finish_and_clear();
         eprintln!(
             "{}: {} scans, RPE median {:.2} mm (odometry {:.2} mm), drift at 10 m {}",
             result.name,

@@ -1,9 +1,13 @@
 //! `levelscan match`: pairwise or metascan matching of 2D scans; fills in `estimate` and adds
 //! the contract's `match` object to each record, streaming (one record in, one record out).
 
-use super::{open_input, open_output};
+use super::bag_output::{BagOutput, OutputFormat, output_format};
+use super::open_output;
+use super::reference_tum::ReferenceTum;
+use super::scan_input::{BagArgs, open_scans};
+use super::summary::{Kind, Outcome, Tally};
 use clap::ValueEnum;
-use levelscan::formats::{CarmenParams, read_any, write_tum};
+use levelscan::formats::{CarmenParams, write_tum};
 use levelscan::geometry::Pose;
 use levelscan::matching::{
     CheckParams, Coarse, CorrelativeParams, CovarianceParams, IcpParams, Kernel, MapParams,
@@ -243,15 +247,38 @@ pub struct Args {
     /// Also write the estimated trajectory in TUM format (`timestamp x y z qx qy qz qw`).
     #[arg(long)]
     pub trajectory: Option<PathBuf>,
+    /// Also write the reference trajectory, each record's `true_pose` (x, y, yaw as
+    /// --trajectory, at the same times), in TUM format; records without one are left out.
+    #[arg(long)]
+    pub reference_trajectory: Option<PathBuf>,
     /// Output file; standard output when absent or `-`.
     #[arg(short, long)]
     pub output: Option<PathBuf>,
+    #[command(flatten)]
+    pub bag: BagArgs,
+    /// Output format; default: mcap (a ROS 2 bag) when -o ends in .mcap, else jsonl.
+    #[arg(long, value_enum)]
+    pub format: Option<OutputFormat>,
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
     let params = args.options.params()?;
-    let input = open_input(args.scans.as_deref())?;
-    let mut out = open_output(args.output.as_deref(), &[args.scans.as_deref()])?;
+    let input = open_scans(
+        args.scans.as_deref(),
+        CarmenParams::default(),
+        &args.bag.options(false, Some("/scan_level")),
+    )?;
+    let out = open_output(args.output.as_deref(), &[args.scans.as_deref()])?;
+    let (mut out, mut bag_out) = match output_format(args.format, args.output.as_deref()) {
+        OutputFormat::Jsonl => (Some(out), None),
+        OutputFormat::Mcap => {
+            let shown = args
+                .output
+                .as_deref()
+                .map_or("<stdout>".to_string(), |p| p.display().to_string());
+            (None, Some(BagOutput::new(out, &shown, input.bag.clone())?))
+        }
+    };
     let mut tum = match &args.trajectory {
         Some(p) => Some(open_output(
             Some(p),
@@ -259,24 +286,41 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         )?),
         None => None,
     };
+    let mut reference = ReferenceTum::open(
+        args.reference_trajectory.as_deref(),
+        &[args.scans.as_deref(), args.output.as_deref()],
+    )?;
     let mut matcher = Matcher::new(params);
-    let source = read_any(input.reader, &input.name, CarmenParams::default())?;
-    for (index, item) in source.enumerate() {
+    let mut tally = Tally::new(Kind::Match);
+    for (index, item) in input.source.enumerate() {
         let (_, mut scan) = item?;
         let points = scan_points(&scan, &params.ranges);
         let odometry = scan.odometry.map(|p| p.to_pose2());
         let report = matcher.push(&points, odometry);
         annotate(&mut scan, &report);
-        levelscan::formats::write_scan(&mut out, &scan)?;
+        tally.add(Outcome::of(&scan, "match"));
+        reference.push(&scan, index)?;
+        match (&mut out, &mut bag_out) {
+            (Some(out), _) => levelscan::formats::write_scan(out, &scan)?,
+            (None, Some(bag)) => bag.match_record(&scan)?,
+            (None, None) => unreachable!("one output is open"),
+        }
         if let Some(t) = tum.as_mut() {
             let time = scan.timestamp.map_or(index as f64, |t| t.seconds());
             write_tum(t, time, &report.estimate)?;
         }
     }
-    out.finish()?;
+    if let Some(out) = out {
+        out.finish()?;
+    }
+    if let Some(bag) = bag_out {
+        bag.finish()?;
+    }
     if let Some(t) = tum {
         t.finish()?;
     }
+    reference.finish(&input.name)?;
+    tally.report(&input.name);
     Ok(())
 }
 

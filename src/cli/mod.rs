@@ -1,5 +1,6 @@
 //! Subcommands, one file each, and the input/output plumbing they share.
 
+mod bag_output;
 mod cloud;
 mod demo;
 mod eval;
@@ -11,7 +12,11 @@ mod level;
 mod map;
 mod matching;
 mod output;
+mod progress;
+mod reference_tum;
+mod scan_input;
 mod simulate;
+mod summary;
 mod view;
 
 use anyhow::Context;
@@ -182,7 +187,6 @@ pub fn open_input(path: Option<&Path>) -> anyhow::Result<Input> {
 }
 
 /// A progress bar on standard error; indicatif hides it when standard error is not a terminal.
-#[allow(dead_code)] // for the long-running commands (simulate, level, eval) as they land
 pub fn progress_bar(len: u64, what: &str) -> ProgressBar {
     let bar = ProgressBar::new(len);
     bar.set_style(

@@ -12,6 +12,7 @@
 
 pub mod bag;
 pub mod carmen;
+pub mod kind;
 pub mod level_record;
 pub mod limits;
 pub mod pgm_map;
@@ -35,6 +36,8 @@ pub enum ScanSource<R> {
     /// Boxed: the parallel reader carries two batches of line buffers.
     JsonLines(Box<ParallelScanReader<R>>),
     Carmen(CarmenReader<R>),
+    /// A ROS bag's scans (see [`bag::BagScans`]); the reader `R` is not used.
+    Bag(Box<bag::BagScans>, bag::BagKind),
 }
 
 impl<R: BufRead + Send> ScanSource<R> {
@@ -43,6 +46,7 @@ impl<R: BufRead + Send> ScanSource<R> {
         match self {
             ScanSource::JsonLines(_) => "jsonl",
             ScanSource::Carmen(_) => "carmen",
+            ScanSource::Bag(_, kind) => kind.name(),
         }
     }
 }
@@ -54,6 +58,7 @@ impl<R: BufRead + Send> Iterator for ScanSource<R> {
         match self {
             ScanSource::JsonLines(r) => r.next(),
             ScanSource::Carmen(r) => r.next(),
+            ScanSource::Bag(r, _) => r.next(),
         }
     }
 }
@@ -76,12 +81,29 @@ pub fn read_any<R: BufRead + Send>(
     {
         reader.consume(3);
     }
-    let first = reader
+    let head = reader
         .fill_buf()
-        .map_err(|e| scan_jsonl::read_error(&name, 1, &e))?
-        .iter()
-        .copied()
-        .find(|b| !b.is_ascii_whitespace());
+        .map_err(|e| scan_jsonl::read_error(&name, 1, &e))?;
+    match kind::sniff(head) {
+        kind::FileKind::Mcap | kind::FileKind::Ros1Bag => {
+            // Bags are read in two passes (topics and joints first), so they need a path.
+            return Err(InputError::new(
+                name,
+                "",
+                "a ROS bag on a stream: give the bag's path as the input file instead",
+            ));
+        }
+        // Other text is a CARMEN log whose unknown lines are skipped (as CARMEN readers do).
+        k @ (kind::FileKind::FloorPlan | kind::FileKind::Sqlite) => {
+            return Err(kind::wrong_kind(
+                &name,
+                k,
+                "scans are wanted (JSON Lines, a CARMEN log or a ROS bag)",
+            ));
+        }
+        _ => {}
+    }
+    let first = head.iter().copied().find(|b| !b.is_ascii_whitespace());
     Ok(match first {
         None | Some(b'{') => ScanSource::JsonLines(Box::new(ParallelScanReader::new(reader, name))),
         Some(_) => ScanSource::Carmen(CarmenReader::new(reader, name, carmen)),
