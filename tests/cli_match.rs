@@ -106,7 +106,26 @@ fn simulated_run_is_matched_close_to_the_truth_in_both_modes() {
                     "{mode} {algo}: step off by {err} m: {}",
                     w[1]["match"]
                 );
+                // match.covariance: 9 numbers, symmetric, positive on the diagonal; its x, y sigmas
+                // are millimetres, below the step tolerance.
+                let c: Vec<f64> = w[1]["match"]["covariance"]
+                    .as_array()
+                    .unwrap()
+                    .iter()
+                    .map(|v| v.as_f64().unwrap())
+                    .collect();
+                assert_eq!(c.len(), 9);
+                assert!(c[1] == c[3] && c[2] == c[6] && c[5] == c[7], "{c:?}");
+                assert!(c[0] > 0.0 && c[4] > 0.0 && c[8] > 0.0, "{c:?}");
+                assert!(
+                    c[0].sqrt() < tol && c[4].sqrt() < tol,
+                    "{mode} {algo}: {c:?}"
+                );
             }
+            assert_eq!(
+                recs[0]["match"]["covariance"],
+                serde_json::json!([0.0f64; 9].to_vec())
+            );
         }
     }
 }
@@ -346,7 +365,7 @@ fn eval_real_scores_a_log_against_its_poses() {
     // odometry.
     let mut log = String::new();
     for k in 0..25 {
-        let x = 0.04 * k as f64;
+        let x = 0.05 * k as f64;
         let ranges: Vec<String> = (0..180)
             .map(|i| {
                 let a = -std::f64::consts::FRAC_PI_2 + std::f64::consts::PI * i as f64 / 180.0;
@@ -392,4 +411,15 @@ fn eval_real_scores_a_log_against_its_poses() {
     assert!(matched < odometry, "{table}");
     assert!(matched < 1.0, "{table}");
     assert!(closure < 1.0, "{table}");
+    // The drift table: 1.2 m of path holds 1 m segments only.
+    let drift: Vec<&str> = table
+        .lines()
+        .last()
+        .unwrap()
+        .split('|')
+        .map(str::trim)
+        .collect();
+    let one_metre: f64 = drift[2].split('/').next().unwrap().trim().parse().unwrap();
+    assert!(one_metre < 0.5, "{table}");
+    assert_eq!(&drift[3..7], &["-", "-", "-", "-"], "{table}");
 }

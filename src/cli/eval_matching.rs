@@ -5,6 +5,7 @@ use super::matching::MatchOptions;
 use super::scan_input::open_scans;
 use super::{open_output, write_file};
 use anyhow::Context;
+use levelscan::eval::drift::{DRIFT_LENGTHS, Drift};
 use levelscan::eval::matching::{ExperimentParams, matching_experiment};
 use levelscan::eval::real::{RealLog, RealResult, evaluate_real};
 use levelscan::formats::bag::BagOptions;
@@ -237,11 +238,16 @@ pub fn run_real(args: RealArgs) -> anyhow::Result<()> {
             .with_context(|| format!("{}: fewer than two scans", path.display()))?;
         bar.finish_and_clear();
         eprintln!(
-            "{}: {} scans, RPE median {:.2} mm (odometry {:.2} mm)",
+            "{}: {} scans, RPE median {:.2} mm (odometry {:.2} mm), drift at 10 m {}",
             result.name,
             result.scans,
             result.matched.median_translation * 1e3,
-            result.odometry.median_translation * 1e3
+            result.odometry.median_translation * 1e3,
+            result
+                .drift
+                .iter()
+                .find(|d| d.length == 10.0)
+                .map_or("-".into(), |d| format!("{:.2}%", d.translation_percent))
         );
         results.push(result);
     }
@@ -276,6 +282,27 @@ fn real_table(results: &[RealResult]) -> String {
                 .map_or("-".into(), |c| format!("{:.2}", c.median_translation * 1e3)),
             r.fallbacks,
             r.coarse
+        );
+    }
+    s.push_str(
+        "\nDrift over segments of reference path (KITTI-style): translation [%] / heading [deg/m]\n\n\
+         | log | 1 m | 2 m | 5 m | 10 m | odometry 10 m |\n|---|---:|---:|---:|---:|---:|\n",
+    );
+    for r in results {
+        let cell = |d: &[Drift], length: f64| {
+            d.iter()
+                .find(|d| d.length == length)
+                .map_or("-".into(), |d| {
+                    format!("{:.2} / {:.3}", d.translation_percent, d.rotation_deg_per_m)
+                })
+        };
+        let cells: Vec<String> = DRIFT_LENGTHS.iter().map(|l| cell(&r.drift, *l)).collect();
+        let _ = writeln!(
+            s,
+            "| {} | {} | {} |",
+            r.name,
+            cells.join(" | "),
+            cell(&r.odometry_drift, 10.0)
         );
     }
     s

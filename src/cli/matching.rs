@@ -10,8 +10,9 @@ use clap::ValueEnum;
 use levelscan::formats::{CarmenParams, write_tum};
 use levelscan::geometry::Pose;
 use levelscan::matching::{
-    CheckParams, Coarse, CorrelativeParams, IcpParams, Kernel, MapParams, MatchReport, MatchStatus,
-    Matcher, MatcherParams, Metric, Mode, NormalParams, OdometryPrior, RangeParams, scan_points,
+    CheckParams, Coarse, CorrelativeParams, CovarianceParams, IcpParams, Kernel, MapParams,
+    MatchReport, MatchStatus, Matcher, MatcherParams, Metric, Mode, NormalParams, OdometryPrior,
+    RangeParams, scan_points,
 };
 use levelscan::scan::Scan;
 use serde_json::json;
@@ -125,6 +126,12 @@ pub struct MatchOptions {
     /// Odometry prior: sigma of one ICP residual, the scale between scans and odometry (m).
     #[arg(long, default_value_t = OdometryPrior::default().residual_sigma)]
     pub prior_residual_sigma: f64,
+    /// Covariance: variance factor over the sandwich estimate at low residuals.
+    #[arg(long, default_value_t = CovarianceParams::default().noise_inflation)]
+    pub cov_inflation: f64,
+    /// Covariance: RMS residual at which the variance factor doubles (m).
+    #[arg(long, default_value_t = CovarianceParams::default().noise_knee)]
+    pub cov_knee: f64,
 }
 
 impl MatchOptions {
@@ -140,6 +147,8 @@ impl MatchOptions {
             ("--max-residual", self.max_residual),
             ("--max-range", self.max_range),
             ("--prior-residual-sigma", self.prior_residual_sigma),
+            ("--cov-inflation", self.cov_inflation),
+            ("--cov-knee", self.cov_knee),
         ];
         let prior_sigmas = [
             self.prior_trans,
@@ -220,6 +229,10 @@ impl MatchOptions {
                 rot_const: self.prior_rot_min.to_radians(),
                 residual_sigma: self.prior_residual_sigma,
             }),
+            covariance: CovarianceParams {
+                noise_inflation: self.cov_inflation,
+                noise_knee: self.cov_knee,
+            },
         })
     }
 }
@@ -337,6 +350,7 @@ pub fn annotate(scan: &mut Scan, report: &MatchReport) {
             "correspondences": report.correspondences,
             "residual": report.residual,
             "coarse": report.coarse,
+            "covariance": report.covariance_row_major(),
         }),
     );
 }

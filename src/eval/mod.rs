@@ -3,6 +3,7 @@
 pub mod accuracy;
 pub mod bound;
 pub mod demo;
+pub mod drift;
 pub mod matching;
 pub mod metrics;
 pub mod real;

@@ -11,6 +11,7 @@
 //! composition of the two one-scan steps they span. A matcher that is right agrees with itself;
 //! an RPE far above its closure error says the reference, not the matcher, sets the RPE.
 
+use super::drift::{DRIFT_LENGTHS, Drift, segment_drift};
 use super::metrics::{Rpe, rpe};
 use crate::geometry::{Pose, Pose2};
 use crate::matching::{MatchReport, MatchStatus, Matcher, MatcherParams};
@@ -36,6 +37,11 @@ pub struct RealResult {
     pub matched: Rpe,
     /// RPE of the perturbed odometry against the reference.
     pub odometry: Rpe,
+    /// Drift of the matched trajectory over 1, 2, 5 and 10 m of reference path (the lengths
+    /// the path is long enough for): the figure to trust where the reference jitters per step.
+    pub drift: Vec<Drift>,
+    /// The same for the perturbed odometry.
+    pub odometry_drift: Vec<Drift>,
     /// Self-consistency: RPE of the direct matches of every second scan against the
     /// composition of the consecutive matches they span (no reference needed). `None` below
     /// three scans.
@@ -76,6 +82,8 @@ pub fn evaluate_real(
         scans: log.points.len(),
         matched: rpe(&estimate, &log.reference)?,
         odometry: rpe(&odo, &log.reference)?,
+        drift: drifts(&estimate, &log.reference),
+        odometry_drift: drifts(&odo, &log.reference),
         closure: rpe(&direct, &composed),
         fallbacks: reports
             .iter()
@@ -83,6 +91,13 @@ pub fn evaluate_real(
             .count(),
         coarse: reports.iter().filter(|r| r.coarse).count(),
     })
+}
+
+fn drifts(estimate: &[Pose2], reference: &[Pose2]) -> Vec<Drift> {
+    DRIFT_LENGTHS
+        .iter()
+        .filter_map(|l| segment_drift(estimate, reference, *l))
+        .collect()
 }
 
 fn match_all<'a>(
@@ -144,6 +159,11 @@ mod tests {
         assert_eq!(r.fallbacks, 0);
         assert!(r.matched.median_translation < 1e-4, "{r:?}");
         assert!(r.odometry.median_translation > 1e-3, "{r:?}");
+        // 1.45 m of path: only the 1 m segments fit; matching drifts far less than odometry.
+        assert_eq!(r.drift.len(), 1);
+        assert_eq!(r.drift[0].segments, 10);
+        assert!(r.drift[0].translation_percent < 0.01, "{r:?}");
+        assert!(r.odometry_drift[0].translation_percent > 0.1, "{r:?}");
         let closure = r.closure.unwrap();
         assert_eq!(closure.pairs, 14);
         assert!(closure.median_translation < 1e-4, "{r:?}");

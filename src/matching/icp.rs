@@ -6,10 +6,11 @@
 //! closed-form solve of `solve.rs` from the original source points (so no error accumulates
 //! over iterations). It stops when the pose changes by less than the thresholds.
 
+use super::covariance::Sandwich;
 use super::reference::Target;
 use super::solve::{RigidSolver, symmetric_eigen_2x2};
 use crate::geometry::{Pose2, wrap_angle};
-use nalgebra::{Matrix2, Point2, Vector2};
+use nalgebra::{Matrix2, Matrix3, Point2, Vector2, Vector3};
 
 /// Which ICP metric.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
@@ -101,6 +102,10 @@ pub struct IcpResult {
     pub constraint_ratio: Option<f64>,
     /// The solver found no unique motion (a degenerate system).
     pub degenerate: bool,
+    /// Covariance of `pose` over (x, y, θ) in the target's frame from the kept pairs alone
+    /// (no prior, not inflated): the sandwich `H⁻¹ B H⁻¹` of `covariance.rs`; `None` when the
+    /// pairs leave a direction free.
+    pub covariance: Option<Matrix3<f64>>,
 }
 
 struct Pair {
@@ -159,12 +164,16 @@ pub fn icp_with_prior(
         residual: f64::INFINITY,
         constraint_ratio: None,
         degenerate: false,
+        covariance: None,
     };
+    // The pose the last kept pairs were associated at: their residuals and Jacobians are there.
+    let mut associated_at = pose;
     for iteration in 1..=params.max_iterations {
         associate(source, target, &pose, params, &mut pairs);
         if pairs.is_empty() {
             return None;
         }
+        associated_at = pose;
         result.associated = pairs.len();
         result.inliers = pairs
             .iter()
@@ -204,7 +213,32 @@ pub fn icp_with_prior(
             break;
         }
     }
+    result.covariance = sandwich(&pairs[..result.correspondences], &associated_at, params);
     Some(result)
+}
+
+/// The sandwich covariance over the kept pairs, each residual with the weight it had in the
+/// last solve and its Jacobian w.r.t. (t_x, t_y, θ) at `pose`: for `r = n · (R p + t - q)`,
+/// `∂r/∂t = n` and `∂r/∂θ = n · R' p`, `R' p = (-sin θ p_x - cos θ p_y, cos θ p_x - sin θ p_y)`.
+fn sandwich(kept: &[Pair], pose: &Pose2, params: &IcpParams) -> Option<Matrix3<f64>> {
+    let (s, c) = pose.theta.sin_cos();
+    let mut acc = Sandwich::default();
+    for pair in kept {
+        let w = weight(pair.residual, params) * incidence_weight(pair, pose, params);
+        let moved = pose.transform_point(&pair.p);
+        let lever = Vector2::new(-s * pair.p.x - c * pair.p.y, c * pair.p.x - s * pair.p.y);
+        let mut row =
+            |n: Vector2<f64>, r: f64| acc.add(Vector3::new(n.x, n.y, n.dot(&lever)), r, w);
+        match (params.metric, pair.line) {
+            (Metric::PointToLine, Some((n, anchor))) => row(n, n.dot(&(moved - anchor))),
+            _ => {
+                let d = moved - pair.q;
+                row(Vector2::x(), d.x);
+                row(Vector2::y(), d.y);
+            }
+        }
+    }
+    acc.covariance()
 }
 
 /// Nearest target point for every source point under `pose`, within the association distance.

@@ -5,226 +5,18 @@
 //! that scan's estimate and match report. Every scan gets a report; when a match is not
 //! trustworthy the step falls back to the odometry and the report says why (CSM issue #17).
 
-use super::correlative::{CorrelativeParams, correlative_search};
-use super::icp::{IcpParams, IcpResult, PosePrior, icp, icp_with_prior};
-use super::map::{MapParams, VoxelMap};
-use super::reference::{Line, NormalParams, ScanReference, Target, estimate_lines};
+use super::correlative::correlative_search;
+use super::covariance::{fuse, inflation, rays_per_degree, rotate_into};
+use super::icp::{IcpParams, IcpResult, icp, icp_with_prior};
+use super::map::VoxelMap;
+pub use super::params::{
+    CheckParams, Coarse, CovarianceParams, MatcherParams, Mode, OdometryPrior, RangeParams,
+};
+use super::reference::{Line, ScanReference, Target, estimate_lines};
+pub use super::report::{FallbackReason, MatchReport, MatchStatus};
 use crate::geometry::Pose2;
 use crate::scan::Scan;
-use nalgebra::{Point2, Vector2};
-
-/// Pairwise or metascan.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
-pub enum Mode {
-    /// Each scan against the previous one.
-    #[default]
-    Pairwise,
-    /// Each scan against a map of all earlier matched scans.
-    Metascan,
-}
-
-/// When to run the coarse correlative search before ICP.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
-pub enum Coarse {
-    /// Never; ICP starts from the odometry guess.
-    Never,
-    /// Only when ICP from the odometry guess looks bad (fails a check, or too few source
-    /// points find a partner); then the better of the two results is kept.
-    #[default]
-    Auto,
-    /// Before every match.
-    Always,
-}
-
-/// Why a step fell back to odometry.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum FallbackReason {
-    /// The scan has no usable ray.
-    NoValidRays,
-    /// Nothing to match against yet (no earlier scan with usable rays).
-    NoReference,
-    /// Fewer kept pairs than `min_correspondences`.
-    TooFewCorrespondences,
-    /// RMS residual above `max_residual`.
-    HighResidual,
-    /// The geometry does not pin the motion (a corridor: all normals nearly parallel).
-    Degenerate,
-    /// The match moved the pose farther from the odometry guess than the search ever looks:
-    /// a match to the wrong place.
-    LargeCorrection,
-}
-
-impl FallbackReason {
-    pub fn as_str(&self) -> &'static str {
-        match self {
-            FallbackReason::NoValidRays => "no_valid_rays",
-            FallbackReason::NoReference => "no_reference",
-            FallbackReason::TooFewCorrespondences => "too_few_correspondences",
-            FallbackReason::HighResidual => "high_residual",
-            FallbackReason::Degenerate => "degenerate",
-            FallbackReason::LargeCorrection => "large_correction",
-        }
-    }
-}
-
-/// The outcome of one scan.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub enum MatchStatus {
-    /// The first scan: its pose is its odometry (or the origin).
-    First,
-    /// The estimate came from a match.
-    Ok,
-    /// The estimate came from odometry.
-    Fallback(FallbackReason),
-}
-
-/// What `Matcher::push` reports for one scan (the contract's `match` object).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct MatchReport {
-    /// `world_from_robot`, planar.
-    pub estimate: Pose2,
-    pub status: MatchStatus,
-    pub iterations: usize,
-    pub correspondences: usize,
-    /// RMS residual of the kept pairs \[m\]; `None` when no match ran.
-    pub residual: Option<f64>,
-    /// Whether the coarse correlative search ran for this scan.
-    pub coarse: bool,
-}
-
-/// Everything the matcher needs. Units in brackets; defaults in `Default`.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct MatcherParams {
-    pub mode: Mode,
-    pub icp: IcpParams,
-    pub normals: NormalParams,
-    pub coarse: Coarse,
-    pub correlative: CorrelativeParams,
-    pub map: MapParams,
-    pub checks: CheckParams,
-    pub ranges: RangeParams,
-    /// Pairwise: also match the previous scan against this one and take the midpoint of the
-    /// two motions. Default true.
-    pub symmetric: bool,
-    /// Weigh the odometry as a prior in every ICP solve; `None` (the default) trusts the scans
-    /// alone and uses the odometry only as the first guess.
-    pub odometry_prior: Option<OdometryPrior>,
-}
-
-impl Default for MatcherParams {
-    fn default() -> Self {
-        Self {
-            mode: Mode::default(),
-            icp: IcpParams::default(),
-            normals: NormalParams::default(),
-            coarse: Coarse::default(),
-            correlative: CorrelativeParams::default(),
-            map: MapParams::default(),
-            checks: CheckParams::default(),
-            ranges: RangeParams::default(),
-            symmetric: true,
-            odometry_prior: None,
-        }
-    }
-}
-
-/// The odometry's noise per step, for the odometry prior: sigma = per-unit part x the step +
-/// constant part, the model `simulate::odometry` and `eval real` use.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct OdometryPrior {
-    /// Translation sigma per metre of the step, x and y each [m/m].
-    pub trans_per_m: f64,
-    /// Translation sigma added to every step \[m\].
-    pub trans_const: f64,
-    /// Heading sigma per radian of the step [rad/rad].
-    pub rot_per_rad: f64,
-    /// Heading sigma added to every step \[rad\].
-    pub rot_const: f64,
-    /// Sigma of one weighted ICP residual, which sets the scale between the two \[m\].
-    pub residual_sigma: f64,
-}
-
-impl Default for OdometryPrior {
-    /// Issue 4's perturbation: 2% + 5 mm, 2% + 0.5 degree; residuals of 1 cm.
-    fn default() -> Self {
-        Self {
-            trans_per_m: 0.02,
-            trans_const: 0.005,
-            rot_per_rad: 0.02,
-            rot_const: 0.5f64.to_radians(),
-            residual_sigma: 0.01,
-        }
-    }
-}
-
-impl OdometryPrior {
-    /// The prior centred on `at` for an odometry step `step`.
-    pub fn around(&self, at: Pose2, step: &Pose2) -> PosePrior {
-        let s_xy = self.trans_per_m * step.translation().norm() + self.trans_const;
-        let s_th = self.rot_per_rad * step.theta.abs() + self.rot_const;
-        PosePrior {
-            pose: at,
-            weight_xy: (self.residual_sigma / s_xy.max(1e-9)).powi(2),
-            weight_theta: (self.residual_sigma / s_th.max(1e-9)).powi(2),
-        }
-    }
-}
-
-/// Which readings are used. Units in brackets.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct RangeParams {
-    /// Shorter readings are ignored (the robot's own body) \[m\]. Default 0.05.
-    pub min_range: f64,
-    /// Readings at or beyond this are ignored (CARMEN writes the maximum range for "no
-    /// return") \[m\]. Default 40.
-    pub max_range: f64,
-}
-
-impl Default for RangeParams {
-    fn default() -> Self {
-        Self {
-            min_range: 0.05,
-            max_range: 40.0,
-        }
-    }
-}
-
-/// When a match is rejected. Units in brackets.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct CheckParams {
-    /// Fewest kept pairs for a trusted match [-]. Default 20.
-    pub min_correspondences: usize,
-    /// Largest RMS residual of the kept pairs \[m\]. Default 0.08.
-    pub max_residual: f64,
-    /// Smallest λ_min/λ_max of the kept pairs' normal scatter; below it the geometry is a
-    /// corridor [-]. Default 0.02.
-    pub min_constraint_ratio: f64,
-    /// With `Coarse::Auto`, the coarse search runs when fewer than this fraction of the
-    /// source points are inliers (residual within the kernel scale) [-]. Default 0.8.
-    pub coarse_trigger_fraction: f64,
-    /// Largest accepted distance between the match and the odometry guess \[m\]. Default 0.6
-    /// (the coarse search's 0.4 m window and ICP's reach beyond it).
-    pub max_correction_xy: f64,
-    /// Largest accepted heading change from the odometry guess \[rad\]. Default 30 deg.
-    pub max_correction_theta: f64,
-    /// Metascan: the largest move the map may make to the pairwise stage's answer \[m\].
-    /// Default 0.1.
-    pub max_map_correction_xy: f64,
-}
-
-impl Default for CheckParams {
-    fn default() -> Self {
-        Self {
-            min_correspondences: 20,
-            max_residual: 0.08,
-            min_constraint_ratio: 0.02,
-            coarse_trigger_fraction: 0.8,
-            max_correction_xy: 0.6,
-            max_correction_theta: 30f64.to_radians(),
-            max_map_correction_xy: 0.1,
-        }
-    }
-}
+use nalgebra::{Matrix3, Point2, Vector2};
 
 /// A scan's usable rays as robot-frame 2D points, in ray order.
 pub fn scan_points(scan: &Scan, ranges: &RangeParams) -> Vec<Point2<f64>> {
@@ -265,6 +57,11 @@ pub struct Matcher {
     map: VoxelMap,
     /// Whether the current and previous scans both have odometry (for the prior).
     has_odometry: bool,
+    /// Metascan: the covariance of the keyframe's estimate relative to the map, world frame.
+    /// A step between two scans matched to the map carries both scans' errors.
+    keyframe_covariance: Matrix3<f64>,
+    /// The current scan's rays per degree, which widens its covariance.
+    rays_per_degree: f64,
 }
 
 impl Matcher {
@@ -275,6 +72,8 @@ impl Matcher {
             keyframe: None,
             map: VoxelMap::new(params.map),
             has_odometry: false,
+            keyframe_covariance: Matrix3::zeros(),
+            rays_per_degree: 0.0,
         }
     }
 
@@ -288,6 +87,7 @@ impl Matcher {
     pub fn push(&mut self, points: &[Point2<f64>], odometry: Option<Pose2>) -> MatchReport {
         self.has_odometry =
             odometry.is_some() && self.previous.is_some_and(|(_, prev)| prev.is_some());
+        self.rays_per_degree = rays_per_degree(points);
         let report = match self.previous {
             None => self.first(points, odometry),
             Some((prev_estimate, prev_odometry)) => match self.params.mode {
@@ -305,6 +105,7 @@ impl Matcher {
             MatchStatus::Fallback(FallbackReason::NoValidRays)
         } else {
             self.remember(points, estimate, odometry);
+            self.keyframe_covariance = Matrix3::zeros();
             MatchStatus::First
         };
         MatchReport {
@@ -314,6 +115,7 @@ impl Matcher {
             correspondences: 0,
             residual: None,
             coarse: false,
+            covariance: Matrix3::zeros(),
         }
     }
 
@@ -366,13 +168,14 @@ impl Matcher {
         prev_odometry: Option<Pose2>,
     ) -> MatchReport {
         let Some(keyframe) = &self.keyframe else {
-            let estimate = prev_estimate.compose(&odometry_step(prev_odometry, odometry));
+            let step = odometry_step(prev_odometry, odometry);
+            let estimate = prev_estimate.compose(&step);
             let reason = if points.is_empty() {
                 FallbackReason::NoValidRays
             } else {
                 FallbackReason::NoReference
             };
-            return self.fallback(points, odometry, estimate, reason, None);
+            return self.fallback(points, odometry, estimate, reason, &step);
         };
         let guess = odometry_step(keyframe.odometry, odometry);
         let odometry_estimate = keyframe.estimate.compose(&guess);
@@ -382,20 +185,20 @@ impl Matcher {
                 odometry,
                 odometry_estimate,
                 FallbackReason::NoValidRays,
-                None,
+                &guess,
             );
         }
         let (result, coarse) = self.align(points, &keyframe.reference, guess);
         let result = result.map(|r| self.symmetrize(points, &keyframe.reference, r));
         let keyframe_estimate = keyframe.estimate;
-        self.finish(
-            points,
-            odometry,
-            result,
-            coarse,
-            |r| keyframe_estimate.compose(&r.pose),
+        // The ICP pose is already keyframe_from_scan, so its covariance is relative to it.
+        let reference = Reference {
+            base: keyframe_estimate,
+            theta: 0.0,
             odometry_estimate,
-        )
+            step: guess,
+        };
+        self.finish(points, odometry, result, coarse, reference)
     }
 
     /// Matches the other way too (the reference's points against this scan's lines) and takes
@@ -441,16 +244,17 @@ impl Matcher {
         prev_estimate: Pose2,
         prev_odometry: Option<Pose2>,
     ) -> MatchReport {
-        let guess = prev_estimate.compose(&odometry_step(prev_odometry, odometry));
+        let step = odometry_step(prev_odometry, odometry);
+        let guess = prev_estimate.compose(&step);
         if points.is_empty() {
-            return self.fallback(points, odometry, guess, FallbackReason::NoValidRays, None);
+            return self.fallback(points, odometry, guess, FallbackReason::NoValidRays, &step);
         }
         if self.map.is_empty() {
             // Nothing to match against yet (e.g. the first pose failed to level and had no
             // valid ray): this scan starts the map at its odometry guess, as a first scan does;
             // otherwise the map would stay empty for the whole run.
             self.remember(points, guess, odometry);
-            return self.fallback(points, odometry, guess, FallbackReason::NoReference, None);
+            return self.fallback(points, odometry, guess, FallbackReason::NoReference, &step);
         }
         // First against the last scan that went into the map (as pairwise, with the coarse
         // search when needed): one scan has one clear basin, the map may have several near a
@@ -464,7 +268,13 @@ impl Matcher {
             coarse = used_coarse;
             if let Ok(r) = local {
                 start = kf.estimate.compose(&r.pose);
-                local_ok = Some(IcpResult { pose: start, ..r });
+                // In the world frame, as the map's result is.
+                let covariance = r.covariance.map(|c| rotate_into(&c, -kf.estimate.theta));
+                local_ok = Some(IcpResult {
+                    pose: start,
+                    covariance,
+                    ..r
+                });
             }
         }
         // The start is already within millimetres; in a map whose walls are a few voxels
@@ -477,7 +287,6 @@ impl Matcher {
             epsilon_theta: self.params.icp.epsilon_theta * 10.0,
             ..self.params.icp
         };
-        let step = odometry_step(prev_odometry, odometry);
         let prior = self
             .params
             .odometry_prior
@@ -502,7 +311,16 @@ impl Matcher {
             (Err(_), Some(local)) => Ok(local),
             (result, None) => result,
         };
-        self.finish(points, odometry, result, coarse, |r| r.pose, guess)
+        // The reference scan is the last one that went into the map (the keyframe): the
+        // world-frame covariance is turned into its frame.
+        let theta = self.keyframe.as_ref().map_or(0.0, |kf| kf.estimate.theta);
+        let reference = Reference {
+            base: Pose2::identity(),
+            theta,
+            odometry_estimate: guess,
+            step,
+        };
+        self.finish(points, odometry, result, coarse, reference)
     }
 
     /// ICP against one scan from `guess`, with the coarse search (over that scan's points)
@@ -616,13 +434,14 @@ impl Matcher {
         odometry: Option<Pose2>,
         result: Result<IcpResult, FallbackReason>,
         coarse: bool,
-        estimate_of: impl Fn(&IcpResult) -> Pose2,
-        odometry_estimate: Pose2,
+        reference: Reference,
     ) -> MatchReport {
         match result {
             Ok(r) => {
-                let estimate = estimate_of(&r);
+                let estimate = reference.base.compose(&r.pose);
+                let (covariance, own) = self.match_covariance(&r, &reference);
                 self.remember(points, estimate, odometry);
+                self.keyframe_covariance = own;
                 MatchReport {
                     estimate,
                     status: MatchStatus::Ok,
@@ -630,14 +449,60 @@ impl Matcher {
                     correspondences: r.correspondences,
                     residual: Some(r.residual),
                     coarse,
+                    covariance,
                 }
             }
             Err(reason) => {
-                let mut report = self.fallback(points, odometry, odometry_estimate, reason, None);
+                let mut report = self.fallback(
+                    points,
+                    odometry,
+                    reference.odometry_estimate,
+                    reason,
+                    &reference.step,
+                );
                 report.coarse = coarse;
                 report
             }
         }
+    }
+
+    /// The reported covariance of an accepted match: the sandwich turned into the reference
+    /// scan's frame, widened by `CovarianceParams`, fused with the odometry's when the odometry
+    /// prior took part in the solve (the estimate is then the MAP of both). A match whose pairs
+    /// left no covariance (cannot pass the checks, but to be safe) reports the odometry's.
+    /// Metascan matches against the map, so the step from the keyframe also carries the
+    /// keyframe's own error against the map (their sum: the errors are not anticorrelated).
+    /// Returns the reported covariance and, in the ICP target's frame, this scan's own.
+    fn match_covariance(
+        &self,
+        r: &IcpResult,
+        reference: &Reference,
+    ) -> (Matrix3<f64>, Matrix3<f64>) {
+        let odometry = self.odometry_model().step_covariance(&reference.step);
+        let own = match r.covariance {
+            Some(scan) => {
+                let k = inflation(&self.params.covariance, r.residual, self.rays_per_degree);
+                let scan = scan * k;
+                if self.params.odometry_prior.is_some() && self.has_odometry {
+                    // The odometry's is isotropic in x, y: the same in every frame.
+                    fuse(&scan, &odometry).unwrap_or(scan)
+                } else {
+                    scan
+                }
+            }
+            None => rotate_into(&odometry, -reference.theta),
+        };
+        let relative = match self.params.mode {
+            Mode::Pairwise => own,
+            Mode::Metascan => own + self.keyframe_covariance,
+        };
+        (rotate_into(&relative, reference.theta), own)
+    }
+
+    /// The odometry noise model: the prior's when one is set, else the default (the
+    /// perturbation `simulate` and `eval real` apply).
+    fn odometry_model(&self) -> OdometryPrior {
+        self.params.odometry_prior.unwrap_or_default()
     }
 
     fn fallback(
@@ -646,23 +511,37 @@ impl Matcher {
         odometry: Option<Pose2>,
         estimate: Pose2,
         reason: FallbackReason,
-        residual: Option<f64>,
+        step: &Pose2,
     ) -> MatchReport {
         // The next scan is first matched against this one (placed by odometry), so one bad step
         // does not poison the next. Metascan keeps it out of the map, which stays clean, but its
         // first (pairwise) stage starts from this scan, the nearest in space and time.
+        let covariance = self.odometry_model().step_covariance(step);
         if !points.is_empty() {
             self.set_keyframe(points, estimate, odometry);
+            // Placed by odometry from the previous scan (isotropic in x, y: any frame).
+            self.keyframe_covariance += covariance;
         }
         MatchReport {
             estimate,
             status: MatchStatus::Fallback(reason),
             iterations: 0,
             correspondences: 0,
-            residual,
+            residual: None,
             coarse: false,
+            covariance,
         }
     }
+}
+
+/// Where a match's result goes: the estimate is `base ⊕` the ICP pose; `theta` is the heading
+/// of the reference scan's frame in the ICP target's frame (for the covariance); the odometry's
+/// answer and step serve a fallback.
+struct Reference {
+    base: Pose2,
+    theta: f64,
+    odometry_estimate: Pose2,
+    step: Pose2,
 }
 
 /// Which of two ICP results to trust: more inliers, then the smaller residual.

@@ -6,22 +6,31 @@
 //! - [`icp`](mod@icp): the ICP loop with trimming (Chetverikov et al. 2002) and a robust kernel.
 //! - [`correlative`]: the coarse correlative search (Olson 2009) that widens the basin.
 //! - [`map`]: the bounded voxel map for metascan matching.
+//! - [`covariance`]: the match's covariance (sandwich estimator, Censi 2007).
+//! - [`params`]: the matcher's settings.
+//! - [`report`]: what each scan's match reports.
 //! - [`matcher`]: a run of scans, one at a time, with fallback to odometry.
 //!
 //! All of it is pure: points and poses in, poses and reports out.
 
 pub mod correlative;
+pub mod covariance;
 pub mod icp;
 pub mod map;
 pub mod matcher;
+pub mod params;
 pub mod reference;
+pub mod report;
 pub mod solve;
 
 pub use correlative::{CorrelativeParams, correlative_search};
+pub use covariance::rays_per_degree;
 pub use icp::{IcpParams, IcpResult, Kernel, Metric, PosePrior, icp, icp_with_prior};
 pub use map::{MapParams, VoxelMap};
 pub use matcher::{
-    CheckParams, Coarse, FallbackReason, MatchReport, MatchStatus, Matcher, MatcherParams, Mode,
-    OdometryPrior, RangeParams, match_run, odometry_step, scan_points,
+    FallbackReason, MatchReport, MatchStatus, Matcher, match_run, odometry_step, scan_points,
+};
+pub use params::{
+    CheckParams, Coarse, CovarianceParams, MatcherParams, Mode, OdometryPrior, RangeParams,
 };
 pub use reference::{Line, NormalParams, ScanReference, Target, estimate_lines};
