@@ -7,7 +7,7 @@ use super::*;
 /// Points whose range changes from scan to scan like a level surface's: in their column, the
 /// range to a neighbouring row's point differs by more than `r de` for the elevation step `de`
 /// (`r cot(a) de` on a surface seen `a` < 45 degrees off the beams' plane, `r tan(b) de` on a
-/// wall met at vertical incidence `b`, see [`super::steep`]), plus a margin for the noise of
+/// wall met at vertical incidence `b`), plus a margin for the noise of
 /// two ranges. A floor or ceiling takes no other point: at high noise a wall's foot lies within
 /// a floor's tolerance, and a band of wall points at one height could pass for a floor.
 ///
