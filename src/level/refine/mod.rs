@@ -174,13 +174,11 @@ pub fn refine(
     sigma: f64,
 ) -> Option<Refined> {
     let s = sigma.max(params.min_sigma);
-    let k = params.refine_k;
     let mut up = start.up;
     let mut sigma_up = start_sigma(start, params);
     // Wall planes to assign from, robot frame.
     let mut wall_fits: Vec<PlaneFit> = walls.iter().map(|p| p.fit).collect();
     let mut level_fits: Vec<PlaneFit> = Vec::new();
-    let levelish = &steps.levelish;
     let mut result: Option<Refined> = None;
     let seed_width = if params.refine_discover {
         super::patches::seed_cols(grid, params, s).max(3)
@@ -188,237 +186,37 @@ pub fn refine(
         0
     };
     for pass in 0..params.refine_passes {
+        // 1. Every point leveled with the current up.
         let level_from_robot = Attitude::from_up(&up).level_from_robot();
-        let lv = Leveled::new(grid, &level_from_robot);
-        let level_ok = flat_points(grid, &lv, s, params.min_sigma, sigma_up, k);
-        if params.level_surfaces {
-            // The first pass looks for the floor and ceiling in its level frame (the region-grown
-            // ones can have run up a wall's foot); later passes start from what it found.
-            let fresh = pass == 0;
-            level_fits = find_levels(
-                grid,
-                &lv,
-                &level_ok,
-                levelish,
-                &level_fits,
-                fresh,
-                &up,
-                params,
-                s,
-                sigma_up,
-            );
-        }
-        // Floor and ceiling members, and the band around them that walls may not take.
-        let mut level_members: Vec<Vec<usize>> = vec![Vec::new(); level_fits.len()];
-        let mut near_level = vec![false; grid.points.len()];
-        let level_models: Vec<LevelModel> =
-            level_fits.iter().map(|f| LevelModel::new(f, s)).collect();
-        for (i, g) in grid.points.iter().enumerate() {
-            let Some(g) = g else { continue };
-            let mut reach = 0;
-            let mut which = 0;
-            for (m, f) in level_models.iter().enumerate() {
-                let (d, sd) = f.distance_sd(g, s, params.min_sigma);
-                if d <= k * sd {
-                    reach += 1;
-                    which = m;
-                }
-                if d <= k * sd + params.flat_margin {
-                    near_level[i] = true;
-                }
-            }
-            if reach == 1 && level_ok[i] {
-                level_members[which].push(i);
-            }
-        }
-        // Without a floor model, the lowest points seen stand for the floor: the band above
-        // them holds a wall's foot and the floor just in front of it, which no vertical plane
-        // tells apart at high noise. If no floor is in view, this only trims the lowest wall
-        // points.
-        if !level_fits.iter().any(|f| f.centroid.coords.dot(&up) < 0.0) {
-            if let Some(low) = extreme_height(&lv, true) {
-                for i in level_band(&lv, low, true, sigma_up, k, s, params) {
-                    near_level[i] = true;
-                }
-            }
-        }
-        // Likewise the highest points stand for a ceiling without a model, when a few of them
-        // step from scan to scan as a ceiling does: the band below them holds a wall's top and
-        // the ceiling just beyond it (traced at 1 cm: a wall's plane through that corner, 7
-        // degrees off vertical, leveled a pose 7 degrees off with a sigma of 1.4). Without such
-        // steps the highest points are the tops of walls, which keep them.
-        if !level_fits.iter().any(|f| f.centroid.coords.dot(&up) > 0.0) {
-            if let Some(high) = extreme_height(&lv, false) {
-                let band: Vec<usize> =
-                    level_band(&lv, high, false, sigma_up, k, s, params).collect();
-                if band.iter().filter(|&&i| steps.ceiling[i]).count() >= CEILING_BAND_MIN_STEPS {
-                    for i in band {
-                        near_level[i] = true;
-                    }
-                }
-            }
-        }
-        // Walls: merge those that are one wall, then assign by horizontal distance.
-        let mut lines: Vec<Line> = wall_fits
-            .iter()
-            .filter_map(|f| line_of(f, &level_from_robot))
-            .collect();
-        let candidate: Vec<bool> = (0..grid.points.len())
-            .map(|i| lv.q[i].is_some() && !near_level[i] && !levelish[i])
-            .collect();
-        // New walls are looked for once; later passes carry them as models.
-        if params.refine_discover && pass == 0 {
-            lines.extend(discover_lines(grid, &lv, &candidate, seed_width, params, s));
-        }
-        merge_lines(&mut lines, params, s);
-        let cos_similar = SIMILAR_LINES_DEG.to_radians().cos();
-        let mut wall_members: Vec<Vec<usize>> = vec![Vec::new(); lines.len()];
-        // Candidates within reach of a line (the floor and ceiling lines below keep off them).
-        let mut in_reach = vec![false; grid.points.len()];
-        for (i, q) in lv.q.iter().enumerate() {
-            let Some((q, d)) = q else { continue };
-            if !candidate[i] {
-                continue;
-            }
-            // The nearest line in sigmas, and the runner-up within reach.
-            let mut best: Option<(f64, usize)> = None;
-            let mut second: Option<(f64, usize)> = None;
-            for (m, l) in lines.iter().enumerate() {
-                let Some(z) = line_z2(l, q, d, s, params.min_sigma, sigma_up, k * k) else {
-                    continue;
-                };
-                if best.is_none_or(|b| z < b.0) {
-                    second = best;
-                    best = Some((z, m));
-                } else if second.is_none_or(|b| z < b.0) {
-                    second = Some((z, m));
-                }
-            }
-            let Some((_, m)) = best else { continue };
-            in_reach[i] = true;
-            // In reach of two walls that meet (a corner): no one's point. Two nearly parallel
-            // lines in reach are one wall's pieces left unmerged: the nearer takes it.
-            if second
-                .is_some_and(|(_, o)| lines[m].normal.dot(&lines[o].normal).abs() < cos_similar)
-            {
-                continue;
-            }
-            wall_members[m].push(i);
-        }
-        let min_rows = params.refine_min_rows.max(2);
-        let mut models: Vec<Model> = Vec::new();
-        for members in wall_members {
-            if members.len() < params.min_patch_points
-                || rows_supported(grid, &members, WALL_ROW_SHARE) < min_rows
-            {
-                continue;
-            }
-            let Some(fit) = fit_members(grid, &members, sigma) else {
-                continue;
-            };
-            // A wall must stay a wall; what turned towards up was floor after all.
-            if fit.normal.dot(&up).abs() > params.wall_cos() {
-                continue;
-            }
-            models.push(Model {
-                kind: SurfaceKind::Wall,
-                fit,
-                members,
-            });
-        }
-        let walls_found = models.len();
-        for (f, members) in level_fits.iter().zip(level_members) {
-            let members = without_standing_rows(grid, members, s, params);
-            if members.len() < params.min_level_points || !two_rows_support(grid, &members) {
-                continue;
-            }
-            let Some(fit) = fit_members(grid, &members, sigma) else {
-                continue;
-            };
-            let kind = if f.centroid.coords.dot(&up) < 0.0 {
-                SurfaceKind::Floor
-            } else {
-                SurfaceKind::Ceiling
-            };
-            if fit.misfit_ratio(s) > params.refine_level_misfit
-                || fit.normal.dot(&up).abs() < params.refine_level_cos()
-                || !clear_of_scanner(&fit.normal, &fit.centroid)
-                // Over two scans it must agree with up (one leveled a pose 7 degrees off
-                // with a sigma of 0.1); over three, it may overrule a wrong start.
-                || (!three_rows_support(grid, &members) && level_z2(&fit, &up, s, sigma_up) > k * k)
-                || !opaque(grid, &fit, s, params)
-            {
-                continue;
-            }
-            models.push(Model { kind, fit, members });
-        }
-        let mut flat_lines: Vec<LevelLine> = Vec::new();
-        if params.level_surfaces && params.level_lines {
-            // Points of a model, or within reach of a wall's vertical plane (a wall line near
-            // its foot lies at the floor's height within the provisional frame's tolerance).
-            let mut taken = vec![false; grid.points.len()];
-            for m in &models {
-                for &i in &m.members {
-                    taken[i] = true;
-                }
-            }
-            for (i, q) in lv.q.iter().enumerate() {
-                let Some((q, d)) = q else { continue };
-                if taken[i] {
-                    continue;
-                }
-                // Candidates were tried against every line above.
-                taken[i] = if candidate[i] {
-                    in_reach[i]
-                } else {
-                    lines
-                        .iter()
-                        .any(|l| line_z2(l, q, d, s, params.min_sigma, sigma_up, k * k).is_some())
-                };
-            }
-            for kind in [SurfaceKind::Floor, SurfaceKind::Ceiling] {
-                if models.iter().any(|m| m.kind == kind) {
-                    continue;
-                }
-                let ctx = LineContext {
-                    grid,
-                    lv: &lv,
-                    levelish: if kind == SurfaceKind::Floor {
-                        &steps.floor_line
-                    } else {
-                        &steps.ceiling
-                    },
-                    taken: &taken,
-                    up: &up,
-                    s,
-                    sigma_up,
-                };
-                match level_lines(&ctx, kind, params) {
-                    LevelEvidence::None => {}
-                    LevelEvidence::Lines(found) => flat_lines.extend(found),
-                    LevelEvidence::Plane(fit, members) => models.push(Model { kind, fit, members }),
-                }
-            }
-        }
-        let obs: Vec<PlaneObs> = models
-            .iter()
-            .map(|m| m.obs(s, params))
-            .chain(
-                flat_lines
-                    .iter()
-                    .map(|l| PlaneObs::level_line(l, params.level_line_inflation)),
-            )
-            .collect();
-        let sol = match up::up_robust(&obs, s, params.iterations) {
-            Some(sol) => sol,
-            // Lines that leave no up within reach were wrong: the models stand alone.
-            None if !flat_lines.is_empty() => {
-                let sol = up::up_robust(&obs[..models.len()], s, params.iterations)?;
-                flat_lines.clear();
-                sol
-            }
-            None => return None,
+        let f = Frame {
+            grid,
+            params,
+            steps,
+            lv: Leveled::new(grid, &level_from_robot),
+            level_from_robot,
+            up,
+            s,
+            sigma,
+            k: params.refine_k,
+            sigma_up,
         };
+        let level_ok = flat_points(grid, &f.lv, s, params.min_sigma, sigma_up, f.k);
+        if params.level_surfaces {
+            level_fits = levels_in(&f, &level_ok, &level_fits, pass == 0);
+        }
+        // 2. Points assigned to the floor and ceiling, then to walls; 3. the models refitted.
+        let (level_members, near_level) = assign_levels(&f, &level_fits, &level_ok);
+        // New walls are looked for once; later passes carry them as models.
+        let discover = params.refine_discover && pass == 0;
+        let mut walls = assign_walls(&f, &wall_fits, &near_level, discover, seed_width);
+        let (mut models, walls_found) = models_of(
+            &f,
+            std::mem::take(&mut walls.members),
+            &level_fits,
+            level_members,
+        );
+        let flat_lines = level_line_evidence(&f, &walls, &mut models);
+        let (sol, flat_lines) = solve_models(&f, &models, flat_lines)?;
         let change = sol.up.angle(&up);
         up = sol.up;
         sigma_up = sol
@@ -437,6 +235,358 @@ pub fn refine(
         }
     }
     result
+}
+
+/// The floor and ceiling planes of a pass ([`find_levels`]): the first pass (`fresh`) looks
+/// for them in its level frame (the region-grown ones can have run up a wall's foot); later
+/// passes start from what it found (`given`).
+fn levels_in(f: &Frame, level_ok: &[bool], given: &[PlaneFit], fresh: bool) -> Vec<PlaneFit> {
+    find_levels(
+        f.grid,
+        &f.lv,
+        level_ok,
+        &f.steps.levelish,
+        given,
+        fresh,
+        &f.up,
+        f.params,
+        f.s,
+        f.sigma_up,
+    )
+}
+
+/// One pass's provisional level frame and the tolerances of assigning points in it.
+struct Frame<'a> {
+    grid: &'a PoseGrid,
+    params: &'a LevelParams,
+    steps: &'a LevelSteps,
+    lv: Leveled,
+    level_from_robot: Rotation3<f64>,
+    up: Vector3<f64>,
+    /// Effective range noise (floored at `min_sigma`) \[m\].
+    s: f64,
+    /// The range noise as given, for the plane fits \[m\].
+    sigma: f64,
+    /// `refine_k`.
+    k: f64,
+    /// Up's uncertainty \[rad\].
+    sigma_up: f64,
+}
+
+/// The floor's and ceiling's members (points in reach of one level model only, and flat to a
+/// neighbour), and the band around them that walls may not take.
+fn assign_levels(
+    f: &Frame,
+    level_fits: &[PlaneFit],
+    level_ok: &[bool],
+) -> (Vec<Vec<usize>>, Vec<bool>) {
+    let Frame {
+        grid,
+        params,
+        steps,
+        ref lv,
+        up,
+        s,
+        k,
+        sigma_up,
+        ..
+    } = *f;
+    let mut level_members: Vec<Vec<usize>> = vec![Vec::new(); level_fits.len()];
+    let mut near_level = vec![false; grid.points.len()];
+    let level_models: Vec<LevelModel> = level_fits.iter().map(|f| LevelModel::new(f, s)).collect();
+    for (i, g) in grid.points.iter().enumerate() {
+        let Some(g) = g else { continue };
+        let mut reach = 0;
+        let mut which = 0;
+        for (m, f) in level_models.iter().enumerate() {
+            let (d, sd) = f.distance_sd(g, s, params.min_sigma);
+            if d <= k * sd {
+                reach += 1;
+                which = m;
+            }
+            if d <= k * sd + params.flat_margin {
+                near_level[i] = true;
+            }
+        }
+        if reach == 1 && level_ok[i] {
+            level_members[which].push(i);
+        }
+    }
+    // Without a floor model, the lowest points seen stand for the floor: the band above
+    // them holds a wall's foot and the floor just in front of it, which no vertical plane
+    // tells apart at high noise. If no floor is in view, this only trims the lowest wall
+    // points.
+    if !level_fits.iter().any(|f| f.centroid.coords.dot(&up) < 0.0) {
+        if let Some(low) = extreme_height(lv, true) {
+            for i in level_band(lv, low, true, sigma_up, k, s, params) {
+                near_level[i] = true;
+            }
+        }
+    }
+    // Likewise the highest points stand for a ceiling without a model, when a few of them
+    // step from scan to scan as a ceiling does: the band below them holds a wall's top and
+    // the ceiling just beyond it (traced at 1 cm: a wall's plane through that corner, 7
+    // degrees off vertical, leveled a pose 7 degrees off with a sigma of 1.4). Without such
+    // steps the highest points are the tops of walls, which keep them.
+    if !level_fits.iter().any(|f| f.centroid.coords.dot(&up) > 0.0) {
+        if let Some(high) = extreme_height(lv, false) {
+            let band: Vec<usize> = level_band(lv, high, false, sigma_up, k, s, params).collect();
+            if band.iter().filter(|&&i| steps.ceiling[i]).count() >= CEILING_BAND_MIN_STEPS {
+                for i in band {
+                    near_level[i] = true;
+                }
+            }
+        }
+    }
+    (level_members, near_level)
+}
+
+/// Points assigned to walls: the walls' lines (`wall_fits` in this frame, merged, and with
+/// `discover` the lines found in each leveled scan), the wall candidates (not near a level
+/// surface, not stepping like one), and each line's members.
+struct WallAssignment {
+    lines: Vec<Line>,
+    candidate: Vec<bool>,
+    members: Vec<Vec<usize>>,
+    /// Candidates within reach of a line (the floor and ceiling lines keep off them).
+    in_reach: Vec<bool>,
+}
+
+fn assign_walls(
+    f: &Frame,
+    wall_fits: &[PlaneFit],
+    near_level: &[bool],
+    discover: bool,
+    seed_width: usize,
+) -> WallAssignment {
+    let Frame {
+        grid,
+        params,
+        steps,
+        ref lv,
+        level_from_robot,
+        s,
+        k,
+        sigma_up,
+        ..
+    } = *f;
+    // Walls: merge those that are one wall, then assign by horizontal distance.
+    let mut lines: Vec<Line> = wall_fits
+        .iter()
+        .filter_map(|f| line_of(f, &level_from_robot))
+        .collect();
+    let candidate: Vec<bool> = (0..grid.points.len())
+        .map(|i| lv.q[i].is_some() && !near_level[i] && !steps.levelish[i])
+        .collect();
+    if discover {
+        lines.extend(discover_lines(grid, lv, &candidate, seed_width, params, s));
+    }
+    merge_lines(&mut lines, params, s);
+    let cos_similar = SIMILAR_LINES_DEG.to_radians().cos();
+    let mut wall_members: Vec<Vec<usize>> = vec![Vec::new(); lines.len()];
+    // Candidates within reach of a line (the floor and ceiling lines below keep off them).
+    let mut in_reach = vec![false; grid.points.len()];
+    for (i, q) in lv.q.iter().enumerate() {
+        let Some((q, d)) = q else { continue };
+        if !candidate[i] {
+            continue;
+        }
+        // The nearest line in sigmas, and the runner-up within reach.
+        let mut best: Option<(f64, usize)> = None;
+        let mut second: Option<(f64, usize)> = None;
+        for (m, l) in lines.iter().enumerate() {
+            let Some(z) = line_z2(l, q, d, s, params.min_sigma, sigma_up, k * k) else {
+                continue;
+            };
+            if best.is_none_or(|b| z < b.0) {
+                second = best;
+                best = Some((z, m));
+            } else if second.is_none_or(|b| z < b.0) {
+                second = Some((z, m));
+            }
+        }
+        let Some((_, m)) = best else { continue };
+        in_reach[i] = true;
+        // In reach of two walls that meet (a corner): no one's point. Two nearly parallel
+        // lines in reach are one wall's pieces left unmerged: the nearer takes it.
+        if second.is_some_and(|(_, o)| lines[m].normal.dot(&lines[o].normal).abs() < cos_similar) {
+            continue;
+        }
+        wall_members[m].push(i);
+    }
+    WallAssignment {
+        lines,
+        candidate,
+        members: wall_members,
+        in_reach,
+    }
+}
+
+/// The refitted models: walls that span `refine_min_rows` scans and stay walls, then the
+/// floor and ceiling that pass the level checks; with the count of walls.
+fn models_of(
+    f: &Frame,
+    wall_members: Vec<Vec<usize>>,
+    level_fits: &[PlaneFit],
+    level_members: Vec<Vec<usize>>,
+) -> (Vec<Model>, usize) {
+    let Frame {
+        grid,
+        params,
+        up,
+        s,
+        sigma,
+        k,
+        sigma_up,
+        ..
+    } = *f;
+    let min_rows = params.refine_min_rows.max(2);
+    let mut models: Vec<Model> = Vec::new();
+    for members in wall_members {
+        if members.len() < params.min_patch_points
+            || rows_supported(grid, &members, WALL_ROW_SHARE) < min_rows
+        {
+            continue;
+        }
+        let Some(fit) = fit_members(grid, &members, sigma) else {
+            continue;
+        };
+        // A wall must stay a wall; what turned towards up was floor after all.
+        if fit.normal.dot(&up).abs() > params.wall_cos() {
+            continue;
+        }
+        models.push(Model {
+            kind: SurfaceKind::Wall,
+            fit,
+            members,
+        });
+    }
+    let walls_found = models.len();
+    for (f, members) in level_fits.iter().zip(level_members) {
+        let members = without_standing_rows(grid, members, s, params);
+        if members.len() < params.min_level_points || !two_rows_support(grid, &members) {
+            continue;
+        }
+        let Some(fit) = fit_members(grid, &members, sigma) else {
+            continue;
+        };
+        let kind = if f.centroid.coords.dot(&up) < 0.0 {
+            SurfaceKind::Floor
+        } else {
+            SurfaceKind::Ceiling
+        };
+        if fit.misfit_ratio(s) > params.refine_level_misfit
+            || fit.normal.dot(&up).abs() < params.refine_level_cos()
+            || !clear_of_scanner(&fit.normal, &fit.centroid)
+            // Over two scans it must agree with up (one leveled a pose 7 degrees off
+            // with a sigma of 0.1); over three, it may overrule a wrong start.
+            || (!three_rows_support(grid, &members) && level_z2(&fit, &up, s, sigma_up) > k * k)
+            || !opaque(grid, &fit, s, params)
+        {
+            continue;
+        }
+        models.push(Model { kind, fit, members });
+    }
+    (models, walls_found)
+}
+
+/// Floor and ceiling lines where no level model was found (`level_lines`): each added to
+/// `models` when several scans' lines make one plane, else returned as lines.
+fn level_line_evidence(
+    f: &Frame,
+    walls: &WallAssignment,
+    models: &mut Vec<Model>,
+) -> Vec<LevelLine> {
+    let Frame {
+        grid,
+        params,
+        steps,
+        ref lv,
+        up,
+        s,
+        k,
+        sigma_up,
+        ..
+    } = *f;
+    let (lines, candidate, in_reach) = (&walls.lines, &walls.candidate, &walls.in_reach);
+    let mut flat_lines: Vec<LevelLine> = Vec::new();
+    if params.level_surfaces && params.level_lines {
+        // Points of a model, or within reach of a wall's vertical plane (a wall line near
+        // its foot lies at the floor's height within the provisional frame's tolerance).
+        let mut taken = vec![false; grid.points.len()];
+        for m in models.iter() {
+            for &i in &m.members {
+                taken[i] = true;
+            }
+        }
+        for (i, q) in lv.q.iter().enumerate() {
+            let Some((q, d)) = q else { continue };
+            if taken[i] {
+                continue;
+            }
+            // Candidates were tried against every line above.
+            taken[i] = if candidate[i] {
+                in_reach[i]
+            } else {
+                lines
+                    .iter()
+                    .any(|l| line_z2(l, q, d, s, params.min_sigma, sigma_up, k * k).is_some())
+            };
+        }
+        for kind in [SurfaceKind::Floor, SurfaceKind::Ceiling] {
+            if models.iter().any(|m| m.kind == kind) {
+                continue;
+            }
+            let ctx = LineContext {
+                grid,
+                lv,
+                levelish: if kind == SurfaceKind::Floor {
+                    &steps.floor_line
+                } else {
+                    &steps.ceiling
+                },
+                taken: &taken,
+                up: &up,
+                s,
+                sigma_up,
+            };
+            match level_lines(&ctx, kind, params) {
+                LevelEvidence::None => {}
+                LevelEvidence::Lines(found) => flat_lines.extend(found),
+                LevelEvidence::Plane(fit, members) => models.push(Model { kind, fit, members }),
+            }
+        }
+    }
+    flat_lines
+}
+
+/// Up from the models and the level lines; without the lines when they leave no up.
+fn solve_models(
+    f: &Frame,
+    models: &[Model],
+    mut flat_lines: Vec<LevelLine>,
+) -> Option<(UpSolution, Vec<LevelLine>)> {
+    let (s, params) = (f.s, f.params);
+    let obs: Vec<PlaneObs> = models
+        .iter()
+        .map(|m| m.obs(s, params))
+        .chain(
+            flat_lines
+                .iter()
+                .map(|l| PlaneObs::level_line(l, params.level_line_inflation)),
+        )
+        .collect();
+    let sol = match up::up_robust(&obs, s, params.iterations) {
+        Some(sol) => sol,
+        // Lines that leave no up within reach were wrong: the models stand alone.
+        None if !flat_lines.is_empty() => {
+            let sol = up::up_robust(&obs[..models.len()], s, params.iterations)?;
+            flat_lines.clear();
+            sol
+        }
+        None => return None,
+    };
+    Some((sol, flat_lines))
 }
 
 /// Passes stop when up moves by less than this fraction of its uncertainty.
