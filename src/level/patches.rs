@@ -82,8 +82,6 @@ pub fn seed_cols(grid: &PoseGrid, params: &LevelParams, sigma: f64) -> usize {
 
 /// No patch.
 pub const UNLABELLED: u32 = u32::MAX;
-/// Kept out of every patch while growing.
-const BLOCKED: u32 = u32::MAX - 1;
 
 /// Grows patches from seed quads: walls first, best-fitting first, then floors and ceilings;
 /// three-row seeds before two-row ones (a wall that only two scans reach, e.g. ahead of a robot
@@ -94,24 +92,15 @@ const BLOCKED: u32 = u32::MAX - 1;
 /// refitted as the patch grows. Finally members farther than that from the final plane are
 /// released and the plane refitted once more.
 /// Returns the patches and, per grid point, the index of its patch or [`UNLABELLED`].
-/// Points marked in `blocked` join no patch.
 pub fn grow_patches(
     grid: &PoseGrid,
     quads: &[Polygon],
     params: &LevelParams,
     sigma: f64,
-    blocked: Option<&[bool]>,
 ) -> (Vec<Patch>, Vec<u32>) {
     let n = grid.points.len();
     let cols = grid.cols;
     let mut labels = vec![UNLABELLED; n];
-    if let Some(b) = blocked {
-        for (l, &b) in labels.iter_mut().zip(b) {
-            if b {
-                *l = BLOCKED;
-            }
-        }
-    }
     let mut patches = Vec::new();
     let tol = params.grow_k * sigma.max(params.min_sigma);
     let width = seed_cols(grid, params, sigma);
@@ -121,11 +110,6 @@ pub fn grow_patches(
     } else {
         wide = extract_quads_sized(grid, params, sigma, params.quad_rows, width);
         &wide
-    };
-    let two_row: Vec<Polygon> = if params.two_row_seeds && params.quad_rows > 2 {
-        extract_quads_sized(grid, params, sigma, 2, width)
-    } else {
-        Vec::new()
     };
     // Floors and ceilings also seed from the paper's narrow quads when the seeds are wide:
     // along a level surface's normal the grazing rays carry little noise, so a narrow quad
@@ -142,7 +126,6 @@ pub fn grow_patches(
     let candidates: Vec<(u8, &Polygon)> = three_row
         .iter()
         .map(|q| (0u8, q))
-        .chain(two_row.iter().map(|q| (1u8, q)))
         .chain(narrow_level.iter().map(|q| (2u8, *q)))
         .collect();
     // Ordered by rank, then mean squared residual, then position, packed in one integer key

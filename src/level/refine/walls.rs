@@ -1,0 +1,207 @@
+//! Walls as 2D lines in the level frame: new ones discovered scan by scan (classic line
+//! extraction of a planar scan) and lines that are one wall merged.
+
+use super::*;
+
+/// New walls in the level frame, found scan by scan: a run of consecutive rays whose points
+/// lie on one 2D line within their noise (along-beam noise projected on the line's normal)
+/// seeds a line, which grows ray by ray while the next point stays within `refine_k` sigmas.
+/// This is the classic line extraction of a planar scan (e.g. Nguyen et al. 2005, "A
+/// comparison of line extraction algorithms using 2D laser rangefinder"), applied to each
+/// leveled scan; lines of different scans on one wall are merged afterwards.
+pub(crate) fn discover_lines(
+    grid: &PoseGrid,
+    lv: &Leveled,
+    candidate: &[bool],
+    width: usize,
+    params: &LevelParams,
+    s: f64,
+) -> Vec<Line> {
+    let cols = grid.cols;
+    let min_points = params.min_patch_points.max(width);
+    let k = params.refine_k;
+    let point = |i: usize| -> Option<(Vector2<f64>, Vector2<f64>, f64)> {
+        if !candidate[i] {
+            return None;
+        }
+        let (q, d) = lv.q[i].as_ref()?;
+        Some((Vector2::new(q.x, q.y), Vector2::new(d.x, d.y), q.z))
+    };
+    let mut out = Vec::new();
+    for r in 0..grid.rows() {
+        let row = r * cols;
+        let mut c = 0;
+        while c + width <= cols {
+            let mut acc = Line2::default();
+            let mut unusable = None;
+            for j in c..c + width {
+                match point(row + j) {
+                    Some((p, d, z)) => acc.add(&p, &d, z),
+                    None => {
+                        unusable = Some(j);
+                        break;
+                    }
+                }
+            }
+            // Every seed over an unusable ray fails: the next one starts past it.
+            if let Some(j) = unusable {
+                c = j + 1;
+                continue;
+            }
+            let Some(mut line) = acc
+                .line()
+                .filter(|l| acc.misfit(l, s, params.min_sigma) <= SEED_MISFIT)
+            else {
+                c += 1;
+                continue;
+            };
+            let mut end = c + width;
+            let mut gap = 0;
+            let mut refit_at = acc.n * 5 / 4 + 1;
+            while end < cols && gap <= MAX_GAP {
+                let Some((p, d, z)) = point(row + end) else {
+                    gap += 1;
+                    end += 1;
+                    continue;
+                };
+                let along = line.normal.dot(&d);
+                let sd = (s * s * along * along + params.min_sigma.powi(2)).sqrt();
+                if (line.normal.dot(&p) - line.offset).abs() > k * sd {
+                    break;
+                }
+                gap = 0;
+                acc.add(&p, &d, z);
+                end += 1;
+                if acc.n >= refit_at {
+                    if let Some(l) = acc.line() {
+                        line = l;
+                    }
+                    refit_at = acc.n * 5 / 4 + 1;
+                }
+            }
+            if acc.n >= min_points {
+                if let Some(l) = acc.line() {
+                    out.push(l);
+                }
+            }
+            c = end;
+        }
+    }
+    out
+}
+
+/// A seed's points must fit its line within this multiple of the residual their noise
+/// explains \[1\].
+pub(crate) const SEED_MISFIT: f64 = 2.0;
+
+/// Rays without a usable point that a growing line may step over.
+pub(crate) const MAX_GAP: usize = 2;
+
+/// Sums for a 2D total-least-squares line.
+#[derive(Clone, Copy, Debug, Default)]
+pub(crate) struct Line2 {
+    n: usize,
+    sum: Vector2<f64>,
+    sxx: f64,
+    sxy: f64,
+    syy: f64,
+    z: f64,
+    /// Sum of the squared ray directions (for the noise along the normal).
+    dxx: f64,
+    dxy: f64,
+    dyy: f64,
+}
+
+impl Line2 {
+    pub(crate) fn add(&mut self, p: &Vector2<f64>, d: &Vector2<f64>, z: f64) {
+        self.n += 1;
+        self.sum += p;
+        self.sxx += p.x * p.x;
+        self.sxy += p.x * p.y;
+        self.syy += p.y * p.y;
+        self.z += z;
+        self.dxx += d.x * d.x;
+        self.dxy += d.x * d.y;
+        self.dyy += d.y * d.y;
+    }
+
+    pub(crate) fn line(&self) -> Option<Line> {
+        if self.n < 3 {
+            return None;
+        }
+        let n = self.n as f64;
+        let c = self.sum / n;
+        let (a, b, d) = (
+            self.sxx / n - c.x * c.x,
+            self.sxy / n - c.x * c.y,
+            self.syy / n - c.y * c.y,
+        );
+        // Minor axis of the 2x2 scatter [[a, b], [b, d]].
+        let half = 0.5 * (a - d);
+        let root = (half * half + b * b).sqrt();
+        let minor = 0.5 * (a + d) - root;
+        let normal = if b.abs() > 1e-15 {
+            Vector2::new(b, minor - a)
+        } else if a < d {
+            Vector2::new(1.0, 0.0)
+        } else {
+            Vector2::new(0.0, 1.0)
+        }
+        .try_normalize(1e-300)?;
+        Some(Line {
+            normal,
+            offset: normal.dot(&c),
+            z: self.z / n,
+            weight: n,
+        })
+    }
+
+    /// Residual variance about `l` over what the noise explains.
+    pub(crate) fn misfit(&self, l: &Line, s: f64, min_sigma: f64) -> f64 {
+        let n = self.n as f64;
+        let c = self.sum / n;
+        let (u, v) = (l.normal.x, l.normal.y);
+        let scatter = (self.sxx / n - c.x * c.x) * u * u
+            + 2.0 * (self.sxy / n - c.x * c.y) * u * v
+            + (self.syy / n - c.y * c.y) * v * v;
+        let dn2 = (self.dxx * u * u + 2.0 * self.dxy * u * v + self.dyy * v * v) / n;
+        let expected = s * s * dn2 + min_sigma * min_sigma;
+        scatter * n / (n - 2.0).max(1.0) / expected
+    }
+}
+
+/// Merges lines that are one wall: normals within `refine_merge_deg` and each one's pivot
+/// within the tolerance of the other (region growing splits one noisy wall into several
+/// patches; left apart they would claim the same points, which would then be dropped as
+/// ambiguous).
+pub(crate) fn merge_lines(lines: &mut Vec<Line>, params: &LevelParams, s: f64) {
+    let cos_max = params.refine_merge_deg.to_radians().cos();
+    let tol = params.refine_k * s + params.flat_margin;
+    let mut i = 0;
+    while i < lines.len() {
+        let mut j = i + 1;
+        while j < lines.len() {
+            let (a, b) = (lines[i], lines[j]);
+            let c = a.normal.dot(&b.normal);
+            let (bn, bo) = if c < 0.0 {
+                (-b.normal, -b.offset)
+            } else {
+                (b.normal, b.offset)
+            };
+            if c.abs() >= cos_max && (a.offset - bo).abs() <= tol {
+                let w = a.weight + b.weight;
+                let normal = (a.normal * a.weight + bn * b.weight).normalize();
+                lines[i] = Line {
+                    normal,
+                    offset: (a.offset * a.weight + bo * b.weight) / w,
+                    z: (a.z * a.weight + b.z * b.weight) / w,
+                    weight: w,
+                };
+                lines.swap_remove(j);
+            } else {
+                j += 1;
+            }
+        }
+        i += 1;
+    }
+}
