@@ -273,7 +273,17 @@ fn help_shows_every_default() {
             b.push('\n');
         }
     }
-    let without_default = ["--trajectory", "--output", "--help", "--version"];
+    let without_default = [
+        "--trajectory",
+        "--output",
+        "--help",
+        "--version",
+        // Bag topics default to what the bag holds.
+        "--scan-topic",
+        "--hinge-joint",
+        "--odom-topic",
+        "--truth-topic",
+    ];
     // Switches (flags without a value) have no default to show.
     let switches = ["--odometry-prior", "--one-way"];
     let mut checked = 0;

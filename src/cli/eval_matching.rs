@@ -2,11 +2,13 @@
 //! with perturbed odometry).
 
 use super::matching::MatchOptions;
-use super::{open_input, open_output, write_file};
+use super::scan_input::open_scans;
+use super::{open_output, write_file};
 use anyhow::Context;
 use levelscan::eval::matching::{ExperimentParams, matching_experiment};
 use levelscan::eval::real::{RealLog, RealResult, evaluate_real};
-use levelscan::formats::{CarmenParams, read_any, read_plan};
+use levelscan::formats::bag::BagOptions;
+use levelscan::formats::{CarmenParams, read_plan};
 use levelscan::matching::{Mode, scan_points};
 use levelscan::simulate::{AdaptiveParams, ScannerParams, elevations_centred};
 use levelscan::viz::plots::{MapPanel, map_panels_png, map_panels_svg, run_map_panel};
@@ -187,7 +189,7 @@ fn load_real_log(
     path: &std::path::Path,
     ranges: &levelscan::matching::RangeParams,
 ) -> anyhow::Result<RealLog> {
-    let input = open_input(Some(path))?;
+    let input = open_scans(Some(path), CarmenParams::default(), &BagOptions::default())?;
     let name = input.name.clone();
     let mut log = RealLog {
         name: path
@@ -196,10 +198,15 @@ fn load_real_log(
         points: Vec::new(),
         reference: Vec::new(),
     };
-    for item in read_any(input.reader, &input.name, CarmenParams::default())? {
+    let bag = input.survey.is_some();
+    for item in input.source {
         let (line, scan) = item?;
         let reference = scan.true_pose.with_context(|| {
-            format!("{name}:{line}: no reference pose (a CARMEN pose or `true_pose`)")
+            if bag {
+                format!("{name}: scan {line} has no reference pose (a /ground_truth PoseStamped within 0.1 s)")
+            } else {
+                format!("{name}:{line}: no reference pose (a CARMEN pose or `true_pose`)")
+            }
         })?;
         log.points.push(scan_points(&scan, ranges));
         log.reference.push(reference.to_pose2());

@@ -1,8 +1,10 @@
 //! `levelscan info [SCANS]`: parses every record and prints one JSON object that summarises
 //! the file: poses, scans, rays, elevations, valid fraction, which optional fields are present.
 
+use super::scan_input::BagArgs;
 use super::{open_input, open_output};
-use levelscan::formats::{CarmenParams, read_any};
+use levelscan::formats::bag::{Bag, BagScans, Survey, survey};
+use levelscan::formats::{CarmenParams, ScanSource, read_any};
 use levelscan::scan::Scan;
 use serde_json::{Value, json};
 use std::collections::{BTreeMap, BTreeSet, HashSet};
@@ -18,23 +20,48 @@ pub struct Args {
     /// log's `PARAM robot_front_laser_max`, else 50.
     #[arg(long)]
     pub max_range: Option<f64>,
+    #[command(flatten)]
+    pub bag: BagArgs,
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let input = open_input(args.scans.as_deref())?;
     let carmen = CarmenParams {
         max_range: args.max_range,
     };
-    let source = read_any(input.reader, &input.name, carmen)?;
-    let format = source.format();
+    let mut report = serde_json::Map::new();
+    let path = args
+        .scans
+        .as_deref()
+        .filter(|p| *p != std::path::Path::new("-"));
+    let source = match path.map(Bag::detect).transpose()?.flatten() {
+        Some(bag) => {
+            report.insert("file".into(), json!(bag.name));
+            report.insert("format".into(), json!(bag.kind.name()));
+            let kind = bag.kind;
+            let surveyed = survey(&bag, &args.bag.options(false, None))?;
+            report.extend(bag_report(&surveyed));
+            // A bag whose scan topic cannot be chosen still shows its topics.
+            match BagScans::start(bag, surveyed) {
+                Ok(scans) => Some(ScanSource::Bag(Box::new(scans), kind)),
+                Err(e) => {
+                    report.insert("scan_topic_problem".into(), json!(e.message));
+                    None
+                }
+            }
+        }
+        None => {
+            let input = open_input(args.scans.as_deref())?;
+            let source = read_any(input.reader, &input.name, carmen)?;
+            report.insert("file".into(), json!(input.name));
+            report.insert("format".into(), json!(source.format()));
+            Some(source)
+        }
+    };
     let mut summary = Summary::default();
-    for item in source {
+    for item in source.into_iter().flatten() {
         let (_, scan) = item?;
         summary.add(&scan);
     }
-    let mut report = serde_json::Map::new();
-    report.insert("file".into(), json!(input.name));
-    report.insert("format".into(), json!(format));
     if let Value::Object(m) = summary.into_json() {
         report.extend(m);
     }
@@ -42,6 +69,44 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     out.write_all((Value::Object(report).to_string() + "\n").as_bytes())?;
     out.finish()?;
     Ok(())
+}
+
+/// A bag's topics (name, type, count, first and last log time in seconds), its time span,
+/// and which topic and joint the scans come from.
+fn bag_report(s: &Survey) -> serde_json::Map<String, Value> {
+    let secs = |ns: u64| ns as f64 * 1e-9;
+    let topics: Vec<Value> = s
+        .topics
+        .iter()
+        .map(|t| {
+            json!({
+                "topic": t.topic,
+                "type": t.message_type,
+                "count": t.count,
+                "first": secs(t.first),
+                "last": secs(t.last),
+            })
+        })
+        .collect();
+    let first = s.topics.iter().map(|t| t.first).min();
+    let last = s.topics.iter().map(|t| t.last).max();
+    let mut m = serde_json::Map::new();
+    m.insert("topics".into(), Value::Array(topics));
+    m.insert(
+        "time_span".into(),
+        match (first, last) {
+            (Some(a), Some(b)) => json!([secs(a), secs(b)]),
+            _ => Value::Null,
+        },
+    );
+    m.insert("scan_topic".into(), json!(s.scan_topic));
+    m.insert("hinge_joint".into(), json!(s.hinge.as_ref().map(|h| &h.0)));
+    m.insert(
+        "odometry_topic".into(),
+        json!(s.odometry.as_ref().map(|o| &o.0)),
+    );
+    m.insert("truth_topic".into(), json!(s.truth.as_ref().map(|t| &t.0)));
+    m
 }
 
 /// What `info` counts, one scan at a time (memory grows only with the number of distinct

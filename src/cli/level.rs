@@ -1,6 +1,7 @@
 //! `levelscan level [SCANS]`: one pseudo-level scan per pose (paper sect. 5 and 6), in input
 //! order, as the contract's "Output of level" lays it out.
 
+use super::scan_input::{BagArgs, open_bag};
 use super::{LevelArgs, open_input, open_output};
 use levelscan::formats::level_record::level_record;
 use levelscan::formats::{InputError, ParallelScanReader, write_scan};
@@ -14,7 +15,8 @@ use std::path::PathBuf;
 
 #[derive(clap::Args, Debug)]
 pub struct Args {
-    /// Scan JSON Lines with `sequence` and `elevation`; standard input when absent or `-`.
+    /// Scan JSON Lines with `sequence` and `elevation`, or a ROS bag (MCAP, rosbag2
+    /// directory, ROS 1 .bag); standard input when absent or `-`.
     pub input: Option<PathBuf>,
     /// Write here instead of standard output.
     #[arg(short, long)]
@@ -41,6 +43,8 @@ pub struct Args {
     /// 4 corners [x, y, z] in the robot frame, for the 3D viewer.
     #[arg(long)]
     pub polygons: bool,
+    #[command(flatten)]
+    pub bag: BagArgs,
 }
 
 /// Poses per parallel batch: bounds memory while keeping both cores busy.
@@ -68,14 +72,24 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         max_gap: args.max_gap,
         ..PseudoLevelParams::default()
     };
-    let input = open_input(args.input.as_deref())?;
-    let name = input.name.clone();
+    // A bag is read by its own reader (two passes, on its thread); text in parallel batches.
+    type Scans = Box<dyn Iterator<Item = Result<(usize, Scan), InputError>> + Send>;
+    let (name, scans): (String, Scans) =
+        match open_bag(args.input.as_deref(), &args.bag.options(true, None))? {
+            Some(bag) => (bag.name, Box::new(bag.source)),
+            None => {
+                let input = open_input(args.input.as_deref())?;
+                let name = input.name.clone();
+                let reader = ParallelScanReader::new(input.reader, name.clone()).skipping_hit();
+                (name, Box::new(reader))
+            }
+        };
     let mut out = open_output(args.output.as_deref(), &[args.input.as_deref()])?;
     // Reading and grouping run on their own thread, a couple of batches ahead, so that the
     // serial part of reading overlaps with leveling (both use the rayon pool for the heavy work).
     let (tx, rx) = std::sync::mpsc::sync_channel::<(Vec<Vec<Scan>>, Option<InputError>)>(2);
     let reader_thread = std::thread::spawn(move || {
-        let mut reader = ParallelScanReader::new(input.reader, name.clone()).skipping_hit();
+        let mut reader = scans;
         let mut grouper = Grouper::default();
         let mut batch: Vec<Vec<Scan>> = Vec::with_capacity(BATCH_POSES);
         loop {

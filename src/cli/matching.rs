@@ -1,9 +1,10 @@
 //! `levelscan match`: pairwise or metascan matching of 2D scans; fills in `estimate` and adds
 //! the contract's `match` object to each record, streaming (one record in, one record out).
 
-use super::{open_input, open_output};
+use super::open_output;
+use super::scan_input::{BagArgs, open_scans};
 use clap::ValueEnum;
-use levelscan::formats::{CarmenParams, read_any, write_tum};
+use levelscan::formats::{CarmenParams, write_tum};
 use levelscan::geometry::Pose;
 use levelscan::matching::{
     CheckParams, Coarse, CorrelativeParams, IcpParams, Kernel, MapParams, MatchReport, MatchStatus,
@@ -233,11 +234,17 @@ pub struct Args {
     /// Output file; standard output when absent or `-`.
     #[arg(short, long)]
     pub output: Option<PathBuf>,
+    #[command(flatten)]
+    pub bag: BagArgs,
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
     let params = args.options.params()?;
-    let input = open_input(args.scans.as_deref())?;
+    let input = open_scans(
+        args.scans.as_deref(),
+        CarmenParams::default(),
+        &args.bag.options(false, Some("/scan_level")),
+    )?;
     let mut out = open_output(args.output.as_deref(), &[args.scans.as_deref()])?;
     let mut tum = match &args.trajectory {
         Some(p) => Some(open_output(
@@ -247,8 +254,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         None => None,
     };
     let mut matcher = Matcher::new(params);
-    let source = read_any(input.reader, &input.name, CarmenParams::default())?;
-    for (index, item) in source.enumerate() {
+    for (index, item) in input.source.enumerate() {
         let (_, mut scan) = item?;
         let points = scan_points(&scan, &params.ranges);
         let odometry = scan.odometry.map(|p| p.to_pose2());

@@ -11,6 +11,7 @@ mod level;
 mod map;
 mod matching;
 mod output;
+mod scan_input;
 mod simulate;
 mod view;
 

@@ -3,6 +3,7 @@
 //! scans, JSON Lines or a CARMEN log (raw scans, CSM logs, `level` output and `match` output are
 //! told apart per record by `viz::html`).
 
+use super::scan_input::{BagArgs, open_bag};
 use super::{open_input, open_output};
 use anyhow::{Context, bail};
 use levelscan::formats::carmen::CarmenParams;
@@ -36,6 +37,8 @@ pub struct Args {
     /// Page title.
     #[arg(long, default_value_t = ViewParams::default().title)]
     pub title: String,
+    #[command(flatten)]
+    pub bag: BagArgs,
 }
 
 /// What one input turned out to be.
@@ -44,7 +47,20 @@ enum Loaded {
     Scans(Source),
 }
 
-fn load(path: Option<&std::path::Path>) -> anyhow::Result<Loaded> {
+fn load(path: Option<&std::path::Path>, bag: &BagArgs) -> anyhow::Result<Loaded> {
+    if let Some(input) = open_bag(path, &bag.options(false, None))? {
+        let scans = input
+            .source
+            .map(|item| item.map(|(_, scan)| scan))
+            .collect::<Result<Vec<_>, _>>()?;
+        if scans.is_empty() {
+            bail!("{}: no scans in the bag", input.name);
+        }
+        return Ok(Loaded::Scans(Source {
+            name: input.name,
+            scans,
+        }));
+    }
     let mut input = open_input(path)?;
     let mut text = String::new();
     input
@@ -86,7 +102,7 @@ fn is_floor_plan(text: &str) -> bool {
 pub fn run(args: Args) -> anyhow::Result<()> {
     let mut plan: Option<(String, Plan)> = None;
     if let Some(p) = &args.plan {
-        match load(Some(p))? {
+        match load(Some(p), &args.bag)? {
             Loaded::Plan(plan_read) => plan = Some((p.display().to_string(), plan_read)),
             Loaded::Scans(_) => bail!("{}: --plan needs a .wall floor plan", p.display()),
         }
@@ -101,7 +117,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             .as_ref()
             .map(|p| p.display().to_string())
             .unwrap_or_else(|| "<stdin>".into());
-        match load(path.as_deref())? {
+        match load(path.as_deref(), &args.bag)? {
             Loaded::Plan(p) => {
                 if let Some((first, _)) = &plan {
                     bail!("{shown}: a second floor plan (the first was {first}); give one");

@@ -35,6 +35,8 @@ pub enum ScanSource<R> {
     /// Boxed: the parallel reader carries two batches of line buffers.
     JsonLines(Box<ParallelScanReader<R>>),
     Carmen(CarmenReader<R>),
+    /// A ROS bag's scans (see [`bag::BagScans`]); the reader `R` is not used.
+    Bag(Box<bag::BagScans>, bag::BagKind),
 }
 
 impl<R: BufRead + Send> ScanSource<R> {
@@ -43,6 +45,7 @@ impl<R: BufRead + Send> ScanSource<R> {
         match self {
             ScanSource::JsonLines(_) => "jsonl",
             ScanSource::Carmen(_) => "carmen",
+            ScanSource::Bag(_, kind) => kind.name(),
         }
     }
 }
@@ -54,6 +57,7 @@ impl<R: BufRead + Send> Iterator for ScanSource<R> {
         match self {
             ScanSource::JsonLines(r) => r.next(),
             ScanSource::Carmen(r) => r.next(),
+            ScanSource::Bag(r, _) => r.next(),
         }
     }
 }
@@ -76,12 +80,18 @@ pub fn read_any<R: BufRead + Send>(
     {
         reader.consume(3);
     }
-    let first = reader
+    let head = reader
         .fill_buf()
-        .map_err(|e| scan_jsonl::read_error(&name, 1, &e))?
-        .iter()
-        .copied()
-        .find(|b| !b.is_ascii_whitespace());
+        .map_err(|e| scan_jsonl::read_error(&name, 1, &e))?;
+    if head.starts_with(bag::source::MCAP_MAGIC) || head.starts_with(b"#ROSBAG") {
+        // Bags are read in two passes (topics and joints first), so they need a path.
+        return Err(InputError::new(
+            name,
+            "",
+            "a ROS bag on a stream: give the bag's path as the input file instead",
+        ));
+    }
+    let first = head.iter().copied().find(|b| !b.is_ascii_whitespace());
     Ok(match first {
         None | Some(b'{') => ScanSource::JsonLines(Box::new(ParallelScanReader::new(reader, name))),
         Some(_) => ScanSource::Carmen(CarmenReader::new(reader, name, carmen)),

@@ -3,6 +3,7 @@
 //! - [`raycast`]: the scene ([`World`]) and its ray caster, with the hit conventions (over
 //!   the plan's spatial index, `plan::grid`, which keeps ray casting fast on big plans);
 //! - [`scanner`]: the tilting scanner ([`ScannerParams`], [`simulate_pose`]);
+//! - [`sweep`]: a hinge that moves while it scans (each ray's own elevation);
 //! - [`random_poses`](mod@random_poses): poses in a plan's free space;
 //! - [`odometry`](mod@odometry): drifting planar dead reckoning.
 //!
@@ -15,6 +16,7 @@ pub mod odometry;
 pub mod random_poses;
 pub mod raycast;
 pub mod scanner;
+pub mod sweep;
 
 pub use adaptive::{AdaptiveParams, simulate_pose_adaptive};
 pub use noise_model::NoiseModel;

@@ -3,6 +3,7 @@
 use super::SimulateError;
 use super::noise_model::NoiseModel;
 use super::raycast::World;
+use super::sweep;
 use crate::geometry::{Pose, beam_direction, beam_origin};
 use crate::scan::{Hit, Scan, even_bearings};
 use nalgebra::Vector3;
@@ -28,6 +29,16 @@ pub struct ScannerParams {
     /// Write `readings_sigma` (the noise sigma for every ray) into the scans. Default false:
     /// `level` must estimate the noise itself.
     pub write_sigma: bool,
+    /// Rate at which the hinge turns while a scan is taken \[rad/s\] (a nodding laser;
+    /// positive tilts the beams further down as the scan goes on). Default 0: the hinge stands
+    /// still during each scan (stop-and-scan, the paper's robot, sect. 7.2.1). When non-zero,
+    /// each ray is cast at its own elevation ([`super::sweep::ray_elevations`]) and the scans
+    /// carry `ray_elevation`.
+    pub sweep_rate: f64,
+    /// Scans per second \[Hz\]: one scan's rays spread over `1 / scan_rate` seconds, which
+    /// with `sweep_rate` sets how far the hinge turns within a scan. Default 40 (a Hokuyo
+    /// UTM-30LX, a common scanner on tilting mounts); it matters only when sweeping.
+    pub scan_rate: f64,
 }
 
 impl Default for ScannerParams {
@@ -40,6 +51,8 @@ impl Default for ScannerParams {
             noise_model: NoiseModel::Gaussian,
             hinge_offset: None,
             write_sigma: false,
+            sweep_rate: 0.0,
+            scan_rate: 40.0,
         }
     }
 }
@@ -53,6 +66,16 @@ impl ScannerParams {
     /// The standard deviation of the range noise \[m\] (what `readings_sigma` holds).
     pub fn range_sigma(&self) -> f64 {
         self.noise_model.sigma(self.noise_sigma)
+    }
+
+    /// One scan's period \[s\]: `1 / scan_rate`.
+    pub fn scan_time(&self) -> f64 {
+        1.0 / self.scan_rate
+    }
+
+    /// The time between two successive rays \[s\] (a LaserScan's `time_increment`).
+    pub fn time_increment(&self) -> f64 {
+        sweep::time_increment(self.rays, self.scan_time())
     }
 
     pub fn validate(&self) -> Result<(), SimulateError> {
@@ -75,6 +98,17 @@ impl ScannerParams {
         {
             return bad("the hinge offset must be three finite numbers");
         }
+        if !(self.scan_rate > 0.0 && self.scan_rate.is_finite()) {
+            return bad("the scan rate must be a positive number of scans per second");
+        }
+        if !self.sweep_rate.is_finite() {
+            return bad("the sweep rate must be a finite number of degrees per second");
+        }
+        // Past a full turn within one scan the per-ray elevations are no longer angles the
+        // scan readers take (`formats::limits::MAX_ANGLE`).
+        if sweep::half_travel(self.rays, self.sweep_rate, self.scan_time()) > std::f64::consts::PI {
+            return bad("the hinge may turn at most 360 degrees within one scan");
+        }
         Ok(())
     }
 }
@@ -92,7 +126,11 @@ pub fn elevations_centred(n: usize, step: f64) -> Vec<f64> {
 /// noise, and a noisy reading that comes out at or below zero is no reading. The `hit` labels
 /// are the truth of what each ray met, whatever the noise did to its reading.
 ///
-/// Fills `sequence`, `elevation`, `theta`, `readings`, `valid`, `hit`, `true_pose`, and
+/// With a hinge that moves while it scans (`params.sweep_rate`), ray `i` is cast at its own
+/// elevation ([`sweep::ray_elevations`], centred on the scan's) and the scan carries it as
+/// `ray_elevation`; `elevation` stays the nominal one.
+///
+/// Fills `sequence`, `elevation`, `ray_elevation`, `theta`, `readings`, `valid`, `hit`, `true_pose`, and
 /// `hinge_offset` and `readings_sigma` when the parameters ask for them; `odometry` is left to
 /// the caller (it depends on the poses before this one).
 pub fn simulate_pose<R: Rng + ?Sized>(
@@ -111,11 +149,18 @@ pub fn simulate_pose<R: Rng + ?Sized>(
     elevations
         .iter()
         .map(|&e| {
+            // A still hinge casts every ray from one origin; a moving one from each ray's own.
+            let ray_elevation =
+                sweep::ray_elevations(e, bearings.len(), params.sweep_rate, params.scan_time());
             let origin = iso * beam_origin(e, &offset);
             let mut readings = Vec::with_capacity(bearings.len());
             let mut valid = Vec::with_capacity(bearings.len());
             let mut hits = Vec::with_capacity(bearings.len());
-            for &phi in &bearings {
+            for (i, &phi) in bearings.iter().enumerate() {
+                let (origin, e) = match &ray_elevation {
+                    Some(own) => (iso * beam_origin(own[i], &offset), own[i]),
+                    None => (origin, e),
+                };
                 let direction = iso * beam_direction(e, phi);
                 match world.cast(&origin, &direction, params.max_range) {
                     Some(h) => {
@@ -134,6 +179,7 @@ pub fn simulate_pose<R: Rng + ?Sized>(
             Scan {
                 sequence: Some(sequence),
                 elevation: Some(e),
+                ray_elevation,
                 theta: bearings.clone(),
                 readings,
                 valid,
