@@ -536,10 +536,11 @@ pub fn top_level_records(bytes: &[u8]) -> Vec<(usize, u8, usize, usize)> {
     let mut at = 8;
     while at + 9 <= bytes.len() {
         let op = bytes[at];
-        let len = u64::from_le_bytes(bytes[at + 1..at + 9].try_into().unwrap()) as usize;
-        if at + 9 + len > bytes.len() {
+        let len = u64::from_le_bytes(bytes[at + 1..at + 9].try_into().unwrap());
+        if len > (bytes.len() - at - 9) as u64 {
             break;
         }
+        let len = len as usize;
         out.push((at, op, at + 9, len));
         at += 9 + len;
     }
