@@ -354,3 +354,18 @@ fn truncated_ros1_bag() {
         both_fail(&path, &[], &[&path], name);
     }
 }
+
+/// What the JSON Lines reader refuses (`formats::limits`: `odometry: x is 1e12 m, beyond the
+/// limit of +-1e7 m`) a bag must not slip past it: the scan would go on to `match`, which then
+/// refuses `level`'s output instead.
+#[test]
+fn odometry_beyond_the_limits_is_refused() {
+    let dir = TempDir::new("bad-limits");
+    let mut msgs = bag_messages(&scans(), &BagSpec::default());
+    for m in msgs.iter_mut().filter(|m| m.topic == "/odom") {
+        m.data = odometry_cdr(m.log_time, 1e12, 0.0, 0.0);
+    }
+    let path = write(&dir, "far.mcap", &mcap_bytes(&msgs, Layout::default()));
+    let line = one_line_failure(&levelscan(&["level", &path]), "odometry at 1e12 m");
+    assert_names(&line, &[&path, "/odom"], "odometry at 1e12 m");
+}

@@ -167,8 +167,9 @@ impl Drop for Scratch {
     }
 }
 
-/// Reads `input` as `level` would: detect, survey, then every scan.
-fn oracle(path: &std::path::Path, input: &[u8]) -> Result<Outcome, String> {
+/// Reads `input` as `level` would: detect, survey, then every scan; with `invariants`, every
+/// scan read must also keep the crate's invariants.
+fn oracle(path: &std::path::Path, input: &[u8], invariants: bool) -> Result<Outcome, String> {
     std::fs::write(path, input).map_err(|e| e.to_string())?;
     let name = path.display().to_string();
     let mut scans = 0usize;
@@ -183,7 +184,9 @@ fn oracle(path: &std::path::Path, input: &[u8]) -> Result<Outcome, String> {
         }
         read_scans(&bag, &s, &mut |_, scan| {
             scans += 1;
-            if let Err(e) = check_scan(&scan) {
+            if let Err(e) = check_scan(&scan).map_err(|e| e + &format!(" in {scan:?}"))
+                && invariants
+            {
                 garbage = Some(e);
                 return Ok(ControlFlow::Break(()));
             }
@@ -205,23 +208,36 @@ fn oracle(path: &std::path::Path, input: &[u8]) -> Result<Outcome, String> {
     }
 }
 
-#[test]
-fn fuzz_mcap() {
+/// The seeds read whole, then `cases` mutated inputs go through the oracle.
+fn fuzz(target: &str, invariants: bool) {
     let seeds = seeds();
-    let path =
-        std::env::temp_dir().join(format!("levelscan-fuzz-mcap-{}.mcap", std::process::id()));
+    let path = std::env::temp_dir().join(format!("levelscan-{target}-{}.mcap", std::process::id()));
     let scratch = Scratch(path);
     for (i, s) in seeds.iter().enumerate() {
-        match oracle(&scratch.0, s) {
+        match oracle(&scratch.0, s, invariants) {
             Ok(Outcome::Accepted(6)) => {}
             other => panic!("seed {i} should read whole, 6 scans: {other:?}"),
         }
     }
     // Each input is a file read twice (about 7 ms): fewer inputs than the text targets.
     run_cases(
-        "mcap",
+        target,
         cases_or(DEFAULT_MCAP_CASES),
         inputs(seeds),
-        |input| oracle(&scratch.0, input),
+        |input| oracle(&scratch.0, input, invariants),
     );
+}
+
+/// No panic, no hang, errors one line naming the file.
+#[test]
+fn fuzz_mcap_never_panics() {
+    fuzz("mcap", false);
+}
+
+/// No garbage accepted: what the reader returns from a damaged file keeps the limits the
+/// JSON Lines reader enforces (`formats::limits`: positions within 1e7 m, bearings within a
+/// turn, ...), which the rest of the crate relies on.
+#[test]
+fn fuzz_mcap_accepts_no_garbage() {
+    fuzz("mcap-invariants", true);
 }
