@@ -333,3 +333,74 @@ fn bag_topics_show_in_info_and_a_wrong_topic_is_named() {
     assert!(err.contains("tilt") && err.contains("hinge"), "{err}");
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// Topic -> message count of an MCAP file, read with the mcap crate.
+fn topic_counts(path: &Path) -> BTreeMap<String, usize> {
+    let bytes = std::fs::read(path).unwrap();
+    let mut counts = BTreeMap::new();
+    for m in mcap::MessageStream::new(&bytes).unwrap() {
+        *counts.entry(m.unwrap().channel.topic.clone()).or_insert(0) += 1;
+    }
+    counts
+}
+
+#[test]
+fn level_and_match_write_bags_that_carry_the_input_through() {
+    let dir = temp_dir("out");
+    let (_, scans) = simulate(&dir, &[]);
+    let bag = dir.join("run.mcap");
+    write_bag(
+        &bag,
+        &scans,
+        &BagSpec {
+            with_odometry: true,
+            sweep: 0.0,
+            scan_time: 0.025,
+        },
+    );
+    let leveled = dir.join("leveled.mcap");
+    let out = bin()
+        .args([
+            "level",
+            bag.to_str().unwrap(),
+            "-o",
+            leveled.to_str().unwrap(),
+        ])
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let input = topic_counts(&bag);
+    let output = topic_counts(&leveled);
+    for (topic, n) in &input {
+        assert_eq!(output.get(topic), Some(n), "{topic} copied through");
+    }
+    let poses = scans.last().unwrap().sequence.unwrap() as usize + 1;
+    for topic in ["/scan_level", "/attitude", "/level_status"] {
+        assert_eq!(output.get(topic), Some(&poses), "one {topic} per pose");
+    }
+    // The leveled bag reads back: match takes /scan_level by default, one record per pose.
+    let matched = dir.join("matched.mcap");
+    let out = bin()
+        .args([
+            "match",
+            leveled.to_str().unwrap(),
+            "-o",
+            matched.to_str().unwrap(),
+        ])
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let output = topic_counts(&matched);
+    assert_eq!(output.get("/odom_matched"), Some(&poses));
+    assert_eq!(output.get("/match_status"), Some(&poses));
+    assert_eq!(output.get("/scan"), Some(&scans.len()));
+    std::fs::remove_dir_all(&dir).ok();
+}

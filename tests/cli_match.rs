@@ -283,6 +283,8 @@ fn help_shows_every_default() {
         "--hinge-joint",
         "--odom-topic",
         "--truth-topic",
+        // Output format: from the -o file name.
+        "--format",
     ];
     // Switches (flags without a value) have no default to show.
     let switches = ["--odometry-prior", "--one-way"];

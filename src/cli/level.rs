@@ -1,7 +1,9 @@
 //! `levelscan level [SCANS]`: one pseudo-level scan per pose (paper sect. 5 and 6), in input
 //! order, as the contract's "Output of level" lays it out.
 
+use super::bag_output::{BagOutput, OutputFormat, output_format};
 use super::scan_input::{BagArgs, open_bag};
+use super::summary::{Kind, Outcome, Tally};
 use super::{LevelArgs, open_input, open_output};
 use levelscan::formats::level_record::level_record;
 use levelscan::formats::{InputError, ParallelScanReader, write_scan};
@@ -45,6 +47,9 @@ pub struct Args {
     pub polygons: bool,
     #[command(flatten)]
     pub bag: BagArgs,
+    /// Output format; default: mcap (a ROS 2 bag) when -o ends in .mcap, else jsonl.
+    #[arg(long, value_enum)]
+    pub format: Option<OutputFormat>,
 }
 
 /// Poses per parallel batch: bounds memory while keeping both cores busy.
@@ -74,17 +79,30 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     };
     // A bag is read by its own reader (two passes, on its thread); text in parallel batches.
     type Scans = Box<dyn Iterator<Item = Result<(usize, Scan), InputError>> + Send>;
-    let (name, scans): (String, Scans) =
-        match open_bag(args.input.as_deref(), &args.bag.options(true, None))? {
-            Some(bag) => (bag.name, Box::new(bag.source)),
-            None => {
-                let input = open_input(args.input.as_deref())?;
-                let name = input.name.clone();
-                let reader = ParallelScanReader::new(input.reader, name.clone()).skipping_hit();
-                (name, Box::new(reader))
-            }
-        };
-    let mut out = open_output(args.output.as_deref(), &[args.input.as_deref()])?;
+    let opened = open_bag(args.input.as_deref(), &args.bag.options(true, None))?;
+    let input_bag = opened.as_ref().and_then(|b| b.bag.clone());
+    let (name, scans): (String, Scans) = match opened {
+        Some(bag) => (bag.name, Box::new(bag.source)),
+        None => {
+            let input = open_input(args.input.as_deref())?;
+            let name = input.name.clone();
+            let reader = ParallelScanReader::new(input.reader, name.clone()).skipping_hit();
+            (name, Box::new(reader))
+        }
+    };
+    let input_name = name.clone();
+    let mut tally = Tally::new(Kind::Level);
+    let out = open_output(args.output.as_deref(), &[args.input.as_deref()])?;
+    let mut sink = match output_format(args.format, args.output.as_deref()) {
+        OutputFormat::Jsonl => Sink::Jsonl(out),
+        OutputFormat::Mcap => {
+            let shown = args
+                .output
+                .as_deref()
+                .map_or("<stdout>".to_string(), |p| p.display().to_string());
+            Sink::Bag(Box::new(BagOutput::new(out, &shown, input_bag)?))
+        }
+    };
     // Reading and grouping run on their own thread, a couple of batches ahead, so that the
     // serial part of reading overlaps with leveling (both use the rayon pool for the heavy work).
     let (tx, rx) = std::sync::mpsc::sync_channel::<(Vec<Vec<Scan>>, Option<InputError>)>(2);
@@ -124,7 +142,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     });
     let mut result = Ok(());
     for (batch, failure) in rx {
-        if let Err(e) = write_batch(&mut out, &batch, &params, &pseudo, args.polygons) {
+        if let Err(e) = write_batch(
+            &mut sink,
+            &batch,
+            &params,
+            &pseudo,
+            args.polygons,
+            &mut tally,
+        ) {
             result = Err(e);
             break;
         }
@@ -136,29 +161,64 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     // The reader ends on its own once the channel is dropped.
     drop(reader_thread);
     // A failed run leaves an `-o` file as it was (standard output keeps what was written).
-    result.and_then(|()| out.finish())
+    result.and_then(|()| sink.finish())?;
+    tally.report(&input_name);
+    Ok(())
+}
+
+/// Where the records go: JSON Lines, or a ROS 2 bag.
+enum Sink {
+    Jsonl(super::output::Output),
+    Bag(Box<BagOutput>),
+}
+
+impl Sink {
+    fn finish(self) -> anyhow::Result<()> {
+        match self {
+            Sink::Jsonl(out) => out.finish(),
+            Sink::Bag(bag) => bag.finish(),
+        }
+    }
 }
 
 fn write_batch(
-    out: &mut dyn Write,
+    sink: &mut Sink,
     batch: &[Vec<Scan>],
     params: &LevelParams,
     pseudo: &PseudoLevelParams,
     polygons: bool,
+    tally: &mut Tally,
 ) -> anyhow::Result<()> {
-    let lines: Vec<Vec<u8>> = batch
+    let records: Vec<Scan> = batch
         .par_iter()
         .map_init(BearingTrigCache::default, |cache, scans| {
             let est = level_pose_with(scans, params, cache);
-            let record = level_record(scans, &est, pseudo, polygons);
-            let mut buf = Vec::with_capacity(8192);
-            // Writing to a Vec cannot fail.
-            let _ = write_scan(&mut buf, &record);
-            buf
+            level_record(scans, &est, pseudo, polygons)
         })
         .collect();
-    for l in lines {
-        out.write_all(&l)?;
+    for record in &records {
+        tally.add(Outcome::of(record, "level"));
+    }
+    match sink {
+        Sink::Jsonl(out) => {
+            let lines: Vec<Vec<u8>> = records
+                .par_iter()
+                .map(|record| {
+                    let mut buf = Vec::with_capacity(8192);
+                    // Writing to a Vec cannot fail.
+                    let _ = write_scan(&mut buf, record);
+                    buf
+                })
+                .collect();
+            for l in lines {
+                out.write_all(&l)?;
+            }
+        }
+        Sink::Bag(bag) => {
+            for record in &records {
+                bag.level_record(record)?;
+            }
+        }
     }
     Ok(())
 }

@@ -1,8 +1,10 @@
 //! `levelscan match`: pairwise or metascan matching of 2D scans; fills in `estimate` and adds
 //! the contract's `match` object to each record, streaming (one record in, one record out).
 
+use super::bag_output::{BagOutput, OutputFormat, output_format};
 use super::open_output;
 use super::scan_input::{BagArgs, open_scans};
+use super::summary::{Kind, Outcome, Tally};
 use clap::ValueEnum;
 use levelscan::formats::{CarmenParams, write_tum};
 use levelscan::geometry::Pose;
@@ -236,6 +238,9 @@ pub struct Args {
     pub output: Option<PathBuf>,
     #[command(flatten)]
     pub bag: BagArgs,
+    /// Output format; default: mcap (a ROS 2 bag) when -o ends in .mcap, else jsonl.
+    #[arg(long, value_enum)]
+    pub format: Option<OutputFormat>,
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
@@ -245,7 +250,17 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         CarmenParams::default(),
         &args.bag.options(false, Some("/scan_level")),
     )?;
-    let mut out = open_output(args.output.as_deref(), &[args.scans.as_deref()])?;
+    let out = open_output(args.output.as_deref(), &[args.scans.as_deref()])?;
+    let (mut out, mut bag_out) = match output_format(args.format, args.output.as_deref()) {
+        OutputFormat::Jsonl => (Some(out), None),
+        OutputFormat::Mcap => {
+            let shown = args
+                .output
+                .as_deref()
+                .map_or("<stdout>".to_string(), |p| p.display().to_string());
+            (None, Some(BagOutput::new(out, &shown, input.bag.clone())?))
+        }
+    };
     let mut tum = match &args.trajectory {
         Some(p) => Some(open_output(
             Some(p),
@@ -254,22 +269,34 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         None => None,
     };
     let mut matcher = Matcher::new(params);
+    let mut tally = Tally::new(Kind::Match);
     for (index, item) in input.source.enumerate() {
         let (_, mut scan) = item?;
         let points = scan_points(&scan, &params.ranges);
         let odometry = scan.odometry.map(|p| p.to_pose2());
         let report = matcher.push(&points, odometry);
         annotate(&mut scan, &report);
-        levelscan::formats::write_scan(&mut out, &scan)?;
+        tally.add(Outcome::of(&scan, "match"));
+        match (&mut out, &mut bag_out) {
+            (Some(out), _) => levelscan::formats::write_scan(out, &scan)?,
+            (None, Some(bag)) => bag.match_record(&scan)?,
+            (None, None) => unreachable!("one output is open"),
+        }
         if let Some(t) = tum.as_mut() {
             let time = scan.timestamp.map_or(index as f64, |t| t.seconds());
             write_tum(t, time, &report.estimate)?;
         }
     }
-    out.finish()?;
+    if let Some(out) = out {
+        out.finish()?;
+    }
+    if let Some(bag) = bag_out {
+        bag.finish()?;
+    }
     if let Some(t) = tum {
         t.finish()?;
     }
+    tally.report(&input.name);
     Ok(())
 }
 

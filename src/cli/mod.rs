@@ -1,5 +1,6 @@
 //! Subcommands, one file each, and the input/output plumbing they share.
 
+mod bag_output;
 mod cloud;
 mod demo;
 mod eval;
@@ -13,6 +14,7 @@ mod matching;
 mod output;
 mod scan_input;
 mod simulate;
+mod summary;
 mod view;
 
 use anyhow::Context;

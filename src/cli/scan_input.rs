@@ -53,6 +53,8 @@ pub struct ScanInput {
     pub source: ScanSource<Box<dyn BufRead + Send>>,
     /// A bag's first pass (topics, signals); `None` for text inputs.
     pub survey: Option<Survey>,
+    /// The bag itself, to copy through into a bag output.
+    pub bag: Option<Bag>,
 }
 
 /// Opens `path` as a bag when it is one (by content); `None` for anything else (text, or
@@ -66,11 +68,12 @@ pub fn open_bag(path: Option<&Path>, bag: &BagOptions) -> anyhow::Result<Option<
     };
     let kind = found.kind;
     let name = found.name.clone();
-    let (scans, survey) = BagScans::open(found, bag)?;
+    let (scans, survey) = BagScans::open(found.clone(), bag)?;
     Ok(Some(ScanInput {
         name,
         source: ScanSource::Bag(Box::new(scans), kind),
         survey: Some(survey),
+        bag: Some(found),
     }))
 }
 
@@ -89,5 +92,6 @@ pub fn open_scans(
         name: input.name,
         source,
         survey: None,
+        bag: None,
     })
 }

@@ -3,9 +3,13 @@
 
 use super::{open_output, progress_bar};
 use anyhow::{Context, bail};
+use levelscan::formats::bag::BagWriter;
+use levelscan::formats::bag::simulated::{self, SimMessage};
+use levelscan::formats::bag::write::NoSeek;
 use levelscan::formats::{InputError, read_plan_from, write_scan};
 use levelscan::geometry::Pose;
 use levelscan::plan::Plan;
+use levelscan::scan::Scan;
 use levelscan::simulate::{
     AdaptiveParams, NoiseModel, RandomPoseParams, ScannerParams, World, elevations_centred,
     odometry, random_poses, simulate_poses,
@@ -112,9 +116,39 @@ pub struct Args {
     /// the noise itself.
     #[arg(long)]
     pub with_sigma: bool,
-    /// Output file; standard output when absent or `-`.
+    /// Output file; standard output when absent or `-`. A name ending in `.mcap` writes a
+    /// ROS 2 bag (see --format).
     #[arg(short, long)]
     pub output: Option<PathBuf>,
+    /// Output format: `jsonl` (scan JSON Lines) or `mcap` (a ROS 2 bag: /scan, /joint_states
+    /// with joint `hinge`, /odom, /ground_truth; pose k at 1000 + 2k s, its scans 0.1 s
+    /// apart) [default: mcap for an output file named *.mcap, else jsonl].
+    #[arg(long, value_enum)]
+    pub format: Option<OutputFormat>,
+}
+
+/// What simulate writes.
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum OutputFormat {
+    /// Scan JSON Lines.
+    Jsonl,
+    /// A ROS 2 bag: one MCAP file (profile ros2, CDR messages).
+    Mcap,
+}
+
+impl OutputFormat {
+    /// `--format` when given, else MCAP for an output file named `*.mcap` (any case), else
+    /// JSON Lines.
+    fn choose(asked: Option<OutputFormat>, output: Option<&std::path::Path>) -> OutputFormat {
+        let mcap = output
+            .and_then(std::path::Path::extension)
+            .is_some_and(|e| e.eq_ignore_ascii_case("mcap"));
+        asked.unwrap_or(if mcap {
+            OutputFormat::Mcap
+        } else {
+            OutputFormat::Jsonl
+        })
+    }
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
@@ -172,7 +206,31 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         max_retakes: args.max_retakes,
         ..AdaptiveParams::default()
     });
-    let mut out = open_output(args.output.as_deref(), &[args.plan.as_deref()])?;
+    let format = OutputFormat::choose(args.format, args.output.as_deref());
+    if format == OutputFormat::Mcap && elevations.len() > simulated::MAX_SCANS_PER_POSE {
+        bail!(
+            "a bag holds at most {} scans per pose ({} s apart within the pose's {} s); \
+             {} elevations were asked for",
+            simulated::MAX_SCANS_PER_POSE,
+            simulated::SCAN_SPACING,
+            simulated::POSE_PERIOD,
+            elevations.len()
+        );
+    }
+    let out = open_output(args.output.as_deref(), &[args.plan.as_deref()])?;
+    let mut sink = match format {
+        OutputFormat::Jsonl => Sink::Jsonl(out),
+        OutputFormat::Mcap => {
+            let name = args
+                .output
+                .as_deref()
+                .filter(|p| p.as_os_str() != "-")
+                .map_or(super::output::STDOUT.to_string(), |p| {
+                    p.display().to_string()
+                });
+            Sink::Bag(Box::new(BagWriter::unseekable(out, &name)?))
+        }
+    };
     let bar = progress_bar(poses.len() as u64, "simulate");
     for (c, chunk) in poses.chunks(CHUNK).enumerate() {
         let first = c * CHUNK;
@@ -186,14 +244,57 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             adaptive.as_ref(),
             args.seed,
         );
-        for scan in scans.iter().flatten() {
-            write_scan(&mut out, scan)?;
+        for (k, pose_scans) in scans.iter().enumerate() {
+            sink.write_pose((first + k) as u64, pose_scans, &scanner)?;
         }
         bar.inc(chunk.len() as u64);
     }
-    out.finish()?;
+    sink.finish()?;
     bar.finish_and_clear();
     Ok(())
+}
+
+/// Where the simulated scans go.
+enum Sink {
+    Jsonl(super::output::Output),
+    Bag(Box<BagWriter<NoSeek<super::output::Output>>>),
+}
+
+impl Sink {
+    fn write_pose(
+        &mut self,
+        k: u64,
+        scans: &[Scan],
+        scanner: &ScannerParams,
+    ) -> anyhow::Result<()> {
+        match self {
+            Sink::Jsonl(out) => {
+                for scan in scans {
+                    write_scan(out, scan)?;
+                }
+            }
+            Sink::Bag(bag) => {
+                let msgs =
+                    simulated::pose_messages(k, scans, scanner).map_err(anyhow::Error::msg)?;
+                for (t, m) in &msgs {
+                    match m {
+                        SimMessage::Scan(x) => bag.write(m.topic(), *t, x)?,
+                        SimMessage::Joint(x) => bag.write(m.topic(), *t, x)?,
+                        SimMessage::Odom(x) => bag.write(m.topic(), *t, x.as_ref())?,
+                        SimMessage::Truth(x) => bag.write(m.topic(), *t, x)?,
+                    }
+                }
+            }
+        }
+        Ok(())
+    }
+
+    fn finish(self) -> anyhow::Result<()> {
+        match self {
+            Sink::Jsonl(out) => out.finish(),
+            Sink::Bag(bag) => bag.finish()?.into_inner().finish(),
+        }
+    }
 }
 
 /// Most random poses per run: their poses and odometry are held in memory (run several seeds

@@ -388,6 +388,74 @@ fn read_ros1(
     name: &str,
     f: &mut dyn FnMut(&BagMessage) -> Result<ControlFlow<()>, InputError>,
 ) -> Result<ControlFlow<()>, InputError> {
+    check_ros1_index(path, name)?;
+    // The rosbag crate trusts the bag's record lengths (it slices the mapped file with them);
+    // the index check above catches a cut file, and a panic on a corrupt record inside is
+    // turned into an input error rather than a crash.
+    let previous_hook = std::panic::take_hook();
+    std::panic::set_hook(Box::new(|_| {}));
+    let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+        read_ros1_records(path, name, f)
+    }));
+    std::panic::set_hook(previous_hook);
+    result.unwrap_or_else(|_| {
+        Err(InputError::new(
+            name,
+            "",
+            "corrupt ROS 1 bag: a record's length points outside the file",
+        ))
+    })
+}
+
+/// A ROS 1 bag header's `index_pos` (ROS wiki, Bags/Format/2.0: the bag header record's
+/// fields are `len name=value` pairs) must lie inside the file: a recording cut short has its
+/// index missing (0, or beyond the end).
+fn check_ros1_index(path: &Path, name: &str) -> Result<(), InputError> {
+    let mut head = vec![0u8; 4096];
+    let n = read_head(path, &mut head).map_err(|e| open_error(name, &e))?;
+    let len = std::fs::metadata(path)
+        .map_err(|e| open_error(name, &e))?
+        .len();
+    let head = &head[..n];
+    let u32_at = |i: usize| -> Option<usize> {
+        Some(u32::from_le_bytes(head.get(i..i + 4)?.try_into().ok()?) as usize)
+    };
+    let bad = |m: &str| Err(InputError::new(name, "", m.to_string()));
+    let mut i = ROS1_MAGIC.len();
+    let Some(header_len) = u32_at(i) else {
+        return bad("a truncated ROS 1 bag: it ends inside its header");
+    };
+    i += 4;
+    let end = i + header_len;
+    let mut index_pos = None;
+    while i + 4 <= end.min(head.len()) {
+        let Some(field_len) = u32_at(i) else { break };
+        let field = head.get(i + 4..i + 4 + field_len).unwrap_or(&[]);
+        if let Some(v) = field.strip_prefix(b"index_pos=")
+            && v.len() == 8
+        {
+            index_pos = Some(u64::from_le_bytes(v.try_into().expect("8 bytes")));
+        }
+        i += 4 + field_len;
+    }
+    match index_pos {
+        None => bad("not a readable ROS 1 bag: its header has no index_pos"),
+        Some(0) => bad(
+            "a ROS 1 bag without its index (a recording cut short?): `rosbag reindex` repairs it",
+        ),
+        Some(p) if p > len || p < end as u64 => bad(&format!(
+            "a truncated ROS 1 bag: its index is at byte {p} but the file has {len} bytes \
+             (`rosbag reindex` may repair it)"
+        )),
+        Some(_) => Ok(()),
+    }
+}
+
+fn read_ros1_records(
+    path: &Path,
+    name: &str,
+    f: &mut dyn FnMut(&BagMessage) -> Result<ControlFlow<()>, InputError>,
+) -> Result<ControlFlow<()>, InputError> {
     use rosbag::{ChunkRecord, MessageRecord, RosBag};
     let bag = RosBag::new(path)
         .map_err(|e| InputError::new(name, "", format!("not a readable ROS 1 bag: {e}")))?;

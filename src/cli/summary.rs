@@ -1,0 +1,403 @@
+//! The account `level` and `match` give at the end of a run: one line on standard error with
+//! the poses leveled and failed (or the scans matched, partly matched and fallen back) by
+//! reason, a warning when most of the run failed, and a word when the input held nothing.
+//! Without it a run that failed every pose ended with exit 0 and not a word (issue 25).
+//!
+//! The counts come from the records' own status objects (`level` and `match` in the contract),
+//! so the line says what the output says, whatever statuses and reasons the output grows.
+
+use levelscan::scan::Scan;
+use std::collections::BTreeMap;
+
+/// One record's status object: `status` and `reason` as the output spells them.
+#[derive(Clone, Debug, PartialEq, Eq, PartialOrd, Ord)]
+pub(crate) struct Outcome {
+    pub status: String,
+    pub reason: Option<String>,
+}
+
+impl Outcome {
+    /// The outcome in `record.extra[key]` (`"level"` or `"match"`); `"unknown"` when the
+    /// record has none (it always has one: `level_record` and `annotate` write it).
+    pub fn of(record: &Scan, key: &str) -> Outcome {
+        let object = record.extra.get(key);
+        let text = |field: &str| {
+            object
+                .and_then(|o| o.get(field))
+                .and_then(|v| v.as_str())
+                .map(str::to_string)
+        };
+        Outcome {
+            status: text("status").unwrap_or_else(|| "unknown".to_string()),
+            reason: text("reason"),
+        }
+    }
+}
+
+/// What is counted: poses for `level`, scans for `match`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Kind {
+    Level,
+    Match,
+}
+
+/// The outcomes of one run, counted.
+#[derive(Debug)]
+pub(crate) struct Tally {
+    kind: Kind,
+    counts: BTreeMap<Outcome, usize>,
+    total: usize,
+}
+
+impl Tally {
+    pub fn new(kind: Kind) -> Tally {
+        Tally {
+            kind,
+            counts: BTreeMap::new(),
+            total: 0,
+        }
+    }
+
+    pub fn add(&mut self, outcome: Outcome) {
+        *self.counts.entry(outcome).or_default() += 1;
+        self.total += 1;
+    }
+
+    /// Prints [`Tally::lines`] on standard error.
+    pub fn report(&self, input: &str) {
+        for line in self.lines(input) {
+            eprintln!("{line}");
+        }
+    }
+
+    /// The summary line, then a warning when most of the run failed (or the input was empty).
+    pub fn lines(&self, input: &str) -> Vec<String> {
+        let command = self.command();
+        let (one, many) = self.units();
+        if self.total == 0 {
+            return vec![format!(
+                "levelscan {command}: warning: {input} holds no scans; nothing to {command}"
+            )];
+        }
+        let groups: Vec<String> = self.groups().into_iter().map(|g| g.describe()).collect();
+        let unit = if self.total == 1 { one } else { many };
+        let mut lines = vec![format!(
+            "levelscan {command}: {} {unit}: {}",
+            self.total,
+            groups.join(", ")
+        )];
+        lines.extend(self.warning());
+        lines
+    }
+
+    fn command(&self) -> &'static str {
+        match self.kind {
+            Kind::Level => "level",
+            Kind::Match => "match",
+        }
+    }
+
+    fn units(&self) -> (&'static str, &'static str) {
+        match self.kind {
+            Kind::Level => ("pose", "poses"),
+            Kind::Match => ("scan", "scans"),
+        }
+    }
+
+    /// The outcomes gathered by what they mean to a user, in a fixed order; within a group,
+    /// reasons by count (most first), then by name.
+    fn groups(&self) -> Vec<Group> {
+        let mut groups: Vec<Group> = Vec::new();
+        for (outcome, &n) in &self.counts {
+            let (rank, label, by_reason) = self.label(outcome);
+            let group = match groups.iter_mut().position(|g| g.label == label) {
+                Some(i) => &mut groups[i],
+                None => {
+                    groups.push(Group {
+                        rank,
+                        label,
+                        count: 0,
+                        reasons: Vec::new(),
+                    });
+                    groups.last_mut().expect("just pushed")
+                }
+            };
+            group.count += n;
+            if by_reason {
+                let reason = outcome.reason.clone().unwrap_or_else(|| "none".to_string());
+                group.reasons.push((reason, n));
+            }
+        }
+        for g in &mut groups {
+            g.reasons
+                .sort_by(|a, b| b.1.cmp(&a.1).then_with(|| a.0.cmp(&b.0)));
+        }
+        groups.sort_by(|a, b| a.rank.cmp(&b.rank).then_with(|| a.label.cmp(&b.label)));
+        groups
+    }
+
+    /// (order, words, whether the reasons are listed) for one outcome.
+    fn label(&self, o: &Outcome) -> (u8, String, bool) {
+        match (self.kind, o.status.as_str(), o.reason.as_deref()) {
+            (Kind::Level, "ok", _) => (0, "leveled".to_string(), false),
+            (Kind::Level, "failed", _) => (2, "failed".to_string(), true),
+            (Kind::Match, "ok", Some("first_scan")) => (3, "first scan".to_string(), false),
+            (Kind::Match, "ok", _) => (0, "matched".to_string(), false),
+            (Kind::Match, "partial", _) => (1, "partly matched".to_string(), true),
+            (Kind::Match, "fallback", _) => (2, "fell back to odometry".to_string(), true),
+            (_, other, _) => (4, other.to_string(), true),
+        }
+    }
+
+    /// Failed, or fallen back: the outcomes that gave the user nothing of the command's own.
+    fn failures(&self) -> Vec<(String, usize)> {
+        let failed = match self.kind {
+            Kind::Level => "failed",
+            Kind::Match => "fallback",
+        };
+        let mut by_reason: Vec<(String, usize)> = self
+            .counts
+            .iter()
+            .filter(|(o, _)| o.status == failed)
+            .map(|(o, &n)| (o.reason.clone().unwrap_or_else(|| "none".to_string()), n))
+            .collect();
+        by_reason.sort_by(|a, b| b.1.cmp(&a.1).then_with(|| a.0.cmp(&b.0)));
+        by_reason
+    }
+
+    /// A warning when more than half of the run failed. For `match` the first scan is left
+    /// out: it has nothing to be matched against, so two scans of which the second fell back
+    /// failed whole.
+    fn warning(&self) -> Option<String> {
+        let failures = self.failures();
+        let failed: usize = failures.iter().map(|(_, n)| n).sum();
+        let first = self
+            .counts
+            .iter()
+            .filter(|(o, _)| self.label(o).1 == "first scan")
+            .map(|(_, &n)| n)
+            .sum::<usize>();
+        let attempted = self.total - first;
+        if attempted == 0 || 2 * failed <= attempted {
+            return None;
+        }
+        let (_, many) = self.units();
+        let verb = match self.kind {
+            Kind::Level => "failed",
+            Kind::Match => "fell back to odometry",
+        };
+        let (top, _) = &failures[0];
+        let mut line = format!(
+            "levelscan {}: warning: {failed} of {attempted} {many} {verb}, most often {top}",
+            self.command()
+        );
+        if let Some(hint) = hint(self.kind, top) {
+            line.push_str(": ");
+            line.push_str(hint);
+        }
+        Some(line)
+    }
+}
+
+/// A group of the summary line: `48 leveled` or `2 failed (too_few_scans 2)`.
+#[derive(Debug)]
+struct Group {
+    rank: u8,
+    label: String,
+    count: usize,
+    reasons: Vec<(String, usize)>,
+}
+
+impl Group {
+    fn describe(&self) -> String {
+        if self.reasons.is_empty() {
+            return format!("{} {}", self.count, self.label);
+        }
+        let reasons: Vec<String> = self
+            .reasons
+            .iter()
+            .map(|(r, n)| format!("{r} {n}"))
+            .collect();
+        format!("{} {} ({})", self.count, self.label, reasons.join(", "))
+    }
+}
+
+/// What usually lies behind the most common failure, for the warning.
+fn hint(kind: Kind, reason: &str) -> Option<&'static str> {
+    Some(match (kind, reason) {
+        (Kind::Level, "too_few_scans") => {
+            "a pose needs scans at three or more distinct elevations (simulate --scans 3 or more)"
+        }
+        (Kind::Level, "inconsistent_scans") => "the scans of a pose must have the same nrays",
+        (Kind::Level, "too_few_polygons") => {
+            "too few wall patches in view; is the noise right (--sigma, readings_sigma) and are \
+             the elevations in radians?"
+        }
+        (Kind::Level, "facing_floor" | "facing_ceiling") => {
+            "the scanner sees more floor or ceiling than walls; use smaller elevations"
+        }
+        (Kind::Level, "parallel_walls") => {
+            "the walls in view all face one way, which pins only one tilt axis"
+        }
+        (Kind::Match, "no_valid_rays") => {
+            "no reading within --min-range and --max-range; are the scans leveled (level's \
+             output) and the ranges in metres?"
+        }
+        (
+            Kind::Match,
+            "too_few_correspondences" | "degenerate" | "high_residual" | "large_correction",
+        ) => {
+            "consecutive scans must overlap: a robot's path, not unrelated poses (simulate \
+             --random draws poses at random)"
+        }
+        _ => return None,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use serde_json::json;
+
+    fn outcome(status: &str, reason: Option<&str>) -> Outcome {
+        Outcome {
+            status: status.to_string(),
+            reason: reason.map(str::to_string),
+        }
+    }
+
+    fn tally(kind: Kind, items: &[(&str, Option<&str>, usize)]) -> Tally {
+        let mut t = Tally::new(kind);
+        for &(s, r, n) in items {
+            for _ in 0..n {
+                t.add(outcome(s, r));
+            }
+        }
+        t
+    }
+
+    #[test]
+    fn outcome_is_read_from_the_records_status_object() {
+        let mut scan = Scan::default();
+        scan.extra.insert(
+            "level".to_string(),
+            json!({"status": "failed", "reason": "too_few_scans", "theta_x": null}),
+        );
+        assert_eq!(
+            Outcome::of(&scan, "level"),
+            outcome("failed", Some("too_few_scans"))
+        );
+        assert_eq!(Outcome::of(&scan, "match"), outcome("unknown", None));
+    }
+
+    #[test]
+    fn level_counts_leveled_and_failed_by_reason() {
+        let t = tally(
+            Kind::Level,
+            &[
+                ("ok", None, 46),
+                ("failed", Some("parallel_walls"), 1),
+                ("failed", Some("too_few_polygons"), 3),
+            ],
+        );
+        assert_eq!(
+            t.lines("in.jsonl"),
+            [
+                "levelscan level: 50 poses: 46 leveled, 4 failed (too_few_polygons 3, parallel_walls 1)"
+            ]
+        );
+    }
+
+    #[test]
+    fn every_pose_failed_warns_with_the_reason_and_a_hint() {
+        let t = tally(Kind::Level, &[("failed", Some("too_few_scans"), 2)]);
+        assert_eq!(
+            t.lines("<stdin>"),
+            [
+                "levelscan level: 2 poses: 2 failed (too_few_scans 2)",
+                "levelscan level: warning: 2 of 2 poses failed, most often too_few_scans: a \
+                 pose needs scans at three or more distinct elevations (simulate --scans 3 or \
+                 more)"
+            ]
+        );
+    }
+
+    #[test]
+    fn half_failed_is_not_most() {
+        let t = tally(
+            Kind::Level,
+            &[("ok", None, 2), ("failed", Some("facing_floor"), 2)],
+        );
+        assert_eq!(t.lines("f").len(), 1);
+        let t = tally(
+            Kind::Level,
+            &[("ok", None, 2), ("failed", Some("facing_floor"), 3)],
+        );
+        assert_eq!(t.lines("f").len(), 2);
+    }
+
+    #[test]
+    fn match_groups_first_matched_partial_and_fallback() {
+        let t = tally(
+            Kind::Match,
+            &[
+                ("ok", Some("first_scan"), 1),
+                ("ok", None, 10),
+                ("partial", Some("degenerate"), 2),
+                ("fallback", Some("degenerate"), 1),
+                ("fallback", Some("too_few_correspondences"), 3),
+            ],
+        );
+        assert_eq!(
+            t.lines("log"),
+            [
+                "levelscan match: 17 scans: 10 matched, 2 partly matched (degenerate 2), 4 fell \
+                 back to odometry (too_few_correspondences 3, degenerate 1), 1 first scan"
+            ]
+        );
+    }
+
+    #[test]
+    fn match_warning_leaves_the_first_scan_out() {
+        let t = tally(
+            Kind::Match,
+            &[
+                ("ok", Some("first_scan"), 1),
+                ("fallback", Some("too_few_correspondences"), 1),
+            ],
+        );
+        let lines = t.lines("log");
+        assert_eq!(lines.len(), 2);
+        assert!(
+            lines[1].starts_with(
+                "levelscan match: warning: 1 of 1 scans fell back to odometry, most often \
+                 too_few_correspondences: consecutive scans must overlap"
+            ),
+            "{lines:?}"
+        );
+        // A single scan has nothing to match against: no warning.
+        let t = tally(Kind::Match, &[("ok", Some("first_scan"), 1)]);
+        assert_eq!(t.lines("log"), ["levelscan match: 1 scan: 1 first scan"]);
+    }
+
+    #[test]
+    fn an_empty_input_says_so() {
+        assert_eq!(
+            Tally::new(Kind::Level).lines("empty.jsonl"),
+            ["levelscan level: warning: empty.jsonl holds no scans; nothing to level"]
+        );
+        assert_eq!(
+            Tally::new(Kind::Match).lines("<stdin>"),
+            ["levelscan match: warning: <stdin> holds no scans; nothing to match"]
+        );
+    }
+
+    #[test]
+    fn unknown_statuses_are_named_as_written() {
+        let t = tally(Kind::Match, &[("ok", None, 3), ("odd", Some("why"), 1)]);
+        assert_eq!(
+            t.lines("x"),
+            ["levelscan match: 4 scans: 3 matched, 1 odd (why 1)"]
+        );
+    }
+}

@@ -1,0 +1,136 @@
+//! `level` and `match` end with one line on standard error saying how the run went (poses
+//! leveled and failed by reason, scans matched and fallen back by reason), warn when most of
+//! the run failed, and say so when the input held nothing; the exit stays 0 (issue 25 item 2).
+
+mod cli_support;
+use cli_support::*;
+
+use std::path::{Path, PathBuf};
+use std::process::Output;
+
+fn plan(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join(format!("examples/plans/{name}.wall"))
+}
+
+fn simulate(args: &[&str]) -> Vec<u8> {
+    let plan = plan("office");
+    let mut all = vec!["simulate", plan.to_str().unwrap()];
+    all.extend_from_slice(args);
+    let out = bin().args(&all).output().unwrap();
+    assert!(out.status.success());
+    out.stdout
+}
+
+/// Standard error of a successful run, as lines.
+fn stderr_lines(out: &Output) -> Vec<String> {
+    let err = String::from_utf8_lossy(&out.stderr).to_string();
+    assert!(out.status.success(), "{err}");
+    err.lines().map(str::to_string).collect()
+}
+
+#[test]
+fn two_scans_per_pose_fail_every_pose_and_level_says_so() {
+    let scans = simulate(&["--scans", "2"]);
+    let out = run_with_stdin(&["level"], &scans);
+    let poses = records(&out);
+    assert_eq!(poses.len(), 30);
+    assert!(
+        poses
+            .iter()
+            .all(|p| p["level"]["reason"] == "too_few_scans")
+    );
+    assert_eq!(
+        stderr_lines(&out),
+        [
+            "levelscan level: 30 poses: 30 failed (too_few_scans 30)",
+            "levelscan level: warning: 30 of 30 poses failed, most often too_few_scans: a pose \
+             needs scans at three or more distinct elevations (simulate --scans 3 or more)"
+        ]
+    );
+}
+
+#[test]
+fn a_good_run_gets_one_line_with_its_counts() {
+    let out = run_with_stdin(&["level"], &simulate(&[]));
+    let poses = records(&out);
+    let ok = poses
+        .iter()
+        .filter(|p| p["level"]["status"] == "ok")
+        .count();
+    assert_eq!(ok, 30);
+    assert_eq!(
+        stderr_lines(&out),
+        ["levelscan level: 30 poses: 30 leveled"]
+    );
+    let leveled: Vec<u8> = out.stdout;
+    let out = run_with_stdin(&["match"], &leveled);
+    let scans = records(&out);
+    let status = |s: &str, r: Option<&str>| {
+        scans
+            .iter()
+            .filter(|m| m["match"]["status"] == s && m["match"]["reason"].as_str() == r)
+            .count()
+    };
+    let lines = stderr_lines(&out);
+    assert_eq!(lines.len(), 1, "{lines:?}");
+    // The line's counts are the records' own.
+    let mut want = format!("levelscan match: 30 scans: {} matched", status("ok", None));
+    let fallback = scans.len() - status("ok", None) - 1;
+    if fallback > 0 {
+        want.push_str(&format!(", {fallback} fell back to odometry ("));
+    }
+    assert!(lines[0].starts_with(&want), "{} vs {want}", lines[0]);
+    assert!(lines[0].ends_with(", 1 first scan"), "{}", lines[0]);
+    assert!(fallback * 2 <= 29, "most of the office path should match");
+}
+
+#[test]
+fn unrelated_random_poses_warn_that_matching_failed() {
+    let scans = simulate(&["--random", "20", "--seed", "3"]);
+    let level = run_with_stdin(&["level"], &scans);
+    let out = run_with_stdin(&["match"], &level.stdout);
+    let scans = records(&out);
+    let fallback = scans
+        .iter()
+        .filter(|m| m["match"]["status"] == "fallback")
+        .count();
+    assert!(fallback * 2 > 19, "{fallback} of 19 fell back");
+    let lines = stderr_lines(&out);
+    assert_eq!(lines.len(), 2, "{lines:?}");
+    assert!(lines[0].starts_with("levelscan match: 20 scans: "));
+    assert!(
+        lines[1].starts_with(&format!(
+            "levelscan match: warning: {fallback} of 19 scans fell back to odometry, most often "
+        )),
+        "{}",
+        lines[1]
+    );
+    assert!(lines[1].contains("consecutive scans must overlap"));
+}
+
+#[test]
+fn an_empty_input_says_it_held_nothing() {
+    let dir = std::env::temp_dir().join(format!("levelscan-summary-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let empty = dir.join("empty.jsonl");
+    std::fs::write(&empty, b"").unwrap();
+    let name = empty.to_str().unwrap();
+    for command in ["level", "match"] {
+        let out = bin().args([command, name]).output().unwrap();
+        assert!(out.stdout.is_empty());
+        assert_eq!(
+            stderr_lines(&out),
+            [format!(
+                "levelscan {command}: warning: {name} holds no scans; nothing to {command}"
+            )]
+        );
+        let out = run_with_stdin(&[command], b"");
+        assert_eq!(
+            stderr_lines(&out),
+            [format!(
+                "levelscan {command}: warning: <stdin> holds no scans; nothing to {command}"
+            )]
+        );
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
