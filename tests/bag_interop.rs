@@ -666,3 +666,38 @@ fn rosbags_two_scan_topics_fail_cleanly() {
         "two LaserScan topics",
     );
 }
+
+/// The last table row of `eval real` output, as cells.
+fn table_row(text: &str) -> Vec<String> {
+    let row = text.lines().rfind(|l| l.starts_with('|')).unwrap();
+    row.trim_matches('|')
+        .split('|')
+        .map(|c| c.trim().to_string())
+        .collect()
+}
+
+/// `eval real` and `view` take bags as they take JSON Lines (the truth from /ground_truth).
+#[test]
+fn eval_real_and_view_take_bags() {
+    let Some(fx) = Fixture::new("bag-eval") else {
+        return;
+    };
+    let r2 = fx.bag("r2", "mcap", &[]);
+    let r1 = fx.bag("r1.bag", "ros1", &[]);
+    let want = table_row(&ok_stdout(&["eval", "real", &fx.scans]));
+    for bag in [&r2, &r1] {
+        let got = table_row(&ok_stdout(&["eval", "real", bag]));
+        assert_eq!(got[1], want[1], "{bag}: scans");
+        // RPE medians [mm] within 0.1 mm (float32 ranges); odometry's exactly (float64).
+        let mm = |v: &str| v.parse::<f64>().unwrap();
+        assert!(
+            (mm(&got[2]) - mm(&want[2])).abs() <= 0.1,
+            "{bag}: RPE {got:?} vs {want:?}"
+        );
+        assert_eq!(got[5], want[5], "{bag}: odometry RPE");
+    }
+    let html = fx.dir.join("view.html");
+    ok_stdout(&["view", &r2, "-o", &html]);
+    let page = std::fs::read_to_string(&html).unwrap();
+    assert!(page.len() > 10_000 && page.contains("<html"), "a page");
+}
