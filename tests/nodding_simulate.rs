@@ -261,3 +261,40 @@ fn a_still_hinge_writes_no_ray_elevation() {
         "1 cm noise, 6 sigma"
     );
 }
+
+/// `eval accuracy` with a sweep: a still hinge (`--sweep-rate 0`) is the default run to the
+/// byte, and leveling a 30 deg/s sweep without its per-ray elevations is worse than with them.
+#[test]
+fn eval_accuracy_measures_the_sweep() {
+    let office = plan_path("office");
+    let dir = std::env::temp_dir().join(format!("levelscan-nod-{}", std::process::id()));
+    let median = |extra: &[&str]| -> (Vec<u8>, f64) {
+        let out = bin()
+            .args([
+                "eval", "accuracy", &office, "--poses", "120", "--scans", "3",
+            ])
+            .args(["--noise", "0.01", "--estimators", "robust", "--out"])
+            .arg(&dir)
+            .args(extra)
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let json: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(dir.join("accuracy.json")).unwrap()).unwrap();
+        (out.stdout, json["cells"][0]["median_deg"].as_f64().unwrap())
+    };
+    let (plain, _) = median(&[]);
+    let (still, _) = median(&["--sweep-rate", "0"]);
+    assert_eq!(plain, still);
+    let (_, with) = median(&["--sweep-rate", "30", "--scan-rate", "40"]);
+    let (_, without) = median(&["--sweep-rate", "30", "--drop-ray-elevation"]);
+    let _ = std::fs::remove_dir_all(&dir);
+    assert!(
+        without > 1.5 * with,
+        "median {without} without vs {with} with ray_elevation"
+    );
+}

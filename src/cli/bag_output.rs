@@ -28,7 +28,9 @@ use std::sync::mpsc::{Receiver, sync_channel};
 /// What the output is: JSON Lines, or a ROS 2 bag (MCAP).
 #[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
 pub enum OutputFormat {
+    /// Scan JSON Lines.
     Jsonl,
+    /// A ROS 2 bag: one MCAP file (profile ros2, CDR messages).
     Mcap,
 }
 

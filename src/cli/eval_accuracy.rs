@@ -56,6 +56,22 @@ pub struct Args {
     /// Take the scans with the adaptive robot (cleverRobot), as the paper's Table I did.
     #[arg(long)]
     pub adaptive: bool,
+    /// Nodding laser: the hinge turns at this rate while each scan is taken (deg/s), each ray
+    /// cast at its own elevation (as `simulate --sweep-rate`). 0 stops it for each scan.
+    #[arg(
+        long,
+        default_value_t = 0.0,
+        allow_hyphen_values = true,
+        value_name = "DEG_PER_S"
+    )]
+    pub sweep_rate: f64,
+    /// Scans per second (Hz), as `simulate --scan-rate`.
+    #[arg(long, default_value_t = AccuracyParams::default().scan_rate, value_name = "HZ")]
+    pub scan_rate: f64,
+    /// Level as if the hinge stood still during each scan: drop the per-ray elevations of a
+    /// sweep, every ray at its scan's elevation (what ignoring the sweep costs).
+    #[arg(long)]
+    pub drop_ray_elevation: bool,
     /// Write accuracy.json, poses.jsonl (every pose's outcome) and the Fig. 6 histograms
     /// (PNG, SVG) here.
     #[arg(long)]
@@ -90,6 +106,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         step_deg: args.step,
         tilt_deg: args.tilt,
         adaptive: args.adaptive,
+        sweep_rate_deg: args.sweep_rate,
+        scan_rate: args.scan_rate,
+        drop_ray_elevation: args.drop_ray_elevation,
         level: LevelParams {
             coplanar_k: args.quad_tolerance,
             ..args.leveling.apply(LevelParams::default())
@@ -114,6 +133,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             "noise_model": args.noise_model.to_string(),
             "quad_tolerance": args.quad_tolerance,
             "adaptive": args.adaptive,
+            "sweep_rate_deg": args.sweep_rate,
+            "scan_rate": args.scan_rate,
+            "drop_ray_elevation": args.drop_ray_elevation,
             "cells": stats,
         });
         write_file(&path, serde_json::to_string_pretty(&json)?.as_bytes())?;
@@ -249,17 +271,17 @@ fn markdown(stats: &[CellStats], params: &AccuracyParams) -> String {
     let _ = writeln!(s, "### Every cell\n");
     let _ = writeln!(
         s,
-        "| estimator | scans | noise [m] | leveled | mean | median | p95 | max | ok > 5 deg | within 3 sigma | phantom | floor/ceiling kept | coverage | bound | bound within gate | true segments within gate | failures |"
+        "| estimator | scans | noise [m] | leveled | mean | rms | median | p95 | max | ok > 5 deg | within 3 sigma | phantom | floor/ceiling kept | coverage | bound | bound within gate | true segments within gate | failures |"
     );
     let _ = writeln!(
         s,
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"
     );
     for c in stats {
         let failures: Vec<String> = c.failures.iter().map(|(k, v)| format!("{k} {v}")).collect();
         let _ = writeln!(
             s,
-            "| {} | {} | {} | {}/{} ({}) | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
+            "| {} | {} | {} | {}/{} ({}) | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
             c.estimator,
             c.scans,
             c.noise,
@@ -267,6 +289,7 @@ fn markdown(stats: &[CellStats], params: &AccuracyParams) -> String {
             c.poses,
             fmt_pct(c.leveled_fraction),
             fmt_deg(c.mean_deg),
+            fmt_deg(c.rms_deg),
             fmt_deg(c.median_deg),
             fmt_deg(c.p95_deg),
             fmt_deg(c.max_deg),

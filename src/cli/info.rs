@@ -80,7 +80,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 /// A bag's topics (name, type, count, first and last log time in seconds), its time span,
 /// and which topic and joint the scans come from.
 fn bag_report(s: &Survey) -> serde_json::Map<String, Value> {
-    let secs = |ns: u64| ns as f64 * 1e-9;
+    // Whole seconds and the fraction apart, so that 1000 s prints as 1000.0, not 1000.0000000000001.
+    let secs = |ns: u64| (ns / 1_000_000_000) as f64 + (ns % 1_000_000_000) as f64 / 1e9;
     let topics: Vec<Value> = s
         .topics
         .iter()

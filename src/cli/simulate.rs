@@ -1,6 +1,7 @@
 //! `levelscan simulate PLAN.wall`: tilted multi-elevation scans of a floor plan as scan JSON
 //! Lines (paper sect. 7.2.1), a thin layer over [`levelscan::simulate`].
 
+use super::bag_output::{OutputFormat, output_format};
 use super::{open_output, progress_bar};
 use anyhow::{Context, bail};
 use levelscan::formats::bag::BagWriter;
@@ -127,30 +128,6 @@ pub struct Args {
     pub format: Option<OutputFormat>,
 }
 
-/// What simulate writes.
-#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
-pub enum OutputFormat {
-    /// Scan JSON Lines.
-    Jsonl,
-    /// A ROS 2 bag: one MCAP file (profile ros2, CDR messages).
-    Mcap,
-}
-
-impl OutputFormat {
-    /// `--format` when given, else MCAP for an output file named `*.mcap` (any case), else
-    /// JSON Lines.
-    fn choose(asked: Option<OutputFormat>, output: Option<&std::path::Path>) -> OutputFormat {
-        let mcap = output
-            .and_then(std::path::Path::extension)
-            .is_some_and(|e| e.eq_ignore_ascii_case("mcap"));
-        asked.unwrap_or(if mcap {
-            OutputFormat::Mcap
-        } else {
-            OutputFormat::Jsonl
-        })
-    }
-}
-
 pub fn run(args: Args) -> anyhow::Result<()> {
     let scanner = scanner_params(&args)?;
     let odo = args.odometry.params()?;
@@ -206,7 +183,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         max_retakes: args.max_retakes,
         ..AdaptiveParams::default()
     });
-    let format = OutputFormat::choose(args.format, args.output.as_deref());
+    let format = output_format(args.format, args.output.as_deref());
     if format == OutputFormat::Mcap && elevations.len() > simulated::MAX_SCANS_PER_POSE {
         bail!(
             "a bag holds at most {} scans per pose ({} s apart within the pose's {} s); \

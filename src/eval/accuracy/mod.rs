@@ -82,6 +82,17 @@ pub struct AccuracyParams {
     /// Take the scans with the adaptive robot, cleverRobot (sect. 7.2.2), as the paper's
     /// Table I did. Default false.
     pub adaptive: bool,
+    /// A nodding laser: the hinge turns at this rate while each scan is taken \[deg/s\]
+    /// ([`ScannerParams::sweep_rate`]). Default 0 (stop-and-scan, as the paper's robot).
+    pub sweep_rate_deg: f64,
+    /// Scans per second \[Hz\] ([`ScannerParams::scan_rate`]); with a sweep it sets how far
+    /// the hinge turns within a scan. Default 40.
+    pub scan_rate: f64,
+    /// Level without the scans' per-ray elevations (`ray_elevation`), every ray at its scan's
+    /// nominal elevation: what a leveler that ignores the sweep gets. The bound and the truth
+    /// still use the rays as cast. (The adaptive robot's own leveling keeps them.) Default
+    /// false.
+    pub drop_ray_elevation: bool,
     /// Also fit the maximum-likelihood core ([`crate::level::ml`]) to each pose's true
     /// segmentation, for the `true_segments_ml` statistics. Default true.
     pub true_segments_ml: bool,
@@ -109,6 +120,9 @@ impl Default for AccuracyParams {
             max_range: 30.0,
             phantom_distance: 0.15,
             adaptive: false,
+            sweep_rate_deg: 0.0,
+            scan_rate: ScannerParams::default().scan_rate,
+            drop_ray_elevation: false,
             true_segments_ml: true,
             level: LevelParams::default(),
             pseudo: PseudoLevelParams::default(),
@@ -134,6 +148,7 @@ pub fn run_accuracy(
     plans: &[Plan],
     params: &AccuracyParams,
 ) -> Result<Vec<CellStats>, SimulateError> {
+    scanner_params(params, 0.0).validate()?;
     let pose_params = RandomPoseParams {
         tilt: params.tilt_deg.to_radians(),
         clearance: params.clearance,
@@ -248,6 +263,20 @@ fn run_pose_cell(
         .collect()
 }
 
+/// The scanner of the experiment at range noise `noise`.
+fn scanner_params(params: &AccuracyParams, noise: f64) -> ScannerParams {
+    ScannerParams {
+        rays: params.rays,
+        fov: params.fov_deg.to_radians(),
+        max_range: params.max_range,
+        noise_sigma: noise,
+        noise_model: params.noise_model,
+        sweep_rate: params.sweep_rate_deg.to_radians(),
+        scan_rate: params.scan_rate,
+        ..ScannerParams::default()
+    }
+}
+
 /// The pose's scans for one cell, from its own random stream.
 fn simulate_cell(
     scene: &Scene,
@@ -256,14 +285,7 @@ fn simulate_cell(
     stream_seed: u64,
     params: &AccuracyParams,
 ) -> Vec<Scan> {
-    let scanner = ScannerParams {
-        rays: params.rays,
-        fov: params.fov_deg.to_radians(),
-        max_range: params.max_range,
-        noise_sigma: noise,
-        noise_model: params.noise_model,
-        ..ScannerParams::default()
-    };
+    let scanner = scanner_params(params, noise);
     let mut rng = stream_rng(stream_seed, Stream::Scans, k as u64);
     let elevations = elevations_centred(nscans, params.step_deg.to_radians());
     if params.adaptive {

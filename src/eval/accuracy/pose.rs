@@ -9,6 +9,7 @@ use crate::plan::Segment;
 use crate::pseudo_level::{base_scan_index, pseudo_level_scan};
 use crate::scan::{Hit, Scan};
 use nalgebra::Point2;
+use std::borrow::Cow;
 
 /// What happened at one pose in one cell with one estimator.
 #[derive(Clone, Debug, PartialEq, Default)]
@@ -94,6 +95,20 @@ fn wall_hits(scan: &Scan) -> usize {
         .map_or(0, |h| h.iter().filter(|&&x| x == Hit::Wall).count())
 }
 
+/// The scans as the leveler is given them: as cast, or with `drop_ray_elevation` each ray at
+/// its scan's nominal elevation (the truth and the hit labels stay with `scans`).
+fn leveler_view<'a>(scans: &'a [Scan], params: &AccuracyParams) -> Cow<'a, [Scan]> {
+    if params.drop_ray_elevation {
+        let nominal = scans.iter().map(|s| Scan {
+            ray_elevation: None,
+            ..s.clone()
+        });
+        Cow::Owned(nominal.collect())
+    } else {
+        Cow::Borrowed(scans)
+    }
+}
+
 /// Levels one pose's scans and scores the result against the truth: the plan's `walls` and
 /// its ceiling's height when it has one (its `plan` and `pose` indices, bound and
 /// true-segment fields are the caller's to set).
@@ -104,7 +119,8 @@ pub fn evaluate_pose(
     level: &LevelParams,
     params: &AccuracyParams,
 ) -> PoseOutcome {
-    let est = level_pose(scans, level);
+    let seen = leveler_view(scans, params);
+    let est = level_pose(&seen, level);
     let t = truth.attitude();
     let truth_deg = [t.theta_x.to_degrees(), t.theta_y.to_degrees()];
     let best_wall_hits = scans.iter().map(wall_hits).max().unwrap_or(0);
@@ -120,7 +136,7 @@ pub fn evaluate_pose(
         (att.theta_x - t.theta_x).abs(),
         (att.theta_y - t.theta_y).abs(),
     );
-    let pseudo = pseudo_level_scan(scans, &est, &params.pseudo);
+    let pseudo = pseudo_level_scan(&seen, &est, &params.pseudo);
     let base = &scans[base_scan_index(scans, &est)];
     let planar = truth.to_pose2();
     let world_from_robot = truth.world_from_robot();

@@ -19,6 +19,8 @@ pub struct CellStats {
     pub leveled_fraction: f64,
     /// Mean, median, 95th percentile and maximum error over leveled poses \[deg\].
     pub mean_deg: f64,
+    /// Root mean square of the leveled poses' errors \[deg\]: what large errors weigh in.
+    pub rms_deg: f64,
     pub median_deg: f64,
     pub p95_deg: f64,
     pub max_deg: f64,
@@ -132,6 +134,11 @@ pub(crate) fn cell_stats(
         } else {
             errors.iter().sum::<f64>() / n as f64
         },
+        rms_deg: if n == 0 {
+            f64::NAN
+        } else {
+            (errors.iter().map(|e| e * e).sum::<f64>() / n as f64).sqrt()
+        },
         median_deg: median(&sorted),
         p95_deg: nearest_rank(&sorted, 0.95),
         max_deg: sorted.last().copied().unwrap_or(f64::NAN),
@@ -201,6 +208,7 @@ mod tests {
         let s = cell_stats(3, 0.01, Estimator::Robust, 1.5, &refs);
         assert_eq!(s.leveled, 3);
         assert!((s.mean_deg - 10.0 / 3.0).abs() < 1e-12);
+        assert!((s.rms_deg - (46.0f64 / 3.0).sqrt()).abs() < 1e-12);
         assert_eq!(s.median_deg, 3.0);
         assert_eq!(s.max_deg, 6.0);
         assert_eq!(s.wrong_over_5_deg, 1);
