@@ -701,3 +701,61 @@ fn eval_real_and_view_take_bags() {
     let page = std::fs::read_to_string(&html).unwrap();
     assert!(page.len() > 10_000 && page.contains("<html"), "a page");
 }
+
+/// A nodding laser (simulate --sweep-rate 30: the hinge turns while each scan is taken) as
+/// rosbags writes it: the LaserScan's time_increment and joint messages on the sweep just
+/// before and after each scan. The reader must give every ray its own elevation (the joint
+/// interpolated at the ray's time), so the bag levels as its JSON Lines, which carry
+/// ray_elevation; the same bag read as stop-and-scan would not.
+#[test]
+fn nodding_bag_levels_as_its_json_lines() {
+    let Some(fx) = Fixture::new("bag-nodding") else {
+        return;
+    };
+    let scans = fx.dir.join("nod.jsonl");
+    let plan = concat!(env!("CARGO_MANIFEST_DIR"), "/examples/plans/office.wall");
+    let sim = [
+        "simulate",
+        plan,
+        "--random",
+        "6",
+        "--seed",
+        "7",
+        "--sweep-rate",
+        "30",
+    ];
+    ok_stdout(&[&sim[..], &["-o", &scans]].concat());
+    let jsonl = ok_records(&["level", &scans]);
+    let fx = Fixture { scans, ..fx };
+    let nod = fx.bag("nod", "mcap", &["--sweep-rate", "30"]);
+    assert_same_levels(&ok_records(&["level", &nod]), &jsonl, "nodding bag");
+    // The per-ray elevations as read, through match's pass-through.
+    let want: Vec<Value> = std::fs::read_to_string(&fx.scans)
+        .unwrap()
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    let read = ok_records(&["match", "--mode", "pairwise", &nod]);
+    for (i, (g, w)) in read.iter().zip(&want).enumerate() {
+        let (g, w) = (
+            g["ray_elevation"].as_array(),
+            w["ray_elevation"].as_array().unwrap(),
+        );
+        let g = g.unwrap_or_else(|| panic!("scan {i}: no ray_elevation read"));
+        for (j, (a, b)) in g.iter().zip(w).enumerate() {
+            assert!((f(a) - f(b)).abs() < 1e-8, "scan {i} ray {j}: {a} vs {b}");
+        }
+    }
+    // Without the sweep (time_increment 0, the joint still): off by more than the tolerance.
+    let still = fx.bag("still", "mcap", &[]);
+    let worst = ok_records(&["level", &still])
+        .iter()
+        .zip(&jsonl)
+        .filter(|(b, j)| b["level"]["status"] == "ok" && j["level"]["status"] == "ok")
+        .map(|(b, j)| (f(&b["level"]["theta_y"]) - f(&j["level"]["theta_y"])).abs())
+        .fold(0.0, f64::max);
+    assert!(
+        worst > ATTITUDE_TOL,
+        "the test needs the sweep to matter ({worst} rad)"
+    );
+}

@@ -68,6 +68,9 @@ def parse_args(argv):
                    help="LaserScan range_max (m); default just above the longest reading")
     p.add_argument("--time-increment", type=float, default=0.0,
                    help="LaserScan time_increment (s); 0: stop-and-scan")
+    p.add_argument("--sweep-rate", type=float, default=0.0,
+                   help="nodding hinge (deg/s), for scans with ray_elevation (simulate "
+                        "--sweep-rate): time_increment from it, joint messages on the sweep")
     p.add_argument("--expect", default=None,
                    help="also write the scans as stored in the bag as JSON Lines here")
     return p.parse_args(argv)
@@ -115,6 +118,19 @@ def bearing_grid(scan, path):
     return np.float32(theta[0]), np.float32(inc)
 
 
+def sweep(scan, args):
+    """(time_increment s, joint position at t s after the first ray) of a scan. A nodding
+    hinge turns at --sweep-rate through the scan's ray_elevation (linear in the ray index), so
+    the time between rays is the elevation step over the rate; the header stamp is the first
+    ray's time (the ROS LaserScan convention)."""
+    rays = scan.get("ray_elevation")
+    if not args.sweep_rate or not rays or len(rays) < 2:
+        return args.time_increment, lambda t: scan["elevation"]
+    rate = math.radians(args.sweep_rate)
+    dt = (rays[-1] - rays[0]) / ((len(rays) - 1) * rate)
+    return float(np.float32(dt)), lambda t: rays[0] + rate * t
+
+
 def ranges_of(scan):
     valid = scan.get("valid") or [1 if r is not None else 0 for r in scan["readings"]]
     return np.array([r if (r is not None and v) else math.nan
@@ -151,7 +167,7 @@ class Messages:
         return self.T["sensor_msgs/msg/LaserScan"](
             header=self.header(t, "laser"), angle_min=float(amin),
             angle_max=float(np.float32(amin + inc * (n - 1))), angle_increment=float(inc),
-            time_increment=args.time_increment, scan_time=SCAN_PERIOD_S,
+            time_increment=sweep(scan, args)[0], scan_time=SCAN_PERIOD_S,
             range_min=args.range_min, range_max=range_max, ranges=ranges_of(scan),
             intensities=np.zeros(0, dtype=np.float32))
 
@@ -219,7 +235,8 @@ def events(scans, times, args):
         ev.append((t, 1, "scan", s))
         if not args.no_joints:
             ev.append((t - JOINT_LEAD_S + args.joint_offset, 0, "joint", s))
-            ev.append((t + JOINT_LEAD_S + args.joint_offset, 2, "joint", s))
+            span = sweep(s, args)[0] * (s["nrays"] - 1)
+            ev.append((t + span + JOINT_LEAD_S + args.joint_offset, 2, "joint", s))
         if not args.no_odom and s.get("odometry") is not None:
             ev.append((t, 1, "odom", s))
         if not args.no_truth and s.get("true_pose") is not None:
@@ -229,6 +246,12 @@ def events(scans, times, args):
 
 
 def write(args, scans, times):
+    for s, t in zip(scans, times):
+        s["_stamp"] = t
+
+    def joint_at(s, t):
+        return sweep(s, args)[1](t - s["_stamp"] - args.joint_offset)
+
     w, ts, ros1 = open_writer(args)
     m = Messages(ts, ros1)
     scan_type = "std_msgs/msg/String" if args.string_scan else "sensor_msgs/msg/LaserScan"
@@ -255,7 +278,7 @@ def write(args, scans, times):
                         msg = m.laser_scan(t, s, args, args.scans, range_max)
                         mtype = "sensor_msgs/msg/LaserScan"
                 elif kind == "joint":
-                    msg = m.joint_state(t, names, [s["elevation"]] + [0.0] * (len(names) - 1))
+                    msg = m.joint_state(t, names, [joint_at(s, t)] + [0.0] * (len(names) - 1))
                     mtype = "sensor_msgs/msg/JointState"
                 elif kind == "odom":
                     msg, mtype = m.odometry(t, s["odometry"]), "nav_msgs/msg/Odometry"
@@ -272,7 +295,7 @@ def write_expect(path, scans, times, args, range_max):
             amin, inc = bearing_grid(s, args.scans)
             r = ranges_of(s)
             keep = [not math.isnan(x) and args.range_min <= x <= range_max for x in r]
-            rec = dict(s)
+            rec = {k: v for k, v in s.items() if k != "_stamp"}
             rec["theta"] = [float(amin) + i * float(inc) for i in range(s["nrays"])]
             rec["readings"] = [float(x) if k else None for x, k in zip(r, keep)]
             rec["valid"] = [1 if k else 0 for k in keep]
