@@ -5,6 +5,10 @@
 //! is not hidden by the same bug here), on foxglove's `mcap` crate for the container.
 #![allow(dead_code)]
 
+pub mod cdr;
+pub mod interop;
+pub use cdr::*;
+
 use serde_json::Value;
 use std::collections::BTreeMap;
 use std::io::Cursor;
@@ -130,180 +134,6 @@ pub fn run_script(python: &str, script: &str, args: &[&str]) -> String {
     String::from_utf8(out.stdout).unwrap()
 }
 
-// ---- ROS 2 CDR, little endian (the test's own encoder) ------------------------------------
-
-/// A CDR buffer: the 4-byte encapsulation header (CDR_LE), then fields aligned to their size
-/// counted from the end of that header (the OMG CDR rule ROS 2 uses).
-pub struct Cdr(pub Vec<u8>);
-
-impl Cdr {
-    pub fn new() -> Cdr {
-        Cdr(vec![0, 1, 0, 0])
-    }
-    fn align(&mut self, n: usize) {
-        while (self.0.len() - 4) % n != 0 {
-            self.0.push(0);
-        }
-    }
-    pub fn u32(&mut self, v: u32) -> &mut Self {
-        self.align(4);
-        self.0.extend_from_slice(&v.to_le_bytes());
-        self
-    }
-    pub fn i32(&mut self, v: i32) -> &mut Self {
-        self.u32(v as u32)
-    }
-    pub fn f32(&mut self, v: f32) -> &mut Self {
-        self.u32(v.to_bits())
-    }
-    pub fn f64(&mut self, v: f64) -> &mut Self {
-        self.align(8);
-        self.0.extend_from_slice(&v.to_le_bytes());
-        self
-    }
-    pub fn string(&mut self, s: &str) -> &mut Self {
-        self.u32(s.len() as u32 + 1);
-        self.0.extend_from_slice(s.as_bytes());
-        self.0.push(0);
-        self
-    }
-    pub fn header(&mut self, ns: u64, frame: &str) -> &mut Self {
-        self.i32((ns / 1_000_000_000) as i32)
-            .u32((ns % 1_000_000_000) as u32)
-            .string(frame)
-    }
-    pub fn f64s(&mut self, v: &[f64]) -> &mut Self {
-        self.u32(v.len() as u32);
-        for x in v {
-            self.f64(*x);
-        }
-        self
-    }
-    /// A pose: position, then the quaternion (x, y, z, w) of yaw about z, roll/pitch given.
-    pub fn pose(&mut self, p: [f64; 3], q: [f64; 4]) -> &mut Self {
-        for x in p.iter().chain(q.iter()) {
-            self.f64(*x);
-        }
-        self
-    }
-    pub fn done(&mut self) -> Vec<u8> {
-        std::mem::take(&mut self.0)
-    }
-}
-
-/// Quaternion (x, y, z, w) of Rz(yaw) Ry(pitch) Rx(roll).
-pub fn quat(roll: f64, pitch: f64, yaw: f64) -> [f64; 4] {
-    let (sr, cr) = (roll / 2.0).sin_cos();
-    let (sp, cp) = (pitch / 2.0).sin_cos();
-    let (sy, cy) = (yaw / 2.0).sin_cos();
-    [
-        sr * cp * cy - cr * sp * sy,
-        cr * sp * cy + sr * cp * sy,
-        cr * cp * sy - sr * sp * cy,
-        cr * cp * cy + sr * sp * sy,
-    ]
-}
-
-pub struct LaserScanMsg<'a> {
-    pub stamp_ns: u64,
-    pub frame: &'a str,
-    pub angle_min: f32,
-    pub angle_increment: f32,
-    pub range_min: f32,
-    pub range_max: f32,
-    pub ranges: &'a [f32],
-}
-
-pub fn laser_scan_cdr(m: &LaserScanMsg) -> Vec<u8> {
-    let n = m.ranges.len().max(1) as f32;
-    let mut c = Cdr::new();
-    c.header(m.stamp_ns, m.frame)
-        .f32(m.angle_min)
-        .f32(m.angle_min + m.angle_increment * (n - 1.0))
-        .f32(m.angle_increment)
-        .f32(0.0)
-        .f32(0.1)
-        .f32(m.range_min)
-        .f32(m.range_max)
-        .u32(m.ranges.len() as u32);
-    for r in m.ranges {
-        c.f32(*r);
-    }
-    c.u32(0).done()
-}
-
-pub fn joint_state_cdr(stamp_ns: u64, names: &[&str], positions: &[f64]) -> Vec<u8> {
-    let mut c = Cdr::new();
-    c.header(stamp_ns, "").u32(names.len() as u32);
-    for n in names {
-        c.string(n);
-    }
-    c.f64s(positions).f64s(&[]).f64s(&[]).done()
-}
-
-pub fn odometry_cdr(stamp_ns: u64, x: f64, y: f64, yaw: f64) -> Vec<u8> {
-    let mut c = Cdr::new();
-    c.header(stamp_ns, "odom")
-        .string("base_link")
-        .pose([x, y, 0.0], quat(0.0, 0.0, yaw));
-    for _ in 0..36 + 6 + 36 {
-        c.f64(0.0);
-    }
-    c.done()
-}
-
-pub fn pose_stamped_cdr(stamp_ns: u64, pose6: &[f64]) -> Vec<u8> {
-    let mut c = Cdr::new();
-    let q = quat(pose6[5], pose6[4], pose6[3]);
-    c.header(stamp_ns, "world")
-        .pose([pose6[0], pose6[1], pose6[2]], q)
-        .done()
-}
-
-pub fn string_cdr(s: &str) -> Vec<u8> {
-    Cdr::new().string(s).done()
-}
-
-// ---- ros2msg schema texts ----------------------------------------------------------------
-
-const TIME: &str = "MSG: builtin_interfaces/Time\nint32 sec\nuint32 nanosec\n";
-const HEADER: &str = "MSG: std_msgs/Header\nbuiltin_interfaces/Time stamp\nstring frame_id\n";
-const SEP: &str =
-    "================================================================================\n";
-
-pub fn schema_text(name: &str) -> String {
-    let header = format!("{SEP}{HEADER}{SEP}{TIME}");
-    let geometry = format!(
-        "{SEP}MSG: geometry_msgs/Pose\nPoint position\nQuaternion orientation\n{SEP}\
-         MSG: geometry_msgs/Point\nfloat64 x\nfloat64 y\nfloat64 z\n{SEP}\
-         MSG: geometry_msgs/Quaternion\nfloat64 x 0\nfloat64 y 0\nfloat64 z 0\nfloat64 w 1\n"
-    );
-    match name {
-        "sensor_msgs/msg/LaserScan" => format!(
-            "std_msgs/Header header\nfloat32 angle_min\nfloat32 angle_max\n\
-             float32 angle_increment\nfloat32 time_increment\nfloat32 scan_time\n\
-             float32 range_min\nfloat32 range_max\nfloat32[] ranges\nfloat32[] intensities\n{header}"
-        ),
-        "sensor_msgs/msg/JointState" => format!(
-            "std_msgs/Header header\nstring[] name\nfloat64[] position\nfloat64[] velocity\n\
-             float64[] effort\n{header}"
-        ),
-        "nav_msgs/msg/Odometry" => format!(
-            "std_msgs/Header header\nstring child_frame_id\n\
-             geometry_msgs/PoseWithCovariance pose\ngeometry_msgs/TwistWithCovariance twist\n\
-             {header}{SEP}MSG: geometry_msgs/PoseWithCovariance\nPose pose\n\
-             float64[36] covariance\n{SEP}MSG: geometry_msgs/TwistWithCovariance\nTwist twist\n\
-             float64[36] covariance\n{SEP}MSG: geometry_msgs/Twist\nVector3 linear\n\
-             Vector3 angular\n{SEP}MSG: geometry_msgs/Vector3\nfloat64 x\nfloat64 y\n\
-             float64 z\n{geometry}"
-        ),
-        "geometry_msgs/msg/PoseStamped" => {
-            format!("std_msgs/Header header\nPose pose\n{header}{geometry}")
-        }
-        _ => "string data\n".to_string(),
-    }
-}
-
 // ---- MCAP files ----------------------------------------------------------------------------
 
 /// One message to write: topic, type (ROS 2 name), log time [ns], CDR bytes.
@@ -412,80 +242,72 @@ pub fn bag_messages(scans: &[Value], spec: &BagSpec) -> Vec<Msg> {
             within = 0;
         }
         last = seq;
-        let t = scan_time_ns(pose, within);
+        scan_messages(s, scan_time_ns(pose, within), spec, &mut out);
         within += 1;
-        let e = s["elevation"].as_f64().unwrap();
-        let msg = |topic: &str, ty: &str, lt: u64, data: Vec<u8>| Msg {
-            topic: topic.into(),
-            msgtype: ty.into(),
-            log_time: lt,
-            data,
-        };
-        let positions: Vec<f64> = (0..spec.joint_names.len())
-            .map(|i| if i == 0 { e } else { 0.0 })
-            .collect();
-        if spec.joints {
-            let data = joint_state_cdr(t - 10_000_000, &spec.joint_names, &positions);
-            out.push(msg(
-                "/joint_states",
-                "sensor_msgs/msg/JointState",
-                t - 10_000_000,
-                data,
-            ));
-        }
-        for (i, topic) in spec.scan_topics.iter().enumerate() {
-            let ty = if i == 0 {
-                spec.scan_type
-            } else {
-                "sensor_msgs/msg/LaserScan"
-            };
-            let data = if ty == "sensor_msgs/msg/LaserScan" {
-                scan_cdr(s, t)
-            } else {
-                string_cdr("not a scan")
-            };
-            out.push(msg(topic, ty, t, data));
-        }
-        if spec.odom {
-            let o: Vec<f64> = s["odometry"]
-                .as_array()
-                .unwrap()
-                .iter()
-                .map(|v| v.as_f64().unwrap())
-                .collect();
-            out.push(msg(
-                "/odom",
-                "nav_msgs/msg/Odometry",
-                t,
-                odometry_cdr(t, o[0], o[1], o[2]),
-            ));
-        }
-        if spec.truth {
-            let p: Vec<f64> = s["true_pose"]
-                .as_array()
-                .unwrap()
-                .iter()
-                .map(|v| v.as_f64().unwrap())
-                .collect();
-            out.push(msg(
-                "/ground_truth",
-                "geometry_msgs/msg/PoseStamped",
-                t,
-                pose_stamped_cdr(t, &p),
-            ));
-        }
-        if spec.joints {
-            let data = joint_state_cdr(t + 10_000_000, &spec.joint_names, &positions);
-            out.push(msg(
-                "/joint_states",
-                "sensor_msgs/msg/JointState",
-                t + 10_000_000,
-                data,
-            ));
-        }
     }
     out
 }
+
+fn msg(topic: &str, ty: &str, log_time: u64, data: Vec<u8>) -> Msg {
+    Msg {
+        topic: topic.into(),
+        msgtype: ty.into(),
+        log_time,
+        data,
+    }
+}
+
+fn numbers(v: &Value) -> Vec<f64> {
+    v.as_array()
+        .unwrap()
+        .iter()
+        .map(|x| x.as_f64().unwrap())
+        .collect()
+}
+
+/// The messages of one scan stamped `t` [ns]: joints 10 ms before, the scan, odometry and
+/// truth at `t`, joints 10 ms after.
+fn scan_messages(s: &Value, t: u64, spec: &BagSpec, out: &mut Vec<Msg>) {
+    let e = s["elevation"].as_f64().unwrap();
+    let positions: Vec<f64> = (0..spec.joint_names.len())
+        .map(|i| if i == 0 { e } else { 0.0 })
+        .collect();
+    let joints = |lt: u64| {
+        let data = joint_state_cdr(lt, &spec.joint_names, &positions);
+        msg("/joint_states", "sensor_msgs/msg/JointState", lt, data)
+    };
+    if spec.joints {
+        out.push(joints(t - 10_000_000));
+    }
+    for (i, topic) in spec.scan_topics.iter().enumerate() {
+        let ty = if i == 0 { spec.scan_type } else { LASER_SCAN };
+        let data = if ty == LASER_SCAN {
+            scan_cdr(s, t)
+        } else {
+            string_cdr("not a scan")
+        };
+        out.push(msg(topic, ty, t, data));
+    }
+    if spec.odom {
+        let o = numbers(&s["odometry"]);
+        let data = odometry_cdr(t, o[0], o[1], o[2]);
+        out.push(msg("/odom", "nav_msgs/msg/Odometry", t, data));
+    }
+    if spec.truth {
+        let data = pose_stamped_cdr(t, &numbers(&s["true_pose"]));
+        out.push(msg(
+            "/ground_truth",
+            "geometry_msgs/msg/PoseStamped",
+            t,
+            data,
+        ));
+    }
+    if spec.joints {
+        out.push(joints(t + 10_000_000));
+    }
+}
+
+const LASER_SCAN: &str = "sensor_msgs/msg/LaserScan";
 
 /// One LaserScan of a scan record: angle_min = theta[0], the even spacing, NaN for no return.
 fn scan_cdr(s: &Value, stamp_ns: u64) -> Vec<u8> {
