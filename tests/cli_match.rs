@@ -275,6 +275,7 @@ fn help_shows_every_default() {
     }
     let without_default = [
         "--trajectory",
+        "--reference-trajectory",
         "--output",
         "--help",
         "--version",

@@ -2,7 +2,7 @@
 
 use super::{LevelArgs, open_output, write_file};
 use anyhow::Context;
-use levelscan::eval::accuracy::{AccuracyParams, CellStats, Efficiency, run_accuracy};
+use levelscan::eval::accuracy::{AccuracyParams, CellStats, Efficiency, run_accuracy_with};
 use levelscan::formats::read_plan;
 use levelscan::level::{Estimator, LevelParams};
 use levelscan::simulate::NoiseModel;
@@ -115,7 +115,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         },
         ..AccuracyParams::default()
     };
-    let stats = run_accuracy(&plans, &params)?;
+    let bar = super::progress_bar(
+        (plans.len() * params.poses_per_plan) as u64,
+        "eval accuracy",
+    );
+    let stats = run_accuracy_with(&plans, &params, &|| bar.inc(1))?;
+    bar.finish_and_clear();
     let inputs: Vec<Option<&Path>> = args.plans.iter().map(|p| Some(p.as_path())).collect();
     let mut out = open_output(None, &inputs)?;
     out.write_all(markdown(&stats, &params).as_bytes())?;

@@ -87,7 +87,9 @@ pub fn run_matching(args: MatchingArgs) -> anyhow::Result<()> {
         let stem = path
             .file_stem()
             .map_or("plan".to_string(), |s| s.to_string_lossy().into_owned());
+        let bar = super::progress::spinner(&format!("eval matching: {}", path.display()));
         let (truth, runs) = matching_experiment(&plan, &params);
+        bar.finish_and_clear();
         for r in &runs {
             let _ = writeln!(
                 table,
@@ -199,8 +201,18 @@ fn load_real_log(
         reference: Vec::new(),
     };
     let bag = input.survey.is_some();
+    let mut last_sequence = None;
     for item in input.source {
         let (line, scan) = item?;
+        // Several scans of one pose are a tilting scanner's, not a 2D log: RPE between them
+        // would be nonsense.
+        if scan.sequence.is_some() && scan.sequence == last_sequence && scan.elevation.is_some() {
+            anyhow::bail!(
+                "{name}:{line}: several scans per pose (a tilting scanner's multi-elevation scans); \
+                 eval real wants one 2D scan per pose: level them first (levelscan level {name} -o level.jsonl)"
+            );
+        }
+        last_sequence = scan.sequence;
         let reference = scan.true_pose.with_context(|| {
             if bag {
                 format!("{name}: scan {line} has no reference pose (a /ground_truth PoseStamped within 0.1 s)")
@@ -219,9 +231,11 @@ pub fn run_real(args: RealArgs) -> anyhow::Result<()> {
     let noise = args.odometry.params()?;
     let mut results: Vec<RealResult> = Vec::new();
     for path in &args.logs {
+        let bar = super::progress::spinner(&format!("eval real: {}", path.display()));
         let log = load_real_log(path, &params.ranges)?;
         let result = evaluate_real(&log, &params, &noise, args.seed)
             .with_context(|| format!("{}: fewer than two scans", path.display()))?;
+        bar.finish_and_clear();
         eprintln!(
             "{}: {} scans, RPE median {:.2} mm (odometry {:.2} mm)",
             result.name,

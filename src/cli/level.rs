@@ -12,7 +12,7 @@ use levelscan::pseudo_level::PseudoLevelParams;
 use levelscan::scan::Scan;
 use rayon::prelude::*;
 use std::collections::HashSet;
-use std::io::Write;
+use std::io::{BufRead, Write};
 use std::path::PathBuf;
 
 #[derive(clap::Args, Debug)]
@@ -84,8 +84,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let (name, scans): (String, Scans) = match opened {
         Some(bag) => (bag.name, Box::new(bag.source)),
         None => {
-            let input = open_input(args.input.as_deref())?;
+            let mut input = open_input(args.input.as_deref())?;
             let name = input.name.clone();
+            refuse_other_kinds(&name, input.reader.fill_buf()?)?;
             let reader = ParallelScanReader::new(input.reader, name.clone()).skipping_hit();
             (name, Box::new(reader))
         }
@@ -164,6 +165,28 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     result.and_then(|()| sink.finish())?;
     tally.report(&input_name);
     Ok(())
+}
+
+/// `level` reads scan JSON Lines (or a bag, opened before): any other kind of file is named
+/// as what it is, with what `level` wants.
+fn refuse_other_kinds(name: &str, head: &[u8]) -> Result<(), InputError> {
+    use levelscan::formats::kind::{FileKind, sniff, wrong_kind};
+    let wanted = "level wants scans at several hinge elevations per pose \
+                  (scan JSON Lines with sequence and elevation, or a ROS bag)";
+    match sniff(head) {
+        FileKind::ScanJsonLines | FileKind::Empty => Ok(()),
+        FileKind::Carmen => Err(wrong_kind(
+            name,
+            FileKind::Carmen,
+            &format!("{wanted}; a 2D log has one elevation only (match reads it as it is)"),
+        )),
+        FileKind::Mcap | FileKind::Ros1Bag => Err(InputError::new(
+            name,
+            "",
+            "a ROS bag on a stream: give the bag's path as the input file instead",
+        )),
+        other => Err(wrong_kind(name, other, wanted)),
+    }
 }
 
 /// Where the records go: JSON Lines, or a ROS 2 bag.

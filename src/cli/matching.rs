@@ -3,6 +3,7 @@
 
 use super::bag_output::{BagOutput, OutputFormat, output_format};
 use super::open_output;
+use super::reference_tum::ReferenceTum;
 use super::scan_input::{BagArgs, open_scans};
 use super::summary::{Kind, Outcome, Tally};
 use clap::ValueEnum;
@@ -233,6 +234,10 @@ pub struct Args {
     /// Also write the estimated trajectory in TUM format (`timestamp x y z qx qy qz qw`).
     #[arg(long)]
     pub trajectory: Option<PathBuf>,
+    /// Also write the reference trajectory, each record's `true_pose` (x, y, yaw as
+    /// --trajectory, at the same times), in TUM format; records without one are left out.
+    #[arg(long)]
+    pub reference_trajectory: Option<PathBuf>,
     /// Output file; standard output when absent or `-`.
     #[arg(short, long)]
     pub output: Option<PathBuf>,
@@ -268,6 +273,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         )?),
         None => None,
     };
+    let mut reference = ReferenceTum::open(
+        args.reference_trajectory.as_deref(),
+        &[args.scans.as_deref(), args.output.as_deref()],
+    )?;
     let mut matcher = Matcher::new(params);
     let mut tally = Tally::new(Kind::Match);
     for (index, item) in input.source.enumerate() {
@@ -277,6 +286,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         let report = matcher.push(&points, odometry);
         annotate(&mut scan, &report);
         tally.add(Outcome::of(&scan, "match"));
+        reference.push(&scan, index)?;
         match (&mut out, &mut bag_out) {
             (Some(out), _) => levelscan::formats::write_scan(out, &scan)?,
             (None, Some(bag)) => bag.match_record(&scan)?,
@@ -296,6 +306,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if let Some(t) = tum {
         t.finish()?;
     }
+    reference.finish(&input.name)?;
     tally.report(&input.name);
     Ok(())
 }

@@ -12,6 +12,8 @@ mod level;
 mod map;
 mod matching;
 mod output;
+mod progress;
+mod reference_tum;
 mod scan_input;
 mod simulate;
 mod summary;
@@ -185,7 +187,6 @@ pub fn open_input(path: Option<&Path>) -> anyhow::Result<Input> {
 }
 
 /// A progress bar on standard error; indicatif hides it when standard error is not a terminal.
-#[allow(dead_code)] // for the long-running commands (simulate, level, eval) as they land
 pub fn progress_bar(len: u64, what: &str) -> ProgressBar {
     let bar = ProgressBar::new(len);
     bar.set_style(

@@ -6,6 +6,7 @@
 //! The counts come from the records' own status objects (`level` and `match` in the contract),
 //! so the line says what the output says, whatever statuses and reasons the output grows.
 
+use indicatif::ProgressBar;
 use levelscan::scan::Scan;
 use std::collections::BTreeMap;
 
@@ -47,24 +48,33 @@ pub(crate) struct Tally {
     kind: Kind,
     counts: BTreeMap<Outcome, usize>,
     total: usize,
+    /// Records counted so far, on a terminal's standard error (hidden elsewhere).
+    bar: ProgressBar,
 }
 
 impl Tally {
     pub fn new(kind: Kind) -> Tally {
+        let bar = match kind {
+            Kind::Level => super::progress::counter("level", "poses"),
+            Kind::Match => super::progress::counter("match", "scans"),
+        };
         Tally {
             kind,
             counts: BTreeMap::new(),
             total: 0,
+            bar,
         }
     }
 
     pub fn add(&mut self, outcome: Outcome) {
         *self.counts.entry(outcome).or_default() += 1;
         self.total += 1;
+        self.bar.inc(1);
     }
 
-    /// Prints [`Tally::lines`] on standard error.
+    /// Clears the progress counter and prints [`Tally::lines`] on standard error.
     pub fn report(&self, input: &str) {
+        self.bar.finish_and_clear();
         for line in self.lines(input) {
             eprintln!("{line}");
         }
@@ -196,6 +206,13 @@ impl Tally {
             line.push_str(hint);
         }
         Some(line)
+    }
+}
+
+impl Drop for Tally {
+    /// A run that stops on an error clears its counter too, before the error is printed.
+    fn drop(&mut self) {
+        self.bar.finish_and_clear();
     }
 }
 

@@ -12,6 +12,7 @@
 
 pub mod bag;
 pub mod carmen;
+pub mod kind;
 pub mod level_record;
 pub mod limits;
 pub mod pgm_map;
@@ -83,13 +84,24 @@ pub fn read_any<R: BufRead + Send>(
     let head = reader
         .fill_buf()
         .map_err(|e| scan_jsonl::read_error(&name, 1, &e))?;
-    if head.starts_with(bag::source::MCAP_MAGIC) || head.starts_with(b"#ROSBAG") {
-        // Bags are read in two passes (topics and joints first), so they need a path.
-        return Err(InputError::new(
-            name,
-            "",
-            "a ROS bag on a stream: give the bag's path as the input file instead",
-        ));
+    match kind::sniff(head) {
+        kind::FileKind::Mcap | kind::FileKind::Ros1Bag => {
+            // Bags are read in two passes (topics and joints first), so they need a path.
+            return Err(InputError::new(
+                name,
+                "",
+                "a ROS bag on a stream: give the bag's path as the input file instead",
+            ));
+        }
+        // Other text is a CARMEN log whose unknown lines are skipped (as CARMEN readers do).
+        k @ (kind::FileKind::FloorPlan | kind::FileKind::Sqlite) => {
+            return Err(kind::wrong_kind(
+                &name,
+                k,
+                "scans are wanted (JSON Lines, a CARMEN log or a ROS bag)",
+            ));
+        }
+        _ => {}
     }
     let first = head.iter().copied().find(|b| !b.is_ascii_whitespace());
     Ok(match first {

@@ -33,18 +33,27 @@ pub fn read_plan(path: &Path) -> Result<Plan, InputError> {
 /// Reads and validates a `.wall` plan from `reader` (at most [`MAX_PLAN_BYTES`]); `name` is
 /// used in error messages.
 pub fn read_plan_from(reader: impl Read, name: &str) -> Result<Plan, InputError> {
-    let mut text = String::new();
+    let mut bytes = Vec::new();
     reader
         .take(MAX_PLAN_BYTES + 1)
-        .read_to_string(&mut text)
-        .map_err(|e| {
-            let what = if e.kind() == std::io::ErrorKind::InvalidData {
-                "is not valid UTF-8 text".to_string()
-            } else {
-                format!("cannot read: {e}")
-            };
-            InputError::new(name, "", what)
-        })?;
+        .read_to_end(&mut bytes)
+        .map_err(|e| InputError::new(name, "", format!("cannot read: {e}")))?;
+    let kind = super::kind::sniff(&bytes[..bytes.len().min(1 << 16)]);
+    if matches!(
+        kind,
+        super::kind::FileKind::Mcap
+            | super::kind::FileKind::Ros1Bag
+            | super::kind::FileKind::Sqlite
+            | super::kind::FileKind::Gzip
+    ) {
+        return Err(super::kind::wrong_kind(
+            name,
+            kind,
+            "a floor plan (.wall) is wanted",
+        ));
+    }
+    let text = String::from_utf8(bytes)
+        .map_err(|_| InputError::new(name, "", "is not valid UTF-8 text"))?;
     if text.len() as u64 > MAX_PLAN_BYTES {
         return Err(InputError::new(
             name,
@@ -60,6 +69,18 @@ pub fn read_plan_from(reader: impl Read, name: &str) -> Result<Plan, InputError>
 
 /// Parses and validates the text of a `.wall` file; `name` is used in error messages.
 pub fn parse_plan(text: &str, name: &str) -> Result<Plan, InputError> {
+    let kind = super::kind::sniff(&text.as_bytes()[..text.len().min(1 << 16)]);
+    use super::kind::FileKind;
+    if !matches!(
+        kind,
+        FileKind::FloorPlan | FileKind::Unknown | FileKind::Empty
+    ) {
+        return Err(super::kind::wrong_kind(
+            name,
+            kind,
+            "a floor plan (.wall) is wanted",
+        ));
+    }
     let value: Value = serde_json::from_str(&strip_comments(text))
         .map_err(|e| InputError::at_line(name, e.line().max(1), json_error_message(&e)))?;
     let err = |path: &str, msg: String| InputError::new(name, path, msg);

@@ -11,6 +11,7 @@
 //! run's output depends on its seed only, never on the thread count.
 
 pub mod adaptive;
+pub mod clock;
 pub mod noise_model;
 pub mod odometry;
 pub mod random_poses;
@@ -80,7 +81,7 @@ pub fn stream_rng(seed: u64, purpose: Stream, index: u64) -> ChaCha8Rng {
 
 /// Simulates the scans at `poses` in parallel; pose `k` gets `sequence = first_sequence + k`,
 /// the odometry `odometry[k]` when given, and its noise from
-/// `stream_rng(seed, Stream::Scans, sequence)`. With `adaptive`, cleverRobot takes each pose's
+/// `stream_rng(seed, Stream::Scans, sequence)`, and `timestamp`s from [`clock`]. With `adaptive`, cleverRobot takes each pose's
 /// scans (its first set is the same as without). The result is in pose order and identical for
 /// any number of threads, and simulating a run in chunks gives the same scans as all at once.
 #[allow(clippy::too_many_arguments)]
@@ -106,6 +107,9 @@ pub fn simulate_poses(
                 }
                 None => simulate_pose(world, sequence, pose, elevations, params, &mut rng),
             };
+            for (j, s) in scans.iter_mut().enumerate() {
+                s.timestamp = Some(clock::scan_timestamp(sequence, j));
+            }
             if let Some(odo) = odometry.and_then(|o| o.get(k)) {
                 for s in &mut scans {
                     s.odometry = Some(*odo);

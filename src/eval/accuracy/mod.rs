@@ -148,6 +148,16 @@ pub fn run_accuracy(
     plans: &[Plan],
     params: &AccuracyParams,
 ) -> Result<Vec<CellStats>, SimulateError> {
+    run_accuracy_with(plans, params, &|| {})
+}
+
+/// [`run_accuracy`], calling `pose_done` once per pose (from any thread) as its cells finish,
+/// for a caller's progress display: `plans.len() * poses_per_plan` calls in all.
+pub fn run_accuracy_with(
+    plans: &[Plan],
+    params: &AccuracyParams,
+    pose_done: &(dyn Fn() + Sync),
+) -> Result<Vec<CellStats>, SimulateError> {
     scanner_params(params, 0.0).validate()?;
     let pose_params = RandomPoseParams {
         tilt: params.tilt_deg.to_radians(),
@@ -184,10 +194,12 @@ pub fn run_accuracy(
     let outcomes: Vec<Vec<Vec<PoseOutcome>>> = tasks
         .par_iter()
         .map(|&(pi, k, pose)| {
-            cells
+            let pose_cells = cells
                 .iter()
                 .map(|&cell| run_pose_cell(&scenes[pi], (pi, k, &pose), cell, params))
-                .collect()
+                .collect();
+            pose_done();
+            pose_cells
         })
         .collect();
     let mut stats = Vec::new();

@@ -1,0 +1,95 @@
+//! A file of the wrong kind is named as what it is, with what the command wants (issue: "wrong
+//! kind of file, misleading message"): one line, exit 1, no parser complaint about column 1.
+
+mod cli_support;
+
+use cli_support::bin;
+
+fn plan() -> String {
+    concat!(env!("CARGO_MANIFEST_DIR"), "/examples/plans/office.wall").to_string()
+}
+
+fn fails_with(args: &[&str], wanted: &[&str]) {
+    let out = bin().args(args).output().unwrap();
+    assert_eq!(out.status.code(), Some(1), "{args:?}");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(err.trim().lines().count(), 1, "one line: {err}");
+    for w in wanted {
+        assert!(err.contains(w), "{args:?}: {err:?} lacks {w:?}");
+    }
+}
+
+fn scans(dir: &std::path::Path) -> String {
+    let path = dir.join("scans.jsonl");
+    let p = path.to_str().unwrap().to_string();
+    let plan = plan();
+    let out = bin()
+        .args(["simulate", &plan, "--random", "3", "-o", &p])
+        .output()
+        .unwrap();
+    assert!(out.status.success());
+    p
+}
+
+#[test]
+fn a_floor_plan_given_for_scans_is_named() {
+    let plan = plan();
+    for cmd in ["level", "match", "info"] {
+        fails_with(
+            &[cmd, &plan],
+            &["office.wall", "floor plan", "levelscan simulate"],
+        );
+    }
+}
+
+#[test]
+fn scans_or_a_bag_given_for_a_plan_are_named() {
+    let dir = std::env::temp_dir().join(format!("levelscan-kinds-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let s = scans(&dir);
+    fails_with(
+        &["simulate", &s],
+        &["scans.jsonl", "scan file", "floor plan (.wall) is wanted"],
+    );
+    let bag = dir.join("run.mcap");
+    let b = bag.to_str().unwrap();
+    let plan = plan();
+    assert!(
+        bin()
+            .args(["simulate", &plan, "--random", "2", "-o", b])
+            .output()
+            .unwrap()
+            .status
+            .success()
+    );
+    fails_with(&["simulate", b], &["run.mcap", "MCAP bag", "floor plan"]);
+    // Multi-elevation scans are not a 2D log for eval real.
+    fails_with(
+        &["eval", "real", &s],
+        &["several scans per pose", "level them first"],
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn a_2d_carmen_log_given_to_level_is_named() {
+    let dir = std::env::temp_dir().join(format!("levelscan-kinds-c-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let log = dir.join("run.log");
+    std::fs::write(
+        &log,
+        "# CARMEN log\nFLASER 3 1.0 2.0 3.0 0 0 0 0 0 0 1.0 host 1.0\n",
+    )
+    .unwrap();
+    fails_with(
+        &["level", log.to_str().unwrap()],
+        &["run.log", "CARMEN log", "match reads it"],
+    );
+    let bin_file = dir.join("noise.bin");
+    std::fs::write(&bin_file, [0u8, 1, 2, 3, 200, 17, 0, 9]).unwrap();
+    fails_with(
+        &["level", bin_file.to_str().unwrap()],
+        &["noise.bin", "unknown kind"],
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}
