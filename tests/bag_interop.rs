@@ -284,30 +284,66 @@ fn table_row(text: &str) -> Vec<String> {
         .collect()
 }
 
-/// `eval real` and `view` take bags as they take JSON Lines (the truth from /ground_truth).
+/// `eval real` wants one 2D scan per pose: it refuses a bag of tilting scans as it refuses
+/// their JSON Lines, in one line naming the bag.
 #[test]
-fn eval_real_and_view_take_bags() {
-    let Some(fx) = Fixture::new("bag-eval") else {
+fn eval_real_refuses_raw_bags_as_json_lines() {
+    let Some(fx) = Fixture::new("bag-eval-raw") else {
+        return;
+    };
+    let jsonl = one_line_failure(
+        &levelscan(&["eval", "real", &fx.scans]),
+        "eval real JSON Lines",
+    );
+    assert!(jsonl.contains("level them first"), "{jsonl}");
+    for bag in [fx.bag("r2", "mcap", &[]), fx.bag("r1.bag", "ros1", &[])] {
+        let err = one_line_failure(&levelscan(&["eval", "real", &bag]), "eval real bag");
+        assert_names(&err, &[&bag, "level them first"], "eval real bag");
+    }
+}
+
+/// `eval real` on `level`'s output bag, its /scan_level named (the bag has /scan too), the
+/// truth from /ground_truth: as many scans as poses, and RPE figures.
+#[test]
+fn eval_real_takes_a_leveled_bag() {
+    let Some(fx) = Fixture::new("bag-eval-level") else {
         return;
     };
     let r2 = fx.bag("r2", "mcap", &[]);
-    let r1 = fx.bag("r1.bag", "ros1", &[]);
-    let want = table_row(&ok_stdout(&["eval", "real", &fx.scans]));
-    for bag in [&r2, &r1] {
-        let got = table_row(&ok_stdout(&["eval", "real", bag]));
-        assert_eq!(got[1], want[1], "{bag}: scans");
-        // RPE medians [mm] within 0.1 mm (float32 ranges); odometry's exactly (float64).
-        let mm = |v: &str| v.parse::<f64>().unwrap();
+    let leveled = fx.dir.join("level.mcap");
+    ok_stdout(&["level", &r2, "-o", &leveled]);
+    let level_jsonl = fx.dir.join("level.jsonl");
+    ok_stdout(&["level", &fx.scans, "-o", &level_jsonl]);
+    let want = table_row(&ok_stdout(&["eval", "real", &level_jsonl]));
+    let got = table_row(&ok_stdout(&[
+        "eval",
+        "real",
+        &leveled,
+        "--scan-topic",
+        "/scan_level",
+    ]));
+    assert_eq!(got[1], want[1], "scans: {got:?} vs {want:?}");
+    assert!(
+        got[2].parse::<f64>().is_ok_and(f64::is_finite),
+        "RPE median: {got:?}"
+    );
+}
+
+/// `view` takes bags as it takes JSON Lines.
+#[test]
+fn view_takes_bags() {
+    let Some(fx) = Fixture::new("bag-view") else {
+        return;
+    };
+    for bag in [fx.bag("r2", "mcap", &[]), fx.bag("r1.bag", "ros1", &[])] {
+        let html = fx.dir.join("view.html");
+        ok_stdout(&["view", &bag, "-o", &html]);
+        let page = std::fs::read_to_string(&html).unwrap();
         assert!(
-            (mm(&got[2]) - mm(&want[2])).abs() <= 0.1,
-            "{bag}: RPE {got:?} vs {want:?}"
+            page.len() > 10_000 && page.contains("<html"),
+            "{bag}: a page"
         );
-        assert_eq!(got[5], want[5], "{bag}: odometry RPE");
     }
-    let html = fx.dir.join("view.html");
-    ok_stdout(&["view", &r2, "-o", &html]);
-    let page = std::fs::read_to_string(&html).unwrap();
-    assert!(page.len() > 10_000 && page.contains("<html"), "a page");
 }
 
 /// A nodding laser (simulate --sweep-rate 30: the hinge turns while each scan is taken) as
