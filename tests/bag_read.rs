@@ -449,3 +449,39 @@ fn a_simulated_nodding_bag_levels_like_its_json_lines() {
     }
     std::fs::remove_dir_all(&dir).ok();
 }
+
+#[test]
+fn leveling_a_leveled_bag_replaces_its_level_topics() {
+    let dir = temp_dir("twice");
+    let (_, scans) = simulate(&dir, &[]);
+    let bag = dir.join("run.mcap");
+    write_bag(
+        &bag,
+        &scans,
+        &BagSpec {
+            with_odometry: true,
+            sweep: 0.0,
+            scan_time: 0.025,
+        },
+    );
+    let once = dir.join("once.mcap");
+    let twice = dir.join("twice.mcap");
+    for (from, to) in [(&bag, &once), (&once, &twice)] {
+        let args = [
+            "level",
+            from.to_str().unwrap(),
+            "--scan-topic",
+            "/scan",
+            "-o",
+            to.to_str().unwrap(),
+        ];
+        let out = bin().args(args).output().unwrap();
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+    }
+    assert_eq!(topic_counts(&once), topic_counts(&twice));
+    std::fs::remove_dir_all(&dir).ok();
+}

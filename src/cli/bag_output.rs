@@ -67,11 +67,24 @@ pub struct BagOutput {
     peeked: Option<Owned>,
     /// Index of the record written, for stamps of scans without time.
     records: usize,
+    kind: Kind,
+}
+
+/// Which command writes: it decides which input topics its own replace.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Kind {
+    Level,
+    Match,
 }
 
 impl BagOutput {
     /// Starts the output; `input` is the bag to copy through (none for text input).
-    pub fn new(out: Output, name: &str, input: Option<Bag>) -> anyhow::Result<BagOutput> {
+    pub fn new(
+        out: Output,
+        name: &str,
+        input: Option<Bag>,
+        kind: Kind,
+    ) -> anyhow::Result<BagOutput> {
         let writer = BagWriter::unseekable(out, name)?;
         let input = input.map(|bag| {
             let (tx, rx) = sync_channel(QUEUE);
@@ -106,8 +119,19 @@ impl BagOutput {
             input,
             peeked: None,
             records: 0,
+            kind,
         })
     }
+
+    /// Topics this command writes: an input that already has them (a bag leveled before) does
+    /// not get them copied, so that each still holds one message per pose or scan.
+    const WRITTEN: [&'static str; 5] = [
+        "/scan_level",
+        "/attitude",
+        "/level_status",
+        "/odom_matched",
+        "/match_status",
+    ];
 
     /// Copies the input's messages logged at or before `log_time`.
     fn copy_until(&mut self, log_time: u64) -> anyhow::Result<()> {
@@ -127,8 +151,19 @@ impl BagOutput {
                 return Ok(());
             }
             let m = self.peeked.take().expect("just checked");
-            self.copy(&m)?;
+            if !self.replaces(&m.channel.topic) {
+                self.copy(&m)?;
+            }
         }
+    }
+
+    /// True when this run writes `topic` itself (level: its three topics; match: its two).
+    fn replaces(&self, topic: &str) -> bool {
+        let own = match self.kind {
+            Kind::Level => &Self::WRITTEN[..3],
+            Kind::Match => &Self::WRITTEN[3..],
+        };
+        own.contains(&topic)
     }
 
     /// One input message: transcoded to CDR when it is ROS 1 of a type levelscan knows.

@@ -1,7 +1,7 @@
 //! `levelscan level [SCANS]`: one pseudo-level scan per pose (paper sect. 5 and 6), in input
 //! order, as the contract's "Output of level" lays it out.
 
-use super::bag_output::{BagOutput, OutputFormat, output_format};
+use super::bag_output::{BagOutput, Kind as BagKind, OutputFormat, output_format};
 use super::scan_input::{BagArgs, open_bag};
 use super::summary::{Kind, Outcome, Tally};
 use super::{LevelArgs, open_input, open_output};
@@ -101,7 +101,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 .output
                 .as_deref()
                 .map_or("<stdout>".to_string(), |p| p.display().to_string());
-            Sink::Bag(Box::new(BagOutput::new(out, &shown, input_bag)?))
+            Sink::Bag(Box::new(BagOutput::new(
+                out,
+                &shown,
+                input_bag,
+                BagKind::Level,
+            )?))
         }
     };
     // Reading and grouping run on their own thread, a couple of batches ahead, so that the

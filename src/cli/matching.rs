@@ -1,7 +1,7 @@
 //! `levelscan match`: pairwise or metascan matching of 2D scans; fills in `estimate` and adds
 //! the contract's `match` object to each record, streaming (one record in, one record out).
 
-use super::bag_output::{BagOutput, OutputFormat, output_format};
+use super::bag_output::{BagOutput, Kind as BagKind, OutputFormat, output_format};
 use super::open_output;
 use super::reference_tum::ReferenceTum;
 use super::scan_input::{BagArgs, open_scans};
@@ -263,7 +263,15 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 .output
                 .as_deref()
                 .map_or("<stdout>".to_string(), |p| p.display().to_string());
-            (None, Some(BagOutput::new(out, &shown, input.bag.clone())?))
+            (
+                None,
+                Some(BagOutput::new(
+                    out,
+                    &shown,
+                    input.bag.clone(),
+                    BagKind::Match,
+                )?),
+            )
         }
     };
     let mut tum = match &args.trajectory {

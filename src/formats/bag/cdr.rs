@@ -127,15 +127,16 @@ impl<'a> CdrReader<'a> {
     pub fn f32_seq(&mut self, what: &str) -> Result<Vec<f32>> {
         let n = self.count(what, 4)?;
         let bytes = self.take(n * 4, 4, what)?;
-        let conv = if self.little {
-            f32::from_le_bytes
-        } else {
-            f32::from_be_bytes
-        };
-        Ok(bytes
+        // One loop per byte order (not a function pointer), so that the conversion inlines:
+        // ranges are most of a bag's bytes.
+        let words = bytes
             .chunks_exact(4)
-            .map(|c| conv(c.try_into().expect("4 bytes")))
-            .collect())
+            .map(|c| <[u8; 4]>::try_from(c).expect("4 bytes"));
+        Ok(if self.little {
+            words.map(f32::from_le_bytes).collect()
+        } else {
+            words.map(f32::from_be_bytes).collect()
+        })
     }
 
     pub fn f64_seq(&mut self, what: &str) -> Result<Vec<f64>> {
