@@ -44,7 +44,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             match BagScans::start(bag, surveyed) {
                 Ok(scans) => Some(ScanSource::Bag(Box::new(scans), kind)),
                 Err(e) => {
-                    report.insert("scan_topic_problem".into(), json!(e.message));
+                    // The location is the topic when the problem is one topic's.
+                    let problem = if e.location.is_empty() {
+                        e.message
+                    } else {
+                        format!("{}: {}", e.location, e.message)
+                    };
+                    report.insert("scan_topic_problem".into(), json!(problem));
                     None
                 }
             }

@@ -71,10 +71,15 @@ pub const NUMBERS: [&str; 40] = [
 
 /// How many inputs to try.
 pub fn cases() -> u32 {
+    cases_or(DEFAULT_CASES)
+}
+
+/// `LEVELSCAN_FUZZ_CASES`, else `default` (for targets whose inputs cost more).
+pub fn cases_or(default: u32) -> u32 {
     std::env::var("LEVELSCAN_FUZZ_CASES")
         .ok()
         .and_then(|v| v.trim().parse().ok())
-        .unwrap_or(DEFAULT_CASES)
+        .unwrap_or(default)
 }
 
 fn seed() -> u64 {
@@ -125,8 +130,18 @@ pub fn run(
     inputs: impl Strategy<Value = Vec<u8>>,
     check: impl Fn(&[u8]) -> Result<Outcome, String>,
 ) {
+    run_cases(target, cases(), inputs, check)
+}
+
+/// [`run`] with `cases` inputs.
+pub fn run_cases(
+    target: &str,
+    cases: u32,
+    inputs: impl Strategy<Value = Vec<u8>>,
+    check: impl Fn(&[u8]) -> Result<Outcome, String>,
+) {
     let config = Config {
-        cases: cases(),
+        cases,
         failure_persistence: None,
         max_shrink_iters: 2000,
         ..Config::default()
