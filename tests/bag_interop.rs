@@ -229,7 +229,9 @@ fn truncated_rosbags_ros1_bag_fails_cleanly() {
     };
     let r1 = fx.bag("whole.bag", "ros1", &[]);
     let bytes = std::fs::read(&r1).unwrap();
-    for frac in [0.3, 0.5, 0.9, 0.999] {
+    // Cut before the end of the chunk section (a cut in the index tail alone still holds every
+    // message, and reads).
+    for frac in [0.3, 0.5, 0.9] {
         let cut = fx.dir.join(&format!("cut{frac}.bag"));
         std::fs::write(&cut, &bytes[..(bytes.len() as f64 * frac) as usize]).unwrap();
         for cmd in ["info", "level"] {
@@ -277,7 +279,9 @@ fn rosbags_two_scan_topics_fail_cleanly() {
 
 /// The last table row of `eval real` output, as cells.
 fn table_row(text: &str) -> Vec<String> {
-    let row = text.lines().rfind(|l| l.starts_with('|')).unwrap();
+    // The first table's first data row (the drift table follows it).
+    let mut lines = text.lines().skip_while(|l| !l.starts_with("|---"));
+    let row = lines.nth(1).filter(|l| l.starts_with('|')).unwrap();
     row.trim_matches('|')
         .split('|')
         .map(|c| c.trim().to_string())

@@ -185,14 +185,17 @@ pub struct RealArgs {
     pub out: Option<PathBuf>,
     #[command(flatten)]
     pub options: MatchOptions,
+    #[command(flatten)]
+    pub bag: super::scan_input::BagArgs,
 }
 
 /// Reads a log's scans and reference poses.
 fn load_real_log(
     path: &std::path::Path,
     ranges: &levelscan::matching::RangeParams,
+    bag: &BagOptions,
 ) -> anyhow::Result<RealLog> {
-    let input = open_scans(Some(path), CarmenParams::default(), &BagOptions::default())?;
+    let input = open_scans(Some(path), CarmenParams::default(), bag)?;
     let name = input.name.clone();
     let mut log = RealLog {
         name: path
@@ -233,7 +236,11 @@ pub fn run_real(args: RealArgs) -> anyhow::Result<()> {
     let mut results: Vec<RealResult> = Vec::new();
     for path in &args.logs {
         let bar = super::progress::spinner(&format!("eval real: {}", path.display()));
-        let log = load_real_log(path, &params.ranges)?;
+        let log = load_real_log(
+            path,
+            &params.ranges,
+            &args.bag.options(false, Some("/scan_level")),
+        )?;
         let result = evaluate_real(&log, &params, &noise, args.seed)
             .with_context(|| format!("{}: fewer than two scans", path.display()))?;
         bar.finish_and_clear();

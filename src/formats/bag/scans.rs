@@ -124,6 +124,7 @@ fn convert(
     if n == 0 {
         return Err(InputError::new(bag, at(), "a LaserScan without ranges"));
     }
+    crate::formats::limits::check_rays("ranges", n).map_err(|e| InputError::new(bag, at(), e))?;
     if !(msg.angle_min.is_finite() && msg.angle_increment.is_finite()) {
         return Err(InputError::new(
             bag,
@@ -199,6 +200,9 @@ fn convert(
         sec: stamp.sec as i64,
         usec: (stamp.nanosec / 1000) as i64,
     });
+    // The same limits as every reader's (formats::limits): what a bag gives must be a scan
+    // the rest of levelscan accepts, read back from its own output too.
+    crate::formats::limits::check_scan(&scan).map_err(|e| InputError::new(bag, at(), e))?;
     scan.extra
         .insert("ros".to_string(), ros_extra(topic, log_time, msg));
     Ok(scan)

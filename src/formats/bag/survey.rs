@@ -135,6 +135,20 @@ fn pose_of(p: &super::msgs::Pose) -> Pose {
     )
 }
 
+/// A message's pose, within the limits every reader enforces (formats::limits): the error
+/// names the topic and log time.
+fn checked_pose(
+    bag: &str,
+    m: &BagMessage,
+    field: &str,
+    p: &super::msgs::Pose,
+) -> Result<Pose, InputError> {
+    let pose = pose_of(p);
+    crate::formats::limits::check_pose(field, &pose)
+        .map_err(|e| InputError::new(bag, at_message(&m.channel.topic, m.log_time), e))?;
+    Ok(pose)
+}
+
 /// The first pass: topics, and the hinge, odometry and truth series.
 pub fn survey(bag: &Bag, opts: &BagOptions) -> Result<Survey, InputError> {
     let mut topics: BTreeMap<String, TopicSummary> = BTreeMap::new();
@@ -166,13 +180,12 @@ pub fn survey(bag: &Bag, opts: &BagOptions) -> Result<Survey, InputError> {
         } else if ty == ODOMETRY && opts.odom_topic.as_deref().is_none_or(|t| t == topic) {
             let o: Odometry = decode(&bag.name, m)?;
             let t = stamp_seconds(o.header.stamp, m.log_time);
-            odometry
-                .entry(topic.to_string())
-                .or_default()
-                .push(t, pose_of(&o.pose));
+            let pose = checked_pose(&bag.name, m, "odometry", &o.pose)?;
+            odometry.entry(topic.to_string()).or_default().push(t, pose);
         } else if topic == truth_topic && ty == POSE_STAMPED {
             let p: PoseStamped = decode(&bag.name, m)?;
-            truth.push(stamp_seconds(p.header.stamp, m.log_time), pose_of(&p.pose));
+            let pose = checked_pose(&bag.name, m, "pose", &p.pose)?;
+            truth.push(stamp_seconds(p.header.stamp, m.log_time), pose);
         }
         Ok(ControlFlow::Continue(()))
     })?;
