@@ -73,9 +73,9 @@ pub struct Bag {
 }
 
 /// The largest record (or decompressed chunk) the reader accepts \[bytes\]: far above any
-/// chunk a recorder writes (ROS 2 defaults to 768 KiB), low enough that a corrupt length
-/// cannot make the reader reserve gigabytes.
-const RECORD_LIMIT: usize = 1 << 30;
+/// chunk a recorder writes (rosbag2 and the MCAP writers default to about 1 MiB), low enough
+/// that a corrupt length cannot make the reader reserve and fill gigabytes.
+const RECORD_LIMIT: usize = 256 << 20;
 /// Bytes asked of the file per read: large reads keep the reader near disk speed.
 const READ_SIZE: usize = 1 << 20;
 
