@@ -1,0 +1,152 @@
+//! Robust plane fits of a patch's points (Cauchy weights, per-ray tolerances) and the
+//! orders its members are visited in.
+
+use super::*;
+
+/// The patch's plane refitted with Cauchy weights on each point's residual over its own noise
+/// along the normal (`sigma |d . n|`), so that the few floor points caught at a wall's foot,
+/// all on one side of it, stop tilting the wall.
+pub(super) fn robust_fit(
+    grid: &PoseGrid,
+    members: &[usize],
+    mut fit: PlaneFit,
+    params: &LevelParams,
+    sigma: f64,
+) -> Option<PlaneFit> {
+    let points = || members.iter().filter_map(|&i| grid.points[i].as_ref());
+    let s = sigma.max(params.min_sigma);
+    if params.ray_weights {
+        fit = ray_weighted_fit(points(), params, sigma, fit)?;
+    } else if fit.misfit_ratio(s) > params.split_misfit {
+        // A plane its noise already explains has no outliers worth reweighting.
+        for _ in 0..params.plane_iterations {
+            let mut acc = PlaneAccumulator::default();
+            for g in points() {
+                acc.add_weighted(g, cauchy_weight(&fit, g, s, params));
+            }
+            fit = acc.fit(sigma)?;
+        }
+    }
+    Some(fit)
+}
+
+/// Cauchy weight of a point's residual over its own noise along the normal.
+pub(super) fn cauchy_weight(fit: &PlaneFit, g: &GridPoint, s: f64, params: &LevelParams) -> f64 {
+    let sd = s * g.dir.dot(&fit.normal).abs().max(0.3);
+    let z = fit.distance(&g.p) / (params.plane_cauchy * sd);
+    1.0 / (1.0 + z * z)
+}
+
+/// How far from a patch's plane a point may lie and still join it: `grow_k` sigmas of the
+/// point's own range noise along the plane's normal, `sigma |d . n|` (at least
+/// `min_ray_share` of sigma), when `ray_tolerance` is on; else `tol` for every point.
+///
+/// A floor seen at a grazing angle carries its range noise almost along itself, so its points
+/// lie within centimetres of its plane even at 10 cm noise, while the foot of a wall rises
+/// out of it at once; an isotropic `grow_k sigma` (30 cm at 10 cm noise) let floor patches run
+/// up the walls and tilted them by degrees.
+pub(super) fn ray_tolerance(
+    fit: &PlaneFit,
+    g: &GridPoint,
+    tol: f64,
+    sigma: f64,
+    params: &LevelParams,
+) -> f64 {
+    if params.ray_tolerance {
+        params.grow_k * sigma * g.dir.dot(&fit.normal).abs().max(params.min_ray_share)
+    } else {
+        tol
+    }
+}
+
+/// A plane refitted with each point weighted by the inverse variance of its range noise
+/// along the normal, `1 / (d . n)^2` (with `|d . n|` at least `ray_weight_floor`), normalised
+/// to a mean of one so that [`PlaneFit::normal_variance_along`] stays the weighted fit's
+/// variance; plus the Cauchy weights of [`robust_fit`] when the plane misfits. Points met at
+/// an oblique incidence are the precise ones along the normal; an unweighted fit lets the
+/// head-on points' noise dominate. One pass, with the weights from the unweighted fit's normal:
+/// a second pass, with weights from the weighted normal, moved no statistic beyond its noise
+/// (75,600 protocol poses at 5-10 cm: leveled 73.94 vs 73.92%, ok and > 5 degrees off 16 vs
+/// 17; the 1 cm cells of Table I unchanged) and cost 4% of `level`'s time.
+pub(super) fn ray_weighted_fit<'a>(
+    points: impl Iterator<Item = &'a GridPoint>,
+    params: &LevelParams,
+    sigma: f64,
+    fit: PlaneFit,
+) -> Option<PlaneFit> {
+    let s = sigma.max(params.min_sigma);
+    let robust = fit.misfit_ratio(s) > params.split_misfit;
+    let (mut acc, mut ray_weights, mut n) = (PlaneAccumulator::default(), 0.0, 0.0);
+    for g in points {
+        let w = 1.0
+            / g.dir
+                .dot(&fit.normal)
+                .abs()
+                .max(params.ray_weight_floor)
+                .powi(2);
+        let cauchy = if robust {
+            cauchy_weight(&fit, g, s, params)
+        } else {
+            1.0
+        };
+        acc.add_weighted(g, w * cauchy);
+        ray_weights += w;
+        n += 1.0;
+    }
+    // The ray weights' mean scaled to one, after the sums (they are linear in the weights).
+    acc.scale(n / ray_weights.max(1e-300));
+    acc.fit(sigma)
+}
+
+/// Members in row-major order (`by_row`) or column-major order, ties by grid index, as a
+/// sort by `(row or column, index)` would give: ascending grid index is row-major, and a
+/// stable counting sort of that by column is column-major (members are distinct).
+pub(super) fn in_order(grid: &PoseGrid, members: &[usize], by_row: bool) -> Vec<usize> {
+    let ascending = ascending(members);
+    if by_row {
+        return ascending;
+    }
+    let cols = grid.cols.max(1);
+    let rc = grid.row_col();
+    let mut start = vec![0usize; cols + 1];
+    for &i in &ascending {
+        start[rc.col(i) + 1] += 1;
+    }
+    for c in 0..cols {
+        start[c + 1] += start[c];
+    }
+    let mut out = vec![0usize; ascending.len()];
+    for &i in &ascending {
+        let slot = &mut start[rc.col(i)];
+        out[*slot] = i;
+        *slot += 1;
+    }
+    out
+}
+
+/// Distinct grid indices in ascending order: marked in a bitset over their range and read
+/// back word by word, cheaper than a comparison sort for a patch's members (dense in their
+/// range).
+pub(super) fn ascending(members: &[usize]) -> Vec<usize> {
+    let (Some(&lo), Some(&hi)) = (members.iter().min(), members.iter().max()) else {
+        return Vec::new();
+    };
+    if hi - lo > 16 * members.len() {
+        let mut v = members.to_vec();
+        v.sort_unstable();
+        return v;
+    }
+    let mut bits = vec![0u64; (hi - lo) / 64 + 1];
+    for &i in members {
+        bits[(i - lo) / 64] |= 1 << ((i - lo) % 64);
+    }
+    let mut out = Vec::with_capacity(members.len());
+    for (k, &word) in bits.iter().enumerate() {
+        let mut w = word;
+        while w != 0 {
+            out.push(lo + 64 * k + w.trailing_zeros() as usize);
+            w &= w - 1;
+        }
+    }
+    out
+}

@@ -1,0 +1,340 @@
+//! Wall patches: the paper's quads merged with their coplanar neighbours by region growing over
+//! the scan grid, so that a whole wall votes with all its points (the paper's sect. 9 suggests
+//! EM plane fitting after Thrun et al. 2004; region growing from good seeds reaches the same
+//! planes far more cheaply for a handful of scans).
+
+use super::grid::{GridPoint, PlaneAccumulator, PlaneFit, PoseGrid};
+use super::polygons::{Polygon, classify, extract_quads_sized};
+use super::{LevelParams, SurfaceKind, total_order_key};
+use nalgebra::{Matrix3, Point3, Vector3};
+
+mod fit;
+mod split;
+mod trim;
+
+use fit::*;
+pub use split::split_members;
+use split::*;
+use trim::*;
+
+/// One grown planar patch.
+#[derive(Clone, Debug)]
+pub struct Patch {
+    pub fit: PlaneFit,
+    pub kind: SurfaceKind,
+    /// Grid indices (row * cols + col) of its points, ascending.
+    pub members: Vec<usize>,
+    /// Lowest and highest row it reaches.
+    pub row_range: (usize, usize),
+}
+
+/// The height in the level frame (`level_from_robot` applied) of the patches of `kind`: the
+/// median over all their points, or `None` with fewer than `min_points` of them.
+pub fn level_height(
+    grid: &PoseGrid,
+    patches: &[Patch],
+    kind: SurfaceKind,
+    level_from_robot: &Matrix3<f64>,
+    min_points: usize,
+) -> Option<f64> {
+    let mut z: Vec<f64> = patches
+        .iter()
+        .filter(|p| p.kind == kind)
+        .flat_map(|p| p.members.iter())
+        .filter_map(|&i| grid.points[i].as_ref())
+        .map(|g| (level_from_robot * g.p.coords).z)
+        .collect();
+    if z.len() < min_points.max(1) {
+        return None;
+    }
+    let mid = z.len() / 2;
+    let (_, m, _) = z.select_nth_unstable_by(mid, f64::total_cmp);
+    Some(*m)
+}
+
+/// Seed width \[columns\]: the paper's quad width, or wider where the range noise would leave a
+/// quad's plane undetermined. A seed should span about `seed_span_sigmas` noise sigmas sideways
+/// at the grid's median range, so its normal is good to a few degrees and growth follows the
+/// true surface instead of wandering across a corner.
+pub fn seed_cols(grid: &PoseGrid, params: &LevelParams, sigma: f64) -> usize {
+    if grid.cols < 2 || grid.points.iter().all(Option::is_none) {
+        return params.quad_cols;
+    }
+    // Angular step from the directions of the first row's consecutive valid rays.
+    let step = (0..grid.cols - 1)
+        .find_map(|c| {
+            let (a, b) = (grid.at(0, c)?, grid.at(0, c + 1)?);
+            Some(a.dir.angle(&b.dir))
+        })
+        .unwrap_or(1f64.to_radians());
+    let want =
+        |r: f64| (params.seed_span_sigmas * sigma / (r * step).max(1e-9)).ceil() as usize + 1;
+    let clamp = |w: usize| w.clamp(params.quad_cols, params.max_seed_cols.max(params.quad_cols));
+    // `want` falls as the range grows: when the median range is at least a range `t` that
+    // asks for no more than the quad width (low noise), so does the median, which then need
+    // not be found. The median (element `mid` of the sorted ranges) is at least `t` when at
+    // most `mid` ranges lie below `t`.
+    let valid = grid.points.iter().flatten().count();
+    let mid = valid / 2;
+    let slack = params.quad_cols.saturating_sub(2).max(1) as f64;
+    let t = params.seed_span_sigmas * sigma / (slack * step).max(1e-300) * (1.0 + 1e-9);
+    if t.is_finite() && want(t) <= params.quad_cols {
+        let below = grid.points.iter().flatten().filter(|g| g.range < t).count();
+        if below <= mid {
+            return params.quad_cols;
+        }
+    }
+    let mut ranges: Vec<f64> = grid.points.iter().flatten().map(|g| g.range).collect();
+    let (_, r, _) = ranges.select_nth_unstable_by(mid, f64::total_cmp);
+    clamp(want(*r))
+}
+
+/// No patch.
+pub const UNLABELLED: u32 = u32::MAX;
+
+/// Grows patches from seed quads: walls first, best-fitting first, then floors and ceilings;
+/// three-row seeds before two-row ones (a wall that only two scans reach, e.g. ahead of a robot
+/// pitched towards the floor). Seeds are as wide as the paper's quads at low noise and wider at
+/// high noise ([`seed_cols`]), since a seed's plane must be good enough to grow from.
+/// A neighbouring grid point (same column in the next row, or next column in the same row)
+/// joins when it lies within `grow_k * sigma` of the patch's current plane; the plane is
+/// refitted as the patch grows. Finally members farther than that from the final plane are
+/// released and the plane refitted once more.
+/// Returns the patches and, per grid point, the index of its patch or [`UNLABELLED`].
+pub fn grow_patches(
+    grid: &PoseGrid,
+    quads: &[Polygon],
+    params: &LevelParams,
+    sigma: f64,
+) -> (Vec<Patch>, Vec<u32>) {
+    let n = grid.points.len();
+    let cols = grid.cols;
+    let mut labels = vec![UNLABELLED; n];
+    let mut patches = Vec::new();
+    let tol = params.grow_k * sigma.max(params.min_sigma);
+    let width = seed_cols(grid, params, sigma);
+    let wide: Vec<Polygon>;
+    let three_row: &[Polygon] = if width == params.quad_cols {
+        quads
+    } else {
+        wide = extract_quads_sized(grid, params, sigma, params.quad_rows, width);
+        &wide
+    };
+    // Floors and ceilings also seed from the paper's narrow quads when the seeds are wide:
+    // along a level surface's normal the grazing rays carry little noise, so a narrow quad
+    // pins its plane well, and a wide quad rarely fits where the floor is seen only near an
+    // edge of the scans (its far and near sides too unequal, or a wall inside it).
+    let narrow_level: Vec<&Polygon> = if params.narrow_level_seeds && width != params.quad_cols {
+        quads
+            .iter()
+            .filter(|q| q.kind != SurfaceKind::Wall)
+            .collect()
+    } else {
+        Vec::new()
+    };
+    let candidates: Vec<(u8, &Polygon)> = three_row
+        .iter()
+        .map(|q| (0u8, q))
+        .chain(narrow_level.iter().map(|q| (2u8, *q)))
+        .collect();
+    // Ordered by rank, then mean squared residual, then position, packed in one integer key
+    // (unique, so an unstable sort gives the stable order).
+    let mut keys: Vec<u128> = candidates
+        .iter()
+        .enumerate()
+        .map(|(i, &(band, q))| {
+            let rank = band + if q.kind == SurfaceKind::Wall { 0 } else { 2 };
+            // As unsigned, in the same order.
+            let residual = total_order_key(q.fit.residual_ss / q.fit.n as f64) as u64 ^ 1 << 63;
+            (u128::from(rank) << 96) | (u128::from(residual) << 32) | i as u128
+        })
+        .collect();
+    keys.sort_unstable();
+    let seeds = keys.iter().map(|&k| candidates[(k as u32) as usize].1);
+    let mut members = Vec::new();
+    // Columns without a division per visit.
+    let rc = grid.row_col();
+    for q in seeds {
+        if q.span(cols).any(|i| labels[i] != UNLABELLED) {
+            continue;
+        }
+        let id = patches.len() as u32;
+        let mut acc = PlaneAccumulator::default();
+        members.clear();
+        for i in q.span(cols) {
+            labels[i] = id;
+            members.push(i);
+            if let Some(g) = &grid.points[i] {
+                acc.add(g);
+            }
+        }
+        let Some(mut fit) = acc.fit(sigma) else {
+            continue;
+        };
+        let s_eff = sigma.max(params.min_sigma);
+        let tol_at = |fit: &PlaneFit, g: &GridPoint| ray_tolerance(fit, g, tol, s_eff, params);
+        let mut refit_at = acc.n + acc.n / 3 + 1;
+        // Breadth first: the members not yet visited are the queue.
+        let mut next = 0;
+        while let Some(&i) = members.get(next) {
+            next += 1;
+            let c = rc.col(i);
+            let mut neighbours = [usize::MAX; 4];
+            if c > 0 {
+                neighbours[0] = i - 1;
+            }
+            if c + 1 < cols {
+                neighbours[1] = i + 1;
+            }
+            if i >= cols {
+                neighbours[2] = i - cols;
+            }
+            if i + cols < n {
+                neighbours[3] = i + cols;
+            }
+            for j in neighbours {
+                if j == usize::MAX || labels[j] != UNLABELLED {
+                    continue;
+                }
+                let Some(g) = &grid.points[j] else { continue };
+                if fit.distance(&g.p).abs() <= tol_at(&fit, g) {
+                    labels[j] = id;
+                    members.push(j);
+                    acc.add(g);
+                    if acc.n >= refit_at {
+                        if let Some(f) = acc.fit(sigma) {
+                            fit = f;
+                        }
+                        refit_at = acc.n + acc.n / 3 + 1;
+                    }
+                }
+            }
+        }
+        // Release members that the final plane does not explain, then refit.
+        if let Some(f) = acc.fit(sigma) {
+            fit = f;
+        }
+        // Few are released: their sums come off the accumulator, rather than the kept ones'
+        // being summed again.
+        let mut released = PlaneAccumulator::default();
+        members.retain(|&i| {
+            let Some(g) = grid.points[i].as_ref() else {
+                return false;
+            };
+            if fit.distance(&g.p).abs() <= tol_at(&fit, g) {
+                true
+            } else {
+                released.add(g);
+                labels[i] = UNLABELLED;
+                false
+            }
+        });
+        let made = make_patch(grid, &members, acc.minus(&released), params, sigma);
+        match made {
+            Some(p) => patches.push(p),
+            None => {
+                for &i in &members {
+                    labels[i] = UNLABELLED;
+                }
+            }
+        }
+    }
+    // Split patches that are really two planes (grown across a corner or a wall's foot),
+    // then label the points afresh.
+    let mut split = Vec::with_capacity(patches.len());
+    for p in patches {
+        if p.fit.misfit_ratio(sigma.max(params.min_sigma)) <= params.split_misfit {
+            split.push(p);
+            continue;
+        }
+        for part in split_members(grid, &p.members, params, sigma, params.split_depth) {
+            split.extend(release_and_make(grid, &part, params, sigma, tol));
+        }
+    }
+    labels.fill(UNLABELLED);
+    for (id, p) in split.iter().enumerate() {
+        for &i in &p.members {
+            labels[i] = id as u32;
+        }
+    }
+    (split, labels)
+}
+
+/// [`rows_span`] of members in ascending order: their first and last.
+fn rows_span_sorted(members: &[usize], cols: usize) -> (usize, usize) {
+    match (members.first(), members.last()) {
+        (Some(&lo), Some(&hi)) => (lo / cols, hi / cols),
+        _ => (usize::MAX, 0),
+    }
+}
+
+fn rows_span(members: &[usize], cols: usize) -> (usize, usize) {
+    // Rows grow with the grid index: the lowest and highest rows are those of the lowest and
+    // highest index.
+    let lo = members.iter().min().map_or(usize::MAX, |&i| i / cols);
+    let hi = members.iter().max().map_or(0, |&i| i / cols);
+    (lo, hi)
+}
+
+/// A patch from members when it is big enough and spans at least two rows (one row is a
+/// line, which leaves its plane free to turn about it). `acc` holds the sums of the members'
+/// points (the callers have just visited them).
+fn make_patch(
+    grid: &PoseGrid,
+    members: &[usize],
+    acc: PlaneAccumulator,
+    params: &LevelParams,
+    sigma: f64,
+) -> Option<Patch> {
+    // In grid order from here: the passes below then walk the grid forwards.
+    let sorted = ascending(members);
+    let members = &sorted[..];
+    // The rows spanned, unless too small or one row: nothing to fit (trimming only takes
+    // points away).
+    let span = |members: &[usize]| {
+        let (lo, hi) = rows_span_sorted(members, grid.cols);
+        (members.len() >= params.min_patch_points && hi > lo).then_some((lo, hi))
+    };
+    // Still a patch once points went: big enough, over two rows, and stacked.
+    let still_a_patch =
+        |members: &[usize]| span(members).is_some() && stacked(members, grid, params);
+    span(members)?;
+    let first = acc.fit(sigma)?;
+    let trimmed = trim_edge_rows(grid, members, &acc, &first, sigma, params);
+    let (members, first) = match &trimmed {
+        // A three-row patch that lost a row is no wall.
+        Some(kept) if kept.is_empty() => return None,
+        Some(kept) => (&kept[..], grid.accumulate(kept).fit(sigma)?),
+        None => (members, first),
+    };
+    if !still_a_patch(members) {
+        return None;
+    }
+    let fit = robust_fit(grid, members, first, params, sigma)?;
+    let fronted = without_front_row_ends(grid, members, &fit, params, sigma);
+    let (members, fit) = match &fronted {
+        Some(kept) => {
+            if !still_a_patch(kept) {
+                return None;
+            }
+            let first = grid.accumulate(kept).fit(sigma)?;
+            (&kept[..], robust_fit(grid, kept, first, params, sigma)?)
+        }
+        None => (members, fit),
+    };
+    let (lo, hi) = span(members)?;
+    if too_bent_to_split(&fit, members.len(), params, sigma)
+        || bent_across_rows(grid, members, &fit, params, sigma)
+    {
+        return None;
+    }
+    Some(Patch {
+        kind: classify(&fit.normal, &fit.centroid, params),
+        fit,
+        members: members.to_vec(),
+        row_range: (lo, hi),
+    })
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,239 @@
+//! Splitting a patch that is bent, or stacked from two surfaces, into planar parts.
+
+use super::*;
+
+/// Whether the members are stacked: at least `min_stacked_share` of them have a member in an
+/// adjacent row of their column (the scan next in elevation). On a wall the scans meet the
+/// same stretch one above the other. A floor line with a few wall points at one end of it (the
+/// floor at a wall's foot, at nearly the wall's range) is mostly single points in their
+/// columns, and those few points decide its tilt: a steep "wall" off by degrees. Rows that
+/// are not adjacent do not count: two wall lines over a floor line (the middle scan's beam
+/// meets the floor, or another surface, between them) once passed as stacked and tilted a
+/// pose's attitude by 20 degrees with a small sigma. `members` are in ascending order.
+pub(super) fn stacked(members: &[usize], grid: &PoseGrid, params: &LevelParams) -> bool {
+    // Members ascend: the neighbours one row down and one row up are found by two cursors
+    // that only move forwards, rather than in a mask over the whole grid.
+    let cols = grid.cols;
+    let (mut down, mut up) = (0, 0);
+    let has = |cursor: &mut usize, target: usize| {
+        while *cursor < members.len() && members[*cursor] < target {
+            *cursor += 1;
+        }
+        *cursor < members.len() && members[*cursor] == target
+    };
+    let stacked = members
+        .iter()
+        .filter(|&&i| (i >= cols && has(&mut down, i - cols)) || has(&mut up, i + cols))
+        .count();
+    stacked as f64 >= params.min_stacked_share * members.len() as f64
+}
+
+/// A patch too small for [`split_members`] whose points fit their plane far worse than the
+/// noise explains is no plane: typically two scan lines on a wall and one on the floor at its
+/// foot, at nearly the same range, which a quad's tolerance let through. Its normal is tilted
+/// by degrees, and where no other wall pins the same direction it would decide the attitude.
+/// The test: residual variance over the noise's above `1 + k sqrt(2 / dof)` (k =
+/// `max_misfit_sigmas`), k standard deviations of a true plane's ratio.
+pub(super) fn too_bent_to_split(
+    fit: &PlaneFit,
+    members: usize,
+    params: &LevelParams,
+    sigma: f64,
+) -> bool {
+    if params.max_misfit_sigmas <= 0.0 || members >= 2 * params.min_patch_points {
+        return false;
+    }
+    let dof = (fit.weight - 3.0).max(1.0);
+    fit.misfit_ratio(sigma.max(params.min_sigma))
+        > 1.0 + params.max_misfit_sigmas * (2.0 / dof).sqrt()
+}
+
+/// Whether the patch's scan lines do not lie on one plane: a wall line and the floor line at
+/// its foot (or a wall's lines with a floor line in front of them), in adjacent scans, make
+/// a plane that tilts to pass near all of them, and the split test cannot cut them apart when
+/// one part is a single row. A plane fitted through `R` rows absorbs their offsets along the
+/// normal up to a linear trend with height; the rest, the rows' bend, is `R - 2` degrees of
+/// freedom: `chi2 = sum_k m_k^2 / Var(m_k)` over the rows' mean residuals `m_k`, with
+/// `Var(m_k) = sigma^2 sum (d . n)^2 / n_k^2` from each point's noise along the normal. The
+/// patch is dropped when `chi2 / dof` exceeds one by `max_row_bend_sigmas` standard deviations
+/// of a true plane's (`sqrt(2 / dof)`).
+pub(super) fn bent_across_rows(
+    grid: &PoseGrid,
+    members: &[usize],
+    fit: &PlaneFit,
+    params: &LevelParams,
+    sigma: f64,
+) -> bool {
+    if params.max_row_bend_sigmas <= 0.0 {
+        return false;
+    }
+    let s2 = sigma.max(params.min_sigma).powi(2);
+    // Per row: sum of residuals, sum of (d . n)^2, count.
+    let mut rows = vec![(0.0, 0.0, 0usize); grid.rows()];
+    let rc = grid.row_col();
+    for &i in members {
+        if let Some(g) = &grid.points[i] {
+            let r = &mut rows[rc.row(i)];
+            r.0 += fit.distance(&g.p);
+            r.1 += g.dir.dot(&fit.normal).powi(2).max(1e-4);
+            r.2 += 1;
+        }
+    }
+    let used: Vec<&(f64, f64, usize)> = rows.iter().filter(|r| r.2 > 0).collect();
+    if used.len() < 3 {
+        return false;
+    }
+    let chi2: f64 = used
+        .iter()
+        .map(|(sum, dn2, _)| sum * sum / (s2 * dn2))
+        .sum();
+    let dof = (used.len() - 2) as f64;
+    chi2 / dof > 1.0 + params.max_row_bend_sigmas * (2.0 / dof).sqrt()
+}
+
+/// Drops members farther than `tol` from the members' plane, then makes the patch.
+pub(super) fn release_and_make(
+    grid: &PoseGrid,
+    members: &[usize],
+    params: &LevelParams,
+    sigma: f64,
+    tol: f64,
+) -> Option<Patch> {
+    let fit = grid.accumulate(members).fit(sigma)?;
+    let mut acc = PlaneAccumulator::default();
+    let kept: Vec<usize> = members
+        .iter()
+        .copied()
+        .filter(|&i| {
+            grid.points[i].as_ref().is_some_and(|g| {
+                let near = fit.distance(&g.p).abs() <= tol;
+                if near {
+                    acc.add(g);
+                }
+                near
+            })
+        })
+        .collect();
+    make_patch(grid, &kept, acc, params, sigma)
+}
+
+/// Splits a patch's members into planes while two planes explain them significantly better
+/// than one: the best split by column (walls meet at corners, which are column ranges) or by
+/// row (contiguous splits only: freely reassigning points would split one noisy plane into two
+/// parallel ones and fool the test), accepted by an F test on the residual sums of squares,
+/// `F = ((RSS1 - RSS2) / 3) / (RSS2 / (n - 6))`, which needs no noise level. Recurses into the
+/// parts up to `depth` times.
+pub fn split_members(
+    grid: &PoseGrid,
+    members: &[usize],
+    params: &LevelParams,
+    sigma: f64,
+    depth: usize,
+) -> Vec<Vec<usize>> {
+    let whole = vec![members.to_vec()];
+    if depth == 0 || members.len() < 2 * params.min_patch_points {
+        return whole;
+    }
+    let cols = grid.cols;
+    let rc = grid.row_col();
+    let Some(fit_all) = grid.accumulate(members).fit(sigma) else {
+        return whole;
+    };
+    let rss1 = fit_all.residual_ss;
+    // Candidate cuts (where the key changes, both parts spanning two rows), as (lower bound on
+    // the two planes' RSS, which ordering, boundary index). They are fitted in order of their
+    // bounds, and a cut whose bound exceeds the best RSS found cannot win, so most of them
+    // need no eigen decomposition. The winner is the same as fitting every cut in turn: the
+    // least RSS, ties to the first ordering and boundary.
+    let mut candidates: Vec<(f64, usize, usize)> = Vec::new();
+    let orders: [Vec<usize>; 2] = [
+        in_order(grid, members, false),
+        in_order(grid, members, true),
+    ];
+    let mut prefixes: [Vec<PlaneAccumulator>; 2] = [Vec::new(), Vec::new()];
+    for (which, sorted) in orders.iter().enumerate() {
+        let by_row = which == 1;
+        let key = |i: usize| if by_row { rc.row(i) } else { rc.col(i) };
+        let n = sorted.len();
+        // Prefix plane sums, and the rows spanned by every prefix and suffix.
+        let prefix = &mut prefixes[which];
+        prefix.reserve(n + 1);
+        let mut acc = PlaneAccumulator::default();
+        prefix.push(acc);
+        let (mut pre_lo, mut pre_hi) = (vec![usize::MAX; n + 1], vec![0usize; n + 1]);
+        for (k, &i) in sorted.iter().enumerate() {
+            if let Some(g) = &grid.points[i] {
+                acc.add(g);
+            }
+            prefix.push(acc);
+            pre_lo[k + 1] = pre_lo[k].min(rc.row(i));
+            pre_hi[k + 1] = pre_hi[k].max(rc.row(i));
+        }
+        let (mut suf_lo, mut suf_hi) = (vec![usize::MAX; n + 1], vec![0usize; n + 1]);
+        for k in (0..n).rev() {
+            suf_lo[k] = suf_lo[k + 1].min(rc.row(sorted[k]));
+            suf_hi[k] = suf_hi[k + 1].max(rc.row(sorted[k]));
+        }
+        let total = acc;
+        let half = params.min_patch_points / 2;
+        for b in half.max(1)..n.saturating_sub(half).max(1) {
+            // Only where the key changes (column or row boundaries).
+            if key(sorted[b]) == key(sorted[b - 1]) {
+                continue;
+            }
+            if pre_hi[b] <= pre_lo[b] || suf_hi[b] <= suf_lo[b] {
+                continue;
+            }
+            let l = prefix[b];
+            let r = total.minus(&l);
+            let bound = l.residual_lower_bound() + r.residual_lower_bound();
+            candidates.push((bound, which, b));
+        }
+    }
+    candidates.sort_by(|x, y| x.0.total_cmp(&y.0));
+    // Best split so far: (RSS of the two planes, which ordering, boundary index).
+    let mut best: Option<(f64, usize, usize)> = None;
+    for &(bound, which, b) in &candidates {
+        if best.is_some_and(|(br, _, _)| bound > br) {
+            break;
+        }
+        let prefix = &prefixes[which];
+        let l = prefix[b];
+        let r = prefix[prefix.len() - 1].minus(&l);
+        let (Some(fl), Some(fr)) = (l.fit(sigma), r.fit(sigma)) else {
+            continue;
+        };
+        let rss2 = fl.residual_ss + fr.residual_ss;
+        let better =
+            best.is_none_or(|(br, bw, bb)| rss2 < br || (rss2 == br && (which, b) < (bw, bb)));
+        if better {
+            best = Some((rss2, which, b));
+        }
+    }
+    let Some((_, which, cut)) = best else {
+        return whole;
+    };
+    let (a, b) = (orders[which][..cut].to_vec(), orders[which][cut..].to_vec());
+    let ok = |m: &[usize]| {
+        let (lo, hi) = rows_span(m, cols);
+        m.len() >= params.min_patch_points / 2 && hi > lo
+    };
+    if !ok(&a) || !ok(&b) {
+        return whole;
+    }
+    let (Some(fa), Some(fb)) = (
+        grid.accumulate(&a).fit(sigma),
+        grid.accumulate(&b).fit(sigma),
+    ) else {
+        return whole;
+    };
+    let rss2 = fa.residual_ss + fb.residual_ss;
+    let n = members.len() as f64;
+    let f = ((rss1 - rss2) / 3.0) / (rss2 / (n - 6.0)).max(1e-300);
+    if f.is_nan() || f <= params.split_f {
+        return whole;
+    }
+    let mut out = split_members(grid, &a, params, sigma, depth - 1);
+    out.extend(split_members(grid, &b, params, sigma, depth - 1));
+    out
+}
