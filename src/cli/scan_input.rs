@@ -34,11 +34,7 @@ impl BagArgs {
         BagOptions {
             scan_topic: self.scan_topic.clone(),
             preferred_scan_topic: preferred.map(str::to_string),
-            joint_topic: if self.joint_topic.is_empty() {
-                "/joint_states".to_string()
-            } else {
-                self.joint_topic.clone()
-            },
+            joint_topic: self.joint_topic.clone(),
             hinge_joint: self.hinge_joint.clone(),
             odom_topic: self.odom_topic.clone(),
             truth_topic: self.truth_topic.clone(),

@@ -11,7 +11,7 @@
 
 use super::msgs::LaserScan;
 use super::source::{Bag, at_message};
-use super::survey::{BagOptions, Survey, decode, stamp_seconds, survey};
+use super::survey::{BagOptions, Survey, decode, stamp_nanos, stamp_seconds, survey};
 use crate::formats::InputError;
 use crate::geometry::Pose;
 use crate::scan::{Scan, Timestamp};
@@ -257,11 +257,7 @@ pub fn read_scans(
         let msg: LaserScan = decode(&bag.name, m)?;
         let scan = convert(&bag.name, &topic, m.log_time, &msg, survey)?;
         let stamp = msg.header.stamp;
-        let stamp_ns = if stamp.sec == 0 && stamp.nanosec == 0 {
-            m.log_time
-        } else {
-            stamp.nanos()
-        };
+        let stamp_ns = stamp_nanos(stamp, m.log_time);
         arrival += 1;
         heap.push(Pending {
             stamp_ns,

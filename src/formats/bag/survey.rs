@@ -44,10 +44,11 @@ impl Default for BagOptions {
     }
 }
 
-pub const LASER_SCAN: &str = "sensor_msgs/msg/LaserScan";
-const JOINT_STATE: &str = "sensor_msgs/msg/JointState";
-const ODOMETRY: &str = "nav_msgs/msg/Odometry";
-const POSE_STAMPED: &str = "geometry_msgs/msg/PoseStamped";
+// The message types by their ROS 2 names, as the decoders know them.
+const LASER_SCAN: &str = LaserScan::TYPE;
+const JOINT_STATE: &str = JointState::TYPE;
+const ODOMETRY: &str = Odometry::TYPE;
+const POSE_STAMPED: &str = PoseStamped::TYPE;
 
 /// One topic of the bag, for `info`.
 #[derive(Clone, Debug, PartialEq)]
@@ -213,10 +214,15 @@ pub fn survey(bag: &Bag, opts: &BagOptions) -> Result<Survey, InputError> {
 /// A header stamp in seconds; a zero stamp (some drivers leave it unset) falls back to the
 /// message's log time.
 pub fn stamp_seconds(stamp: super::msgs::Time, log_time: u64) -> f64 {
+    stamp_nanos(stamp, log_time) as f64 * 1e-9
+}
+
+/// [`stamp_seconds`] in nanoseconds (the order scans are read in).
+pub fn stamp_nanos(stamp: super::msgs::Time, log_time: u64) -> u64 {
     if stamp.sec == 0 && stamp.nanosec == 0 {
-        log_time as f64 * 1e-9
+        log_time
     } else {
-        stamp.seconds()
+        stamp.nanos()
     }
 }
 
@@ -239,7 +245,7 @@ fn choose_scan_topic(
         .collect();
     if let Some(name) = &opts.scan_topic {
         return match topics.iter().find(|t| &t.topic == name) {
-            Some(t) if t.message_type == LaserScan::TYPE => Ok(name.clone()),
+            Some(t) if t.message_type == LASER_SCAN => Ok(name.clone()),
             Some(t) => Err(InputError::new(
                 bag,
                 name.as_str(),
