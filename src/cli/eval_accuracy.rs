@@ -56,18 +56,8 @@ pub struct Args {
     /// Take the scans with the adaptive robot (cleverRobot), as the paper's Table I did.
     #[arg(long)]
     pub adaptive: bool,
-    /// Nodding laser: the hinge turns at this rate while each scan is taken (deg/s), each ray
-    /// cast at its own elevation (as `simulate --sweep-rate`). 0 stops it for each scan.
-    #[arg(
-        long,
-        default_value_t = 0.0,
-        allow_hyphen_values = true,
-        value_name = "DEG_PER_S"
-    )]
-    pub sweep_rate: f64,
-    /// Scans per second (Hz), as `simulate --scan-rate`.
-    #[arg(long, default_value_t = AccuracyParams::default().scan_rate, value_name = "HZ")]
-    pub scan_rate: f64,
+    #[command(flatten)]
+    pub sweep: super::SweepArgs,
     /// Level as if the hinge stood still during each scan: drop the per-ray elevations of a
     /// sweep, every ray at its scan's elevation (what ignoring the sweep costs).
     #[arg(long)]
@@ -106,8 +96,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         step_deg: args.step,
         tilt_deg: args.tilt,
         adaptive: args.adaptive,
-        sweep_rate_deg: args.sweep_rate,
-        scan_rate: args.scan_rate,
+        sweep_rate_deg: args.sweep.sweep_rate,
+        scan_rate: args.sweep.scan_rate,
         drop_ray_elevation: args.drop_ray_elevation,
         level: LevelParams {
             coplanar_k: args.quad_tolerance,
@@ -138,8 +128,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             "noise_model": args.noise_model.to_string(),
             "quad_tolerance": args.quad_tolerance,
             "adaptive": args.adaptive,
-            "sweep_rate_deg": args.sweep_rate,
-            "scan_rate": args.scan_rate,
+            "sweep_rate_deg": args.sweep.sweep_rate,
+            "scan_rate": args.sweep.scan_rate,
             "drop_ray_elevation": args.drop_ray_elevation,
             "cells": stats,
         });

@@ -110,6 +110,25 @@ impl OdometryNoiseArgs {
     }
 }
 
+/// The nodding-laser flags that `simulate` and `eval accuracy` share (`ScannerParams`).
+#[derive(clap::Args, Debug, Clone)]
+pub struct SweepArgs {
+    /// Nodding laser: the hinge turns at this rate while each scan is taken (deg/s; positive
+    /// tilts the beams further down), each ray cast at its own elevation, centred on the scan's,
+    /// and written to the scan's `ray_elevation`. 0 stops the hinge for each scan.
+    #[arg(
+        long,
+        default_value_t = 0.0,
+        allow_hyphen_values = true,
+        value_name = "DEG_PER_S"
+    )]
+    pub sweep_rate: f64,
+    /// Scans per second (Hz): one scan's rays spread evenly over 1/rate seconds (what sets
+    /// each ray's time, and so its elevation, when the hinge sweeps).
+    #[arg(long, default_value_t = levelscan::simulate::ScannerParams::default().scan_rate, value_name = "HZ")]
+    pub scan_rate: f64,
+}
+
 /// The leveling flags that `level` and `eval accuracy` share (`level::LevelParams`).
 #[derive(clap::Args, Debug, Clone)]
 pub struct LevelArgs {

@@ -84,20 +84,8 @@ pub struct Args {
     )]
     pub hinge_offset: Option<Vec<f64>>,
 
-    /// Nodding laser: the hinge turns at this rate while each scan is taken (deg/s; positive
-    /// tilts the beams further down), each ray cast at its own elevation, centred on the scan's,
-    /// and written to the scan's `ray_elevation`. 0 stops the hinge for each scan.
-    #[arg(
-        long,
-        default_value_t = 0.0,
-        allow_hyphen_values = true,
-        value_name = "DEG_PER_S"
-    )]
-    pub sweep_rate: f64,
-    /// Scans per second (Hz): one scan's rays spread evenly over 1/rate seconds (what sets
-    /// each ray's time, and so its elevation, when the hinge sweeps).
-    #[arg(long, default_value_t = ScannerParams::default().scan_rate, value_name = "HZ")]
-    pub scan_rate: f64,
+    #[command(flatten)]
+    pub sweep: super::SweepArgs,
 
     #[command(flatten)]
     pub odometry: super::OdometryNoiseArgs,
@@ -330,8 +318,8 @@ fn scanner_params(args: &Args) -> anyhow::Result<ScannerParams> {
         noise_model: args.noise_model,
         hinge_offset,
         write_sigma: args.with_sigma,
-        sweep_rate: args.sweep_rate.to_radians(),
-        scan_rate: args.scan_rate,
+        sweep_rate: args.sweep.sweep_rate.to_radians(),
+        scan_rate: args.sweep.scan_rate,
     };
     params.validate()?;
     Ok(params)
