@@ -19,7 +19,7 @@ fn run_accuracy(dir: &Path, extra: &[&str]) -> (String, Value, Vec<Value>) {
     let out = bin()
         .args(["eval", "accuracy", plan("office").to_str().unwrap()])
         .args([
-            "--poses", "12", "--scans", "3,4", "--noise", "0.02", "--seed", "3",
+            "--poses", "12", "--scans", "3,4", "--sigma", "0.02", "--seed", "3",
         ])
         .args(["--out", dir.to_str().unwrap()])
         .args(extra)
@@ -55,7 +55,7 @@ fn median(mut v: Vec<f64>) -> f64 {
 #[test]
 fn efficiency_figures_agree_with_the_pose_records() {
     let dir = out_dir("eff");
-    let (md, json, poses) = run_accuracy(&dir, &["--estimators", "robust"]);
+    let (md, json, poses) = run_accuracy(&dir, &["--estimator", "robust"]);
     assert!(md.contains("### Against each pose's bound"), "{md}");
     assert!(md.contains("ml, true segments"), "{md}");
     assert!(md.contains("floor/ceiling kept"), "{md}");
@@ -116,8 +116,8 @@ fn efficiency_figures_agree_with_the_pose_records() {
 #[test]
 fn paper_noise_model_is_uniform_and_recorded() {
     let (da, db) = (out_dir("gauss"), out_dir("uniform"));
-    let (_, gauss, _) = run_accuracy(&da, &["--estimators", "paper"]);
-    let (_, uniform, _) = run_accuracy(&db, &["--estimators", "paper", "--noise-model", "paper"]);
+    let (_, gauss, _) = run_accuracy(&da, &["--estimator", "paper"]);
+    let (_, uniform, _) = run_accuracy(&db, &["--estimator", "paper", "--noise-model", "paper"]);
     assert_eq!(uniform["noise_model"], "uniform");
     assert_eq!(gauss["noise_model"], "gaussian");
     // Same poses and ray geometry; a uniform width of 2 cm is a sigma of 2 / sqrt 12 cm, so
@@ -155,8 +155,8 @@ fn simulate_uniform_noise_stays_within_half_its_width() {
                 .unwrap(),
         )
     };
-    let clean = sim(&["--noise", "0"]);
-    let noisy = sim(&["--noise", "0.04", "--noise-model", "uniform"]);
+    let clean = sim(&["--sigma", "0"]);
+    let noisy = sim(&["--sigma", "0.04", "--noise-model", "uniform"]);
     assert_eq!(clean.len(), noisy.len());
     let mut largest: f64 = 0.0;
     for (c, n) in clean.iter().zip(&noisy) {

@@ -139,3 +139,33 @@ fn empty_input_is_summarised_as_nothing() {
     assert_eq!(j["poses"], 0);
     assert_eq!(j["valid_fraction"], Value::Null);
 }
+
+#[test]
+fn info_writes_to_o_like_the_other_commands() {
+    let scans = bin()
+        .args(["simulate", plan_path().to_str().unwrap(), "--random", "3"])
+        .output()
+        .unwrap();
+    assert!(scans.status.success());
+    let to_stdout = run_with_stdin(&["info"], &scans.stdout);
+    assert!(to_stdout.status.success());
+    let dash = run_with_stdin(&["info", "-o", "-"], &scans.stdout);
+    assert_eq!(dash.stdout, to_stdout.stdout);
+    let file = std::env::temp_dir().join(format!("levelscan-info-o-{}.json", std::process::id()));
+    let out = run_with_stdin(&["info", "-o", file.to_str().unwrap()], &scans.stdout);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(
+        out.stdout.is_empty(),
+        "-o FILE leaves standard output empty"
+    );
+    assert_eq!(std::fs::read(&file).unwrap(), to_stdout.stdout);
+    std::fs::remove_file(&file).unwrap();
+}
+
+fn plan_path() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/plans/office.wall")
+}

@@ -219,7 +219,7 @@ fn eval_accuracy_writes_table_i_json_and_fig6() {
     let dir = std::env::temp_dir().join(format!("levelscan_eval_acc_{}", std::process::id()));
     let out = Command::new(env!("CARGO_BIN_EXE_levelscan"))
         .args(["eval", "accuracy", plan.to_str().unwrap(), "--poses", "6"])
-        .args(["--scans", "3,5", "--noise", "0.01,0.05", "--seed", "2"])
+        .args(["--scans", "3,5", "--sigma", "0.01,0.05", "--seed", "2"])
         .args(["--out", dir.to_str().unwrap()])
         .output()
         .unwrap();

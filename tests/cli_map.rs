@@ -47,7 +47,7 @@ fn room_scans(dir: &Path) -> PathBuf {
         "360",
         "--rays",
         "720",
-        "--noise",
+        "--sigma",
         "0",
         "--elevations",
         "0",
@@ -375,6 +375,10 @@ fn cloud_writes_a_poses_scans_in_the_robot_frame() {
             assert!((f64::from(v.2) - r).abs() < 1e-5);
         }
     }
+    // Without -o the cloud goes to standard output (here a pipe), as every command's output.
+    let piped = run(&["cloud", scans.to_str().unwrap(), "--sequence", "2"]);
+    ok(&piped);
+    assert_eq!(piped.stdout, std::fs::read(dir.join("b.ply")).unwrap());
     // Several poses and no --sequence: the user is asked to choose.
     let out = run(&[
         "cloud",

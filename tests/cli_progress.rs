@@ -37,7 +37,7 @@ fn on_a_terminal(args: &[&str]) -> Option<String> {
 }
 
 fn accuracy_args(plan: &str) -> Vec<&str> {
-    let a = "eval accuracy PLAN --poses 60 --scans 3 --noise 0.01 --estimators robust";
+    let a = "eval accuracy PLAN --poses 60 --scans 3 --sigma 0.01 --estimator robust";
     a.split(' ')
         .map(|t| if t == "PLAN" { plan } else { t })
         .collect()

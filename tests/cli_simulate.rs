@@ -128,7 +128,7 @@ fn options_reach_the_output() {
             "--hinge-offset",
             "0.1,0,-0.05",
             "--with-sigma",
-            "--noise",
+            "--sigma",
             "0.03",
         ])
         .args(["--height", "0.8", "--flat", "-o", out.0.to_str().unwrap()])
@@ -230,7 +230,7 @@ fn missing_file_no_poses_and_bad_flags_fail_cleanly() {
     for args in [
         &["--rays", "0"][..],
         &["--hinge-offset", "1,2"],
-        &["--noise", "-1"],
+        &["--sigma", "-1"],
         &["--random", "2", "--clearance", "3"],
     ] {
         let out = simulate(&[&[f.0.to_str().unwrap()][..], args].concat());
@@ -241,4 +241,27 @@ fn missing_file_no_poses_and_bad_flags_fail_cleanly() {
             "{args:?}: {err}"
         );
     }
+}
+
+#[test]
+fn old_flag_spellings_and_the_seed_default_still_hold() {
+    let office = plan("office");
+    let office = office.to_str().unwrap();
+    let run = |args: &[&str]| {
+        let out = simulate(&[&[office, "--random", "4"][..], args].concat());
+        assert!(
+            out.status.success(),
+            "{args:?}: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        out.stdout
+    };
+    // `--noise` is the hidden old name of `--sigma`: the same bytes.
+    let sigma = run(&["--sigma", "0.03"]);
+    assert_eq!(sigma, run(&["--noise", "0.03"]));
+    assert_ne!(sigma, run(&["--sigma", "0.01"]));
+    // One seed default in every command: 1 (simulate's was 0).
+    let default = run(&[]);
+    assert_eq!(default, run(&["--seed", "1"]));
+    assert_ne!(default, run(&["--seed", "0"]));
 }

@@ -312,3 +312,35 @@ fn a_long_matched_log_keeps_few_cones_its_whole_path_and_a_reference() {
     assert_eq!(reference["label"], "Reference path (true_pose, green)");
     assert_eq!(xyz(&reference["lines"][0], 1), [100, 100, 0]);
 }
+
+#[test]
+fn without_o_the_page_goes_to_standard_output_like_every_command() {
+    let log = "{ \"nrays\": 2, \"min_theta\": 0, \"max_theta\": 0.2, \"readings\": [1, 1], \
+               \"estimate\": [0, 0, 0] }\n";
+    let dir = temp_dir("stdout");
+    let out = bin()
+        .arg("view")
+        .current_dir(&dir)
+        .stdin(std::process::Stdio::piped())
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .and_then(|mut child| {
+            use std::io::Write;
+            child.stdin.take().unwrap().write_all(log.as_bytes())?;
+            child.wait_with_output()
+        })
+        .unwrap();
+    assert!(out.status.success(), "{}", stderr(&out));
+    let page = String::from_utf8(out.stdout).unwrap();
+    assert!(
+        page.starts_with("<!DOCTYPE html>"),
+        "{}",
+        &page[..page.len().min(80)]
+    );
+    assert!(layer(&embedded_scene(&page), "matched").is_some());
+    // No file appears behind the user's back (it used to be view.html).
+    assert_eq!(std::fs::read_dir(&dir).unwrap().count(), 0);
+    // `-o -` is the same page.
+    assert_eq!(run(&["view", "-o", "-"], Some(log)).stdout, page.as_bytes());
+}

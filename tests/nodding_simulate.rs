@@ -289,7 +289,7 @@ fn eval_accuracy_measures_the_sweep() {
             .args([
                 "eval", "accuracy", &office, "--poses", "120", "--scans", "3",
             ])
-            .args(["--noise", "0.01", "--estimators", "robust", "--out"])
+            .args(["--sigma", "0.01", "--estimator", "robust", "--out"])
             .arg(&dir)
             .args(extra)
             .output()

@@ -18,15 +18,19 @@ pub struct Args {
     /// The pose to write (its `sequence`); may be left out when the file holds one pose.
     #[arg(long)]
     pub sequence: Option<u64>,
-    /// Output PLY file (`-` for standard output).
-    #[arg(short, long, default_value = "cloud.ply")]
-    pub output: PathBuf,
+    /// Output file; standard output when absent or `-`: the PLY cloud. (Binary PLY on a
+    /// terminal is refused: give `-o cloud.ply`, --ascii, or redirect it.)
+    #[arg(short, long)]
+    pub output: Option<PathBuf>,
     /// ASCII PLY instead of binary little-endian.
     #[arg(long)]
     pub ascii: bool,
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
+    if !args.ascii {
+        super::view::refuse_terminal(args.output.as_deref(), "a binary PLY cloud", "cloud.ply")?;
+    }
     let (name, sequence, scans) = read_pose(args.input.as_deref(), args.sequence)?;
     let points = pose_cloud(&scans);
     let elevations: Vec<String> = scans
@@ -42,15 +46,18 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             elevations.join(" ")
         ),
     ];
-    let mut out = open_output(Some(&args.output), &[args.input.as_deref()])?;
+    let mut out = open_output(args.output.as_deref(), &[args.input.as_deref()])?;
+    let shown = match args.output.as_deref().filter(|p| p.as_os_str() != "-") {
+        Some(p) => p.display().to_string(),
+        None => super::output::STDOUT.to_string(),
+    };
     write_ply(&mut out, &points, &comments, args.ascii)
-        .with_context(|| format!("{}: cannot write", args.output.display()))?;
+        .with_context(|| format!("{shown}: cannot write"))?;
     out.finish()?;
     eprintln!(
-        "levelscan cloud: sequence {sequence}: {} points from {} scans; wrote {}",
+        "levelscan cloud: sequence {sequence}: {} points from {} scans; wrote {shown}",
         points.len(),
         scans.len(),
-        args.output.display()
     );
     Ok(())
 }

@@ -25,16 +25,17 @@ pub struct Args {
     /// Directory for report.html, report.json, the figures and the run's scans.
     #[arg(long, default_value = "levelscan-demo")]
     pub out: PathBuf,
-    /// Random seed (same seed, same report numbers).
-    #[arg(long, default_value_t = DemoParams::default().seed)]
+    /// Random seed: the same seed gives the same report numbers.
+    #[arg(long, default_value_t = super::DEFAULT_SEED)]
     pub seed: u64,
-    /// Range noise of the simulated scanner (m).
-    #[arg(long, default_value_t = DemoParams::default().noise)]
-    pub noise: f64,
+    /// Range noise (m): the standard deviation of the simulated readings' errors. (Formerly
+    /// `--noise`, still accepted.)
+    #[arg(long, alias = "noise", default_value_t = DemoParams::default().noise)]
+    pub sigma: f64,
     /// Scans per pose, at elevations --step apart centred on level.
     #[arg(long, default_value_t = DemoParams::default().scans)]
     pub scans: usize,
-    /// Elevation step between scans (deg).
+    /// Elevation step between scans (deg); positive elevations tilt the beams down.
     #[arg(long, default_value_t = DemoParams::default().step_deg)]
     pub step: f64,
     /// Random poses per cell of Table I (the paper's 100).
@@ -47,10 +48,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         args.scans >= 3,
         "--scans: leveling needs at least 3 scans per pose"
     );
-    anyhow::ensure!(args.noise >= 0.0, "--noise: must not be negative");
+    anyhow::ensure!(args.sigma >= 0.0, "--sigma: must not be negative");
     let params = DemoParams {
         seed: args.seed,
-        noise: args.noise,
+        noise: args.sigma,
         scans: args.scans,
         step_deg: args.step,
         accuracy_poses: args.accuracy_poses,

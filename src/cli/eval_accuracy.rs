@@ -16,14 +16,21 @@ pub struct Args {
     /// Floor plans (.wall); poses are drawn in each and the statistics pooled.
     #[arg(required = true)]
     pub plans: Vec<PathBuf>,
-    /// Scan counts per pose.
+    /// Scans per pose, at elevations --step apart centred on level; a comma-separated list,
+    /// one table row each.
     #[arg(long, value_delimiter = ',', default_value = "3,4,5")]
     pub scans: Vec<usize>,
-    /// Range noise (m): Gaussian sigmas, or with `--noise-model uniform` the full widths of
-    /// uniform noise.
-    #[arg(long, value_delimiter = ',', default_value = "0.01,0.05,0.10")]
-    pub noise: Vec<f64>,
-    /// What --noise means: `gaussian` (a standard deviation) or `uniform` (alias `paper`: a
+    /// Range noise (m): the standard deviations of the readings' errors, or with
+    /// `--noise-model uniform` the full widths of uniform noise; a comma-separated list, one
+    /// table column each. (Formerly `--noise`, still accepted.)
+    #[arg(
+        long,
+        alias = "noise",
+        value_delimiter = ',',
+        default_value = "0.01,0.05,0.10"
+    )]
+    pub sigma: Vec<f64>,
+    /// What --sigma means: `gaussian` (a standard deviation) or `uniform` (alias `paper`: a
     /// peak-to-peak width, the paper's "range of about 1 cm", appendix C).
     #[arg(long, value_enum, default_value_t = NoiseModel::Gaussian)]
     pub noise_model: NoiseModel,
@@ -31,29 +38,33 @@ pub struct Args {
     /// (estimated from the data).
     #[arg(long, default_value_t = LevelParams::default().coplanar_k)]
     pub quad_tolerance: f64,
-    /// Estimators to compare.
+    /// Up-vector estimator: a comma-separated list of those to compare (`paper`, `robust`).
+    /// (Formerly `--estimators`, still accepted.)
     #[arg(
         long,
+        alias = "estimators",
         value_enum,
         value_delimiter = ',',
         default_value = "paper,robust"
     )]
-    pub estimators: Vec<Estimator>,
+    pub estimator: Vec<Estimator>,
     /// Random poses per plan.
     #[arg(long, default_value_t = 100)]
     pub poses: usize,
-    /// Seed of the poses and the noise.
-    #[arg(long, default_value_t = 1)]
+    /// Random seed, of the poses and the noise: the same seed gives the same tables.
+    #[arg(long, default_value_t = super::DEFAULT_SEED)]
     pub seed: u64,
-    /// Elevation step between scans (deg).
+    /// Elevation step between scans (deg); positive elevations tilt the beams down.
     #[arg(long, default_value_t = 5.0)]
     pub step: f64,
-    /// Roll and pitch uniform in +-tilt (deg).
+    /// Random poses: roll and pitch uniform in +-TILT (deg).
     #[arg(long, default_value_t = 20.0)]
     pub tilt: f64,
     #[command(flatten)]
     pub leveling: LevelArgs,
-    /// Take the scans with the adaptive robot (cleverRobot), as the paper's Table I did.
+    /// The adaptive robot, cleverRobot (paper sect. 7.2.2): take the scans as it would,
+    /// retaking a pose's scans at other elevations when it cannot level them, as the paper's
+    /// Table I did.
     #[arg(long)]
     pub adaptive: bool,
     #[command(flatten)]
@@ -62,8 +73,8 @@ pub struct Args {
     /// sweep, every ray at its scan's elevation (what ignoring the sweep costs).
     #[arg(long)]
     pub drop_ray_elevation: bool,
-    /// Write accuracy.json, poses.jsonl (every pose's outcome) and the Fig. 6 histograms
-    /// (PNG, SVG) here.
+    /// Directory for accuracy.json, poses.jsonl (every pose's outcome) and the Fig. 6
+    /// histograms (PNG, SVG); none written when absent.
     #[arg(long)]
     pub out: Option<PathBuf>,
 }
@@ -74,8 +85,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         "--scans must list scan counts of at least 1"
     );
     anyhow::ensure!(
-        args.noise.iter().all(|n| n.is_finite() && *n >= 0.0),
-        "--noise must list non-negative sigmas in metres"
+        args.sigma.iter().all(|n| n.is_finite() && *n >= 0.0),
+        "--sigma must list non-negative sigmas in metres"
     );
     anyhow::ensure!(
         args.quad_tolerance.is_finite() && args.quad_tolerance > 0.0,
@@ -88,9 +99,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .collect::<anyhow::Result<Vec<_>>>()?;
     let params = AccuracyParams {
         scans: args.scans.clone(),
-        noise: args.noise.clone(),
+        noise: args.sigma.clone(),
         noise_model: args.noise_model,
-        estimators: args.estimators.clone(),
+        estimators: args.estimator.clone(),
         poses_per_plan: args.poses,
         seed: args.seed,
         step_deg: args.step,

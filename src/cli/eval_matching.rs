@@ -25,16 +25,18 @@ pub struct MatchingArgs {
     /// Directory for `matching.md`, `matching.json` and the maps (PNG and SVG).
     #[arg(long)]
     pub out: Option<PathBuf>,
-    /// Seed of the simulation.
-    #[arg(long, default_value_t = 1)]
+    /// Random seed, of the simulation: the same seed gives the same figures.
+    #[arg(long, default_value_t = super::DEFAULT_SEED)]
     pub seed: u64,
-    /// Range noise of the simulated scanner (m).
-    #[arg(long, default_value_t = ScannerParams::default().noise_sigma)]
-    pub noise: f64,
+    /// Range noise (m): the standard deviation of the simulated readings' errors. (Formerly
+    /// `--noise`, still accepted.)
+    #[arg(long, alias = "noise", default_value_t = ScannerParams::default().noise_sigma)]
+    pub sigma: f64,
     /// Scans per pose of the tilted run, at elevations --step apart centred on level.
     #[arg(long, default_value_t = 3)]
     pub scans: usize,
-    /// Elevation step between the tilted run's scans (deg).
+    /// Elevation step between scans (deg), in the tilted run; positive elevations tilt the
+    /// beams down.
     #[arg(long, default_value_t = 5.0)]
     pub step: f64,
     /// Take one set of scans per pose; by default cleverRobot takes the tilted run, retaking a
@@ -53,15 +55,15 @@ pub fn run_matching(args: MatchingArgs) -> anyhow::Result<()> {
         "--scans: leveling needs at least 3 scans per pose"
     );
     anyhow::ensure!(
-        args.noise.is_finite() && args.noise >= 0.0,
-        "--noise must be >= 0"
+        args.sigma.is_finite() && args.sigma >= 0.0,
+        "--sigma must be >= 0"
     );
     let odometry = args.odometry.params()?;
     let params = ExperimentParams {
         seed: args.seed,
         odometry,
         scanner: ScannerParams {
-            noise_sigma: args.noise,
+            noise_sigma: args.sigma,
             ..ScannerParams::default()
         },
         elevations: elevations_centred(args.scans, args.step.to_radians()),
@@ -175,12 +177,12 @@ pub struct RealArgs {
     /// `true_pose`), optionally gzipped.
     #[arg(required = true)]
     pub logs: Vec<PathBuf>,
-    /// Seed of the odometry perturbation.
-    #[arg(long, default_value_t = 1)]
+    /// Random seed, of the odometry perturbation: the same seed gives the same scores.
+    #[arg(long, default_value_t = super::DEFAULT_SEED)]
     pub seed: u64,
     #[command(flatten)]
     pub odometry: super::OdometryNoiseArgs,
-    /// Also write `real.md` and `real.json` into this directory.
+    /// Directory for `real.md` and `real.json`; none written when absent.
     #[arg(long)]
     pub out: Option<PathBuf>,
     #[command(flatten)]

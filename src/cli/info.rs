@@ -16,10 +16,14 @@ pub struct Args {
     /// Scan file: JSON Lines or a CARMEN log, optionally gzipped; standard input when absent
     /// or `-`.
     pub scans: Option<PathBuf>,
-    /// CARMEN `FLASER` maximum range (m); readings at or beyond it are no return. Default: the
-    /// log's `PARAM robot_front_laser_max`, else 50.
+    /// Scanner's maximum range (m): a reading at or beyond it is no return. Read from
+    /// CARMEN `FLASER` lines, which do not record it (other formats mark no return
+    /// themselves). Default: the log's `PARAM robot_front_laser_max`, else 50.
     #[arg(long)]
     pub max_range: Option<f64>,
+    /// Output file; standard output when absent or `-`.
+    #[arg(short, long)]
+    pub output: Option<PathBuf>,
     #[command(flatten)]
     pub bag: BagArgs,
 }
@@ -71,7 +75,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if let Value::Object(m) = summary.into_json() {
         report.extend(m);
     }
-    let mut out = open_output(None, &[args.scans.as_deref()])?;
+    let mut out = open_output(args.output.as_deref(), &[args.scans.as_deref()])?;
     out.write_all((Value::Object(report).to_string() + "\n").as_bytes())?;
     out.finish()?;
     Ok(())

@@ -20,17 +20,19 @@ pub struct Args {
     /// Scan JSON Lines with `sequence` and `elevation`, or a ROS bag (MCAP, rosbag2
     /// directory, ROS 1 .bag); standard input when absent or `-`.
     pub input: Option<PathBuf>,
-    /// Write here instead of standard output.
+    /// Output file; standard output when absent or `-`. A name ending in `.mcap` writes a
+    /// ROS 2 bag (see --format).
     #[arg(short, long)]
     pub output: Option<PathBuf>,
-    /// Range noise sigma (m); default: the scans' `readings_sigma`, else estimated from the data.
+    /// Range noise (m): the standard deviation of the readings' errors; default: the scans'
+    /// `readings_sigma`, else estimated from the data.
     #[arg(long)]
     pub sigma: Option<f64>,
     /// Up-vector estimator: the paper's cross products over quads, or robust least squares
     /// over whole-wall patches.
     #[arg(long, value_enum, default_value_t = Estimator::Robust)]
     pub estimator: Estimator,
-    /// Quad height [scans].
+    /// Quad height (scans).
     #[arg(long, default_value_t = LevelParams::default().quad_rows)]
     pub quad_rows: usize,
     /// Quad width (rays).

@@ -46,7 +46,8 @@ pub struct Args {
     /// 2D scans with poses: `match` output (leveled or not), or a CSM or CARMEN log; none or
     /// `-` reads standard input.
     pub input: Option<PathBuf>,
-    /// The map's YAML file; the PGM image is written beside it under the same name (map.pgm).
+    /// Output file: the map's YAML; the PGM image is written beside it under the same name
+    /// (map.pgm). Two files, so never standard output.
     #[arg(short, long, default_value = "map.yaml")]
     pub output: PathBuf,
     /// Cell size (m).
@@ -58,6 +59,9 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
+    if args.output.as_os_str() == "-" {
+        bail!("-o -: a map is two files (YAML and PGM), not standard output: give -o map.yaml");
+    }
     if args.output.extension().is_some_and(|e| e == "pgm") {
         bail!(
             "{}: -o names the YAML file (the PGM is written beside it)",

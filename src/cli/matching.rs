@@ -100,7 +100,8 @@ pub struct MatchOptions {
     /// Ignore readings shorter than this (m).
     #[arg(long, default_value_t = RangeParams::default().min_range)]
     pub min_range: f64,
-    /// Ignore readings at or beyond this (CARMEN's "no return") (m).
+    /// Scanner's maximum range (m): a reading at or beyond it is no return, left out of the
+    /// match (CARMEN logs write the maximum range for no return).
     #[arg(long, default_value_t = RangeParams::default().max_range)]
     pub max_range: f64,
     /// Pairwise: match each scan one way only (the default also matches the previous scan
@@ -251,7 +252,8 @@ pub struct Args {
     /// --trajectory, at the same times), in TUM format; records without one are left out.
     #[arg(long)]
     pub reference_trajectory: Option<PathBuf>,
-    /// Output file; standard output when absent or `-`.
+    /// Output file; standard output when absent or `-`. A name ending in `.mcap` writes a
+    /// ROS 2 bag (see --format).
     #[arg(short, long)]
     pub output: Option<PathBuf>,
     #[command(flatten)]

@@ -75,6 +75,10 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
     }
 }
 
+/// The `--seed` default of every command that draws random numbers (simulate, demo, eval):
+/// one default, so that `simulate` and `eval` runs without `--seed` see the same draws.
+pub const DEFAULT_SEED: u64 = 1;
+
 /// The odometry noise model's flags (simulate, eval matching, eval real): per step, Gaussian
 /// noise proportional to the step plus a constant (`simulate::OdometryParams`).
 #[derive(clap::Args, Debug, Clone)]

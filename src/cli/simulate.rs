@@ -33,19 +33,21 @@ pub struct Args {
     /// Field of view centred on the robot's forward axis (deg).
     #[arg(long, default_value_t = 180.0)]
     pub fov: f64,
-    /// Longest range that returns (m); rays that meet nothing within it are invalid.
+    /// Scanner's maximum range (m): a reading at or beyond it is no return (rays that meet
+    /// nothing within it are invalid).
     #[arg(long, default_value_t = 30.0)]
     pub max_range: f64,
-    /// Range noise (m): the Gaussian's standard deviation, or with `--noise-model uniform`
-    /// the full width of uniform noise.
-    #[arg(long, default_value_t = 0.01)]
-    pub noise: f64,
-    /// What --noise means: `gaussian` (a standard deviation) or `uniform` (alias `paper`: a
+    /// Range noise (m): the standard deviation of the readings' errors, or with
+    /// `--noise-model uniform` the full width of uniform noise. (Formerly `--noise`, still
+    /// accepted.)
+    #[arg(long, alias = "noise", default_value_t = 0.01)]
+    pub sigma: f64,
+    /// What --sigma means: `gaussian` (a standard deviation) or `uniform` (alias `paper`: a
     /// peak-to-peak width, the paper's "range of about 1 cm", appendix C).
     #[arg(long, value_enum, default_value_t = NoiseModel::Gaussian)]
     pub noise_model: NoiseModel,
     /// Random seed: the same seed gives the same output bytes, whatever the thread count.
-    #[arg(long, default_value_t = 0)]
+    #[arg(long, default_value_t = super::DEFAULT_SEED)]
     pub seed: u64,
 
     /// Scans per pose, at elevations --step apart centred on level.
@@ -90,10 +92,10 @@ pub struct Args {
     #[command(flatten)]
     pub odometry: super::OdometryNoiseArgs,
 
-    /// The adaptive robot, cleverRobot (paper sect. 7.2.2): level each pose's scans as the
-    /// robot would and, when the estimate is poor, retake them at other elevations: tilted the
-    /// other way when they face the floor or the ceiling, away from the floor (or the ceiling)
-    /// when the walls seen cannot pin the attitude down. Retaken scans keep the pose's
+    /// The adaptive robot, cleverRobot (paper sect. 7.2.2): take the scans as it would, level
+    /// each pose's scans and, when the estimate is poor, retake them at other elevations:
+    /// tilted the other way when they face the floor or the ceiling, away from the floor (or
+    /// the ceiling) when the walls seen cannot pin the attitude down. Retaken scans keep the pose's
     /// `sequence`; every scan records `"adaptive": {"attempt": k, "shift": rad}`.
     #[arg(long)]
     pub adaptive: bool,
@@ -314,7 +316,7 @@ fn scanner_params(args: &Args) -> anyhow::Result<ScannerParams> {
         rays: args.rays,
         fov: args.fov.to_radians(),
         max_range: args.max_range,
-        noise_sigma: args.noise,
+        noise_sigma: args.sigma,
         noise_model: args.noise_model,
         hinge_offset,
         write_sigma: args.with_sigma,

@@ -11,8 +11,8 @@ use levelscan::formats::{parse_plan, read_any};
 use levelscan::plan::Plan;
 use levelscan::viz::html::viewer_page;
 use levelscan::viz::scene::{Source, ViewParams, build_scene};
-use std::io::{Read, Write};
-use std::path::PathBuf;
+use std::io::{IsTerminal, Read, Write};
+use std::path::{Path, PathBuf};
 
 #[derive(clap::Args, Debug)]
 pub struct Args {
@@ -22,16 +22,18 @@ pub struct Args {
     /// A floor plan to overlay (same as giving it among FILES).
     #[arg(long)]
     pub plan: Option<PathBuf>,
-    /// Output HTML file (`-` for standard output).
-    #[arg(short, long, default_value = "view.html")]
-    pub output: PathBuf,
+    /// Output file; standard output when absent or `-`: the HTML page. (Standard output on
+    /// a terminal is refused: give `-o view.html` or redirect it.)
+    #[arg(short, long)]
+    pub output: Option<PathBuf>,
     /// Most scan points embedded in the page; bigger inputs keep every k-th pose.
     #[arg(long, default_value_t = ViewParams::default().max_points)]
     pub max_points: usize,
     /// Most pose cones drawn; longer runs keep one pose in k (the robot path joins them all).
     #[arg(long, default_value_t = ViewParams::default().max_cones)]
     pub max_cones: usize,
-    /// Scanner height (m) for `level` output whose raw scans are not loaded alongside.
+    /// Scanner height above the floor, the pose's z (m), for `level` output whose raw scans
+    /// are not loaded alongside.
     #[arg(long, default_value_t = ViewParams::default().default_height)]
     pub height: f64,
     /// Page title.
@@ -82,6 +84,22 @@ fn load(path: Option<&std::path::Path>, bag: &BagArgs) -> anyhow::Result<Loaded>
     Ok(Loaded::Scans(Source { name, scans }))
 }
 
+/// Refuses to pour a page or a binary file over a terminal when no `-o` was given: the user
+/// almost surely wanted a file (`what` names the output, `example` a file for it).
+pub(super) fn refuse_terminal(
+    output: Option<&Path>,
+    what: &str,
+    example: &str,
+) -> anyhow::Result<()> {
+    if output.is_none() && std::io::stdout().is_terminal() {
+        bail!(
+            "{what} is not written to a terminal: give -o {example} (or -o - to force it), or \
+             redirect standard output"
+        );
+    }
+    Ok(())
+}
+
 /// Tells a `.wall` floor plan (one JSON object, maybe over many lines, maybe with `//`
 /// comment lines) from scan JSON Lines (one object per line, each with `nrays`): a first line
 /// that is a whole scan object means scans; otherwise a `walls` or `wallheight` key means a plan.
@@ -100,6 +118,7 @@ fn is_floor_plan(text: &str) -> bool {
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
+    refuse_terminal(args.output.as_deref(), "the HTML page", "view.html")?;
     let mut plan: Option<(String, Plan)> = None;
     if let Some(p) = &args.plan {
         match load(Some(p), &args.bag)? {
@@ -145,13 +164,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if inputs.is_empty() {
         inputs.push(None);
     }
-    let mut out = open_output(Some(&args.output), &inputs)?;
+    let mut out = open_output(args.output.as_deref(), &inputs)?;
     out.write_all(page.as_bytes())?;
     out.finish()?;
-    if args.output.as_os_str() != "-" {
+    if let Some(file) = args.output.as_ref().filter(|p| p.as_os_str() != "-") {
         eprintln!(
             "levelscan view: wrote {} ({} KB)",
-            args.output.display(),
+            file.display(),
             page.len().div_ceil(1024)
         );
     }
