@@ -80,7 +80,6 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         ..PseudoLevelParams::default()
     };
     // A bag is read by its own reader (two passes, on its thread); text in parallel batches.
-    type Scans = Box<dyn Iterator<Item = Result<(usize, Scan), InputError>> + Send>;
     let opened = open_bag(args.input.as_deref(), &args.bag.options(true, None))?;
     let input_bag = opened.as_ref().and_then(|b| b.bag.clone());
     let (name, scans): (String, Scans) = match opened {
@@ -95,59 +94,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     };
     let input_name = name.clone();
     let mut tally = Tally::new(Kind::Level);
-    let out = open_output(args.output.as_deref(), &[args.input.as_deref()])?;
-    let mut sink = match output_format(args.format, args.output.as_deref()) {
-        OutputFormat::Jsonl => Sink::Jsonl(out),
-        OutputFormat::Mcap => {
-            let shown = args
-                .output
-                .as_deref()
-                .map_or("<stdout>".to_string(), |p| p.display().to_string());
-            Sink::Bag(Box::new(BagOutput::new(
-                out,
-                &shown,
-                input_bag,
-                BagKind::Level,
-            )?))
-        }
-    };
+    let mut sink = open_sink(&args, input_bag)?;
     // Reading and grouping run on their own thread, a couple of batches ahead, so that the
     // serial part of reading overlaps with leveling (both use the rayon pool for the heavy work).
-    let (tx, rx) = std::sync::mpsc::sync_channel::<(Vec<Vec<Scan>>, Option<InputError>)>(2);
-    let reader_thread = std::thread::spawn(move || {
-        let mut reader = scans;
-        let mut grouper = Grouper::default();
-        let mut batch: Vec<Vec<Scan>> = Vec::with_capacity(BATCH_POSES);
-        loop {
-            let item = reader.next();
-            let exhausted = item.is_none();
-            let mut failure = None;
-            match item {
-                Some(Ok((line, scan))) => match grouper.push(&name, line, scan) {
-                    Ok(Some(pose)) => batch.push(pose),
-                    Ok(None) => {}
-                    Err(e) => failure = Some(e),
-                },
-                Some(Err(e)) => failure = Some(e),
-                None => {
-                    if let Some(pose) = grouper.finish() {
-                        batch.push(pose);
-                    }
-                }
-            }
-            let end = exhausted || failure.is_some();
-            if batch.len() >= BATCH_POSES || end {
-                let full = std::mem::replace(&mut batch, Vec::with_capacity(BATCH_POSES));
-                // A closed channel means the writer stopped (e.g. a broken pipe): stop too.
-                if tx.send((full, failure)).is_err() {
-                    return;
-                }
-            }
-            if end {
-                return;
-            }
-        }
-    });
+    let (tx, rx) = std::sync::mpsc::sync_channel::<PoseBatch>(2);
+    let reader_thread = std::thread::spawn(move || read_poses(scans, &name, &tx));
     let mut result = Ok(());
     for (batch, failure) in rx {
         if let Err(e) = write_batch(
@@ -172,6 +123,68 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     result.and_then(|()| sink.finish())?;
     tally.report(&input_name);
     Ok(())
+}
+
+/// The input's scans with their line numbers, from a bag's reader or a text file's.
+type Scans = Box<dyn Iterator<Item = Result<(usize, Scan), InputError>> + Send>;
+
+/// A batch of whole poses (each its scans), and the input error that ended the input, if any.
+type PoseBatch = (Vec<Vec<Scan>>, Option<InputError>);
+
+/// Groups the scans into poses and sends them to `tx` in batches of [`BATCH_POSES`], until the
+/// input ends, an input error (sent with the last batch), or the receiver hangs up.
+fn read_poses(mut reader: Scans, name: &str, tx: &std::sync::mpsc::SyncSender<PoseBatch>) {
+    let mut grouper = Grouper::default();
+    let mut batch: Vec<Vec<Scan>> = Vec::with_capacity(BATCH_POSES);
+    loop {
+        let item = reader.next();
+        let exhausted = item.is_none();
+        let mut failure = None;
+        match item {
+            Some(Ok((line, scan))) => match grouper.push(name, line, scan) {
+                Ok(Some(pose)) => batch.push(pose),
+                Ok(None) => {}
+                Err(e) => failure = Some(e),
+            },
+            Some(Err(e)) => failure = Some(e),
+            None => {
+                if let Some(pose) = grouper.finish() {
+                    batch.push(pose);
+                }
+            }
+        }
+        let end = exhausted || failure.is_some();
+        if batch.len() >= BATCH_POSES || end {
+            let full = std::mem::replace(&mut batch, Vec::with_capacity(BATCH_POSES));
+            // A closed channel means the writer stopped (e.g. a broken pipe): stop too.
+            if tx.send((full, failure)).is_err() {
+                return;
+            }
+        }
+        if end {
+            return;
+        }
+    }
+}
+
+/// The output `-o` (or standard output) as JSON Lines, or as a bag that copies `input_bag`.
+fn open_sink(args: &Args, input_bag: Option<levelscan::formats::bag::Bag>) -> anyhow::Result<Sink> {
+    let out = open_output(args.output.as_deref(), &[args.input.as_deref()])?;
+    Ok(match output_format(args.format, args.output.as_deref()) {
+        OutputFormat::Jsonl => Sink::Jsonl(out),
+        OutputFormat::Mcap => {
+            let shown = args
+                .output
+                .as_deref()
+                .map_or("<stdout>".to_string(), |p| p.display().to_string());
+            Sink::Bag(Box::new(BagOutput::new(
+                out,
+                &shown,
+                input_bag,
+                BagKind::Level,
+            )?))
+        }
+    })
 }
 
 /// `level` reads scan JSON Lines (or a bag, opened before): any other kind of file is named

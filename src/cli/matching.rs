@@ -137,6 +137,12 @@ pub struct MatchOptions {
 
 impl MatchOptions {
     pub fn params(&self) -> anyhow::Result<MatcherParams> {
+        self.check()?;
+        Ok(self.unchecked_params())
+    }
+
+    /// Every flag in its range, or an error naming the flag.
+    fn check(&self) -> anyhow::Result<()> {
         let positive = [
             (
                 "--max-correspondence-distance",
@@ -176,7 +182,12 @@ impl MatchOptions {
         if self.max_iterations == 0 {
             anyhow::bail!("--max-iterations must be at least 1");
         }
-        Ok(MatcherParams {
+        Ok(())
+    }
+
+    /// The matcher's parameters from these flags, as given ([`Self::check`] vets them).
+    fn unchecked_params(&self) -> MatcherParams {
+        MatcherParams {
             mode: match self.mode {
                 ModeArg::Pairwise => Mode::Pairwise,
                 ModeArg::Metascan => Mode::Metascan,
@@ -234,7 +245,7 @@ impl MatchOptions {
                 noise_inflation: self.cov_inflation,
                 noise_knee: self.cov_knee,
             },
-        })
+        }
     }
 }
 

@@ -129,44 +129,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 
     let (plan, name) = load_plan(args.plan.as_deref())?;
     let world = World::from_plan(&plan);
-    let poses: Vec<Pose> = match args.random {
-        Some(n) => {
-            let params = RandomPoseParams {
-                tilt: args.tilt.to_radians(),
-                clearance: args.clearance,
-                height: args.height.unwrap_or(RandomPoseParams::default().height),
-                enclosure_range: scanner.max_range,
-                ..RandomPoseParams::default()
-            };
-            if !(params.tilt.is_finite() && params.clearance >= 0.0) {
-                bail!("--tilt must be finite and --clearance >= 0");
-            }
-            random_poses(&world, n, &params, args.seed).with_context(|| name.clone())?
-        }
-        None => {
-            if plan.poses.is_empty() {
-                return Err(InputError::new(
-                    &name,
-                    "poses",
-                    "the plan has no poses; give --random N to draw some",
-                )
-                .into());
-            }
-            let mut poses = plan.poses.clone();
-            if let Some(h) = args.height {
-                poses.iter_mut().for_each(|p| p.z = h);
-            }
-            poses
-        }
-    };
-    let poses: Vec<Pose> = if args.flat {
-        poses
-            .into_iter()
-            .map(|p| Pose::new(p.x, p.y, p.z, p.rz, 0.0, 0.0))
-            .collect()
-    } else {
-        poses
-    };
+    let poses = poses_of(&args, &plan, &name, &world, &scanner)?;
     let odometry = odometry(&poses, &odo, args.seed);
 
     let adaptive = args.adaptive.then(|| AdaptiveParams {
@@ -184,20 +147,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             elevations.len()
         );
     }
-    let out = open_output(args.output.as_deref(), &[args.plan.as_deref()])?;
-    let mut sink = match format {
-        OutputFormat::Jsonl => Sink::Jsonl(out),
-        OutputFormat::Mcap => {
-            let name = args
-                .output
-                .as_deref()
-                .filter(|p| p.as_os_str() != "-")
-                .map_or(super::output::STDOUT.to_string(), |p| {
-                    p.display().to_string()
-                });
-            Sink::Bag(Box::new(BagWriter::unseekable(out, &name)?))
-        }
-    };
+    let mut sink = open_sink(&args, format)?;
     let bar = progress_bar(poses.len() as u64, "simulate");
     for (c, chunk) in poses.chunks(CHUNK).enumerate() {
         let first = c * CHUNK;
@@ -219,6 +169,73 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     sink.finish()?;
     bar.finish_and_clear();
     Ok(())
+}
+
+/// The poses to simulate: the plan's own (at `--height` when given) or `--random N` drawn in
+/// its free space, with roll and pitch zeroed for `--flat`.
+fn poses_of(
+    args: &Args,
+    plan: &Plan,
+    name: &str,
+    world: &World,
+    scanner: &ScannerParams,
+) -> anyhow::Result<Vec<Pose>> {
+    let poses: Vec<Pose> = match args.random {
+        Some(n) => {
+            let params = RandomPoseParams {
+                tilt: args.tilt.to_radians(),
+                clearance: args.clearance,
+                height: args.height.unwrap_or(RandomPoseParams::default().height),
+                enclosure_range: scanner.max_range,
+                ..RandomPoseParams::default()
+            };
+            if !(params.tilt.is_finite() && params.clearance >= 0.0) {
+                bail!("--tilt must be finite and --clearance >= 0");
+            }
+            random_poses(world, n, &params, args.seed).with_context(|| name.to_string())?
+        }
+        None => {
+            if plan.poses.is_empty() {
+                return Err(InputError::new(
+                    name,
+                    "poses",
+                    "the plan has no poses; give --random N to draw some",
+                )
+                .into());
+            }
+            let mut poses = plan.poses.clone();
+            if let Some(h) = args.height {
+                poses.iter_mut().for_each(|p| p.z = h);
+            }
+            poses
+        }
+    };
+    Ok(if args.flat {
+        poses
+            .into_iter()
+            .map(|p| Pose::new(p.x, p.y, p.z, p.rz, 0.0, 0.0))
+            .collect()
+    } else {
+        poses
+    })
+}
+
+/// The output `-o` (or standard output), as scan JSON Lines or a ROS 2 bag.
+fn open_sink(args: &Args, format: OutputFormat) -> anyhow::Result<Sink> {
+    let out = open_output(args.output.as_deref(), &[args.plan.as_deref()])?;
+    Ok(match format {
+        OutputFormat::Jsonl => Sink::Jsonl(out),
+        OutputFormat::Mcap => {
+            let name = args
+                .output
+                .as_deref()
+                .filter(|p| p.as_os_str() != "-")
+                .map_or(super::output::STDOUT.to_string(), |p| {
+                    p.display().to_string()
+                });
+            Sink::Bag(Box::new(BagWriter::unseekable(out, &name)?))
+        }
+    })
 }
 
 /// Where the simulated scans go.
