@@ -84,6 +84,17 @@ fn sorted_copy(v: &[f64]) -> Vec<f64> {
     v
 }
 
+/// How many poses failed for each reason, by the reason's name.
+fn failure_counts(o: &[&PoseOutcome]) -> BTreeMap<String, usize> {
+    let mut failures = BTreeMap::new();
+    for p in o {
+        if let Some(f) = p.failure {
+            *failures.entry(f.as_str().to_string()).or_insert(0) += 1;
+        }
+    }
+    failures
+}
+
 pub(crate) fn cell_stats(
     scans: usize,
     noise: f64,
@@ -104,12 +115,6 @@ pub(crate) fn cell_stats(
                 .map_or(f64::INFINITY, |f| f.sigmas[0].max(f.sigmas[1]).to_degrees())
         })
         .collect();
-    let mut failures = BTreeMap::new();
-    for p in o {
-        if let Some(f) = p.failure {
-            *failures.entry(f.as_str().to_string()).or_insert(0) += 1;
-        }
-    }
     let leveled: Vec<&&PoseOutcome> = o.iter().filter(|p| p.error_deg.is_some()).collect();
     let sum = |f: fn(&PoseOutcome) -> usize| leveled.iter().map(|p| f(p)).sum::<usize>();
     let valid = sum(|p| p.pseudo_valid);
@@ -160,7 +165,7 @@ pub(crate) fn cell_stats(
         efficiency: Efficiency::of(&records(AxisRecord::of_leveled)),
         true_segments_ml: Efficiency::of(&records(AxisRecord::of_true_segments)),
         true_segments_ml_within_gate: within_gate(&ml_sigmas),
-        failures,
+        failures: failure_counts(o),
         errors_deg: errors,
         outcomes: o.iter().map(|&p| p.clone()).collect(),
     }

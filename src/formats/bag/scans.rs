@@ -10,6 +10,7 @@
 //! monotone sweep of the hinge.
 
 use super::msgs::LaserScan;
+use super::series::Series;
 use super::source::{Bag, at_message};
 use super::survey::{BagOptions, Survey, decode, stamp_nanos, stamp_seconds, survey};
 use crate::formats::InputError;
@@ -153,39 +154,8 @@ fn convert(
         ..Default::default()
     };
     if let Some((joint, series)) = &survey.hinge {
-        let Some(e) = series.at(t, JOINT_TOLERANCE) else {
-            let nearest = series
-                .nearest_time(t)
-                .map(|s| format!("; the nearest is {:.3} s away", (s - t).abs()))
-                .unwrap_or_default();
-            return Err(InputError::new(
-                bag,
-                at(),
-                format!(
-                    "no position of joint {joint} within {JOINT_TOLERANCE} s of the scan's \
-                     stamp {t:.9}{nearest}"
-                ),
-            ));
-        };
-        scan.elevation = Some(e);
-        let dt = msg.time_increment as f64;
-        if dt > 0.0 && dt.is_finite() && n > 1 {
-            // Each ray at the hinge angle of its own time (nodding lasers); the elevation at
-            // a ray's time exists whenever the scan's does, as the series holds its ends.
-            let per_ray: Vec<f64> = (0..n)
-                .map(|i| series.at(t + i as f64 * dt, f64::INFINITY).unwrap_or(e))
-                .collect();
-            let (min, max) = per_ray
-                .iter()
-                .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
-                    (a.min(v), b.max(v))
-                });
-            if max - min > STILL_HINGE {
-                // The scan's own elevation is its nominal, mid-scan one (Scan::elevation).
-                scan.elevation = series.at(t + 0.5 * (n - 1) as f64 * dt, f64::INFINITY);
-                scan.ray_elevation = Some(per_ray);
-            }
-        }
+        hinge_elevations(&mut scan, joint, series, t, msg.time_increment as f64)
+            .map_err(|e| InputError::new(bag, at(), e))?;
     }
     if let Some((_, odom)) = &survey.odometry {
         scan.odometry = odom
@@ -206,6 +176,48 @@ fn convert(
     scan.extra
         .insert("ros".to_string(), ros_extra(topic, log_time, msg));
     Ok(scan)
+}
+
+/// The scan's hinge elevation from the joint's positions at its stamp `t` [s]; with rays
+/// `dt` [s] apart on a moving hinge (a nodding laser), each ray's own as well. The error says
+/// when no joint position is near enough.
+fn hinge_elevations(
+    scan: &mut Scan,
+    joint: &str,
+    series: &Series<f64>,
+    t: f64,
+    dt: f64,
+) -> Result<(), String> {
+    let Some(e) = series.at(t, JOINT_TOLERANCE) else {
+        let nearest = series
+            .nearest_time(t)
+            .map(|s| format!("; the nearest is {:.3} s away", (s - t).abs()))
+            .unwrap_or_default();
+        return Err(format!(
+            "no position of joint {joint} within {JOINT_TOLERANCE} s of the scan's stamp \
+             {t:.9}{nearest}"
+        ));
+    };
+    scan.elevation = Some(e);
+    let n = scan.theta.len();
+    if dt > 0.0 && dt.is_finite() && n > 1 {
+        // Each ray at the hinge angle of its own time (nodding lasers); the elevation at
+        // a ray's time exists whenever the scan's does, as the series holds its ends.
+        let per_ray: Vec<f64> = (0..n)
+            .map(|i| series.at(t + i as f64 * dt, f64::INFINITY).unwrap_or(e))
+            .collect();
+        let (min, max) = per_ray
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
+                (a.min(v), b.max(v))
+            });
+        if max - min > STILL_HINGE {
+            // The scan's own elevation is its nominal, mid-scan one (Scan::elevation).
+            scan.elevation = series.at(t + 0.5 * (n - 1) as f64 * dt, f64::INFINITY);
+            scan.ray_elevation = Some(per_ray);
+        }
+    }
+    Ok(())
 }
 
 /// What the bag writer needs to write a `/scan_level` beside this scan (see [`Scan::extra`]).

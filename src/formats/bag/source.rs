@@ -321,27 +321,8 @@ fn read_mcap(
                 schemas.insert(header.id, (header.name, header.encoding, data.into_owned()));
             }
             mcap::records::Record::Channel(c) => {
-                let (schema_name, schema_encoding, schema_data) = match c.schema_id {
-                    0 => Default::default(),
-                    id => schemas.get(&id).cloned().ok_or_else(|| {
-                        at.error(
-                            name,
-                            format!(
-                                "channel {} names schema {id}, which is not defined",
-                                c.topic
-                            ),
-                        )
-                    })?,
-                };
-                let channel = Channel {
-                    message_type: ros2_type_name(&schema_name),
-                    topic: c.topic,
-                    schema_name,
-                    schema_encoding,
-                    schema_data,
-                    message_encoding: c.message_encoding,
-                };
-                channels.insert(c.id, channel);
+                let id = c.id;
+                channels.insert(id, channel_of(c, &schemas, &at, name)?);
             }
             mcap::records::Record::Message { header, data } => {
                 let Some(channel) = channels.get(&header.channel_id) else {
@@ -370,6 +351,36 @@ fn read_mcap(
         }
     }
     Ok(ControlFlow::Continue(()))
+}
+
+/// An MCAP channel record with its schema (`schemas` by id: name, encoding, data); a schema
+/// id that names no schema is an error.
+fn channel_of(
+    c: mcap::records::Channel,
+    schemas: &HashMap<u16, (String, String, Vec<u8>)>,
+    at: &Position,
+    name: &str,
+) -> Result<Channel, InputError> {
+    let (schema_name, schema_encoding, schema_data) = match c.schema_id {
+        0 => Default::default(),
+        id => schemas.get(&id).cloned().ok_or_else(|| {
+            at.error(
+                name,
+                format!(
+                    "channel {} names schema {id}, which is not defined",
+                    c.topic
+                ),
+            )
+        })?,
+    };
+    Ok(Channel {
+        message_type: ros2_type_name(&schema_name),
+        topic: c.topic,
+        schema_name,
+        schema_encoding,
+        schema_data,
+        message_encoding: c.message_encoding,
+    })
 }
 
 /// The mcap crate's errors, said for a user.
