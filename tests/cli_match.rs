@@ -229,6 +229,29 @@ fn carmen_flaser_and_robotlaser_lines_are_read() {
             "{e:?}"
         );
     }
+
+    // --max-range is the scanner's maximum range, as in `info`: given, a FLASER reading at or
+    // beyond it is no return in the records written, not only left out of the match; absent,
+    // the log's PARAM (50 m) decides.
+    let valid = |r: &Value| {
+        r["valid"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .filter(|v| **v == 1)
+            .count()
+    };
+    let below = |m: f64| {
+        ranges
+            .iter()
+            .filter(|r| r.parse::<f64>().unwrap() < m)
+            .count()
+    };
+    assert_eq!(valid(&recs[0]), below(50.0));
+    let short = records(&run_match(&["--max-range", "3.2"], log.as_bytes()));
+    assert!(below(3.2) < below(50.0));
+    assert_eq!(valid(&short[0]), below(3.2));
+    assert_eq!(valid(&short[1]), below(3.2));
 }
 
 #[test]

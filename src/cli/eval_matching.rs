@@ -195,9 +195,10 @@ pub struct RealArgs {
 fn load_real_log(
     path: &std::path::Path,
     ranges: &levelscan::matching::RangeParams,
+    carmen: CarmenParams,
     bag: &BagOptions,
 ) -> anyhow::Result<RealLog> {
-    let input = open_scans(Some(path), CarmenParams::default(), bag)?;
+    let input = open_scans(Some(path), carmen, bag)?;
     let name = input.name.clone();
     let mut log = RealLog {
         name: path
@@ -241,6 +242,7 @@ pub fn run_real(args: RealArgs) -> anyhow::Result<()> {
         let log = load_real_log(
             path,
             &params.ranges,
+            args.options.carmen(),
             &args.bag.options(false, Some("/scan_level")),
         )?;
         let result = evaluate_real(&log, &params, &noise, args.seed)

@@ -16,9 +16,9 @@ pub struct Args {
     /// Scan file: JSON Lines or a CARMEN log, optionally gzipped; standard input when absent
     /// or `-`.
     pub scans: Option<PathBuf>,
-    /// Scanner's maximum range (m): a reading at or beyond it is no return. Read from
-    /// CARMEN `FLASER` lines, which do not record it (other formats mark no return
-    /// themselves). Default: the log's `PARAM robot_front_laser_max`, else 50.
+    /// Scanner's maximum range (m): a reading at or beyond it is no return. For CARMEN
+    /// `FLASER` lines, which do not record it (other formats mark no return themselves)
+    /// [default: the log's `PARAM robot_front_laser_max`, else 50].
     #[arg(long)]
     pub max_range: Option<f64>,
     /// Output file; standard output when absent or `-`.

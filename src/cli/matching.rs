@@ -101,9 +101,11 @@ pub struct MatchOptions {
     #[arg(long, default_value_t = RangeParams::default().min_range)]
     pub min_range: f64,
     /// Scanner's maximum range (m): a reading at or beyond it is no return, left out of the
-    /// match (CARMEN logs write the maximum range for no return).
-    #[arg(long, default_value_t = RangeParams::default().max_range)]
-    pub max_range: f64,
+    /// match (CARMEN logs write the maximum range for no return); given, it also marks
+    /// CARMEN `FLASER` readings invalid as `info` does [default: 40 for the match; for
+    /// reading `FLASER` lines the log's `PARAM robot_front_laser_max`, else 50].
+    #[arg(long)]
+    pub max_range: Option<f64>,
     /// Pairwise: match each scan one way only (the default also matches the previous scan
     /// against it and takes the midpoint of the two motions).
     #[arg(long)]
@@ -141,6 +143,20 @@ impl MatchOptions {
         Ok(self.unchecked_params())
     }
 
+    /// Readings at or beyond this are left out of the match [m]: `--max-range`, else the
+    /// matcher's default.
+    fn match_max_range(&self) -> f64 {
+        self.max_range.unwrap_or(RangeParams::default().max_range)
+    }
+
+    /// How CARMEN `FLASER` lines are read: `--max-range` when given (one meaning of the
+    /// flag: the scanner's maximum range), else the log's own.
+    pub fn carmen(&self) -> CarmenParams {
+        CarmenParams {
+            max_range: self.max_range,
+        }
+    }
+
     /// Every flag in its range, or an error naming the flag.
     fn check(&self) -> anyhow::Result<()> {
         let positive = [
@@ -152,7 +168,7 @@ impl MatchOptions {
             ("--voxel-size", self.voxel_size),
             ("--window-xy", self.window_xy),
             ("--max-residual", self.max_residual),
-            ("--max-range", self.max_range),
+            ("--max-range", self.match_max_range()),
             ("--prior-residual-sigma", self.prior_residual_sigma),
             ("--cov-inflation", self.cov_inflation),
             ("--cov-knee", self.cov_knee),
@@ -231,7 +247,7 @@ impl MatchOptions {
             },
             ranges: RangeParams {
                 min_range: self.min_range,
-                max_range: self.max_range,
+                max_range: self.match_max_range(),
             },
             symmetric: !self.one_way,
             odometry_prior: self.odometry_prior.then_some(OdometryPrior {
@@ -278,7 +294,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let params = args.options.params()?;
     let input = open_scans(
         args.scans.as_deref(),
-        CarmenParams::default(),
+        args.options.carmen(),
         &args.bag.options(false, Some("/scan_level")),
     )?;
     let out = open_output(args.output.as_deref(), &[args.scans.as_deref()])?;

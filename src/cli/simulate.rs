@@ -47,6 +47,7 @@ pub struct Args {
     #[arg(long, value_enum, default_value_t = NoiseModel::Gaussian)]
     pub noise_model: NoiseModel,
     /// Random seed: the same seed gives the same output bytes, whatever the thread count.
+    /// (The default is 1 as in every command; it was 0 here: `--seed 0` redoes older runs.)
     #[arg(long, default_value_t = super::DEFAULT_SEED)]
     pub seed: u64,
 
