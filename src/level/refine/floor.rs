@@ -80,7 +80,10 @@ impl<'a> LevelModel<'a> {
 
 /// The floor and ceiling planes to assign from: the ones given, else the densest height below
 /// (floor) and above (ceiling) the scanner in the level frame, where at least
-/// `min_level_points` points lie within the tolerance of one height.
+/// `min_level_points` points lie within the tolerance of one height ([`densest_window`]),
+/// refitted in rounds ([`refit_rounds`]) and kept when level within `refine_max_tilt_deg` of
+/// up, explaining its points and clear of the scanner (sect. 5.3 takes floors and ceilings as
+/// the level constraints).
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn find_levels(
     grid: &PoseGrid,
@@ -104,81 +107,23 @@ pub(crate) fn find_levels(
             }
             continue;
         }
-        // Heights of the candidates, with the tolerance of each: the noise along the vertical
-        // plus what an error in up does at the point's horizontal distance.
-        let mut zs: Vec<(f64, usize)> = lv
-            .q
-            .iter()
-            .enumerate()
-            .filter_map(|(i, q)| {
-                let (q, _) = q.as_ref()?;
-                (ok[i] && (q.z < -MIN_LEVEL_DISTANCE) == floor && q.z.abs() > MIN_LEVEL_DISTANCE)
-                    .then_some((q.z, i))
-            })
-            .collect();
+        let zs = level_candidates(lv, ok, floor);
         if zs.len() < params.min_level_points {
             continue;
         }
-        zs.sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
         // A window as wide as the vertical tolerance of a typical grazing floor hit.
         let half = params.refine_k * (0.3 * s + 2.0 * sigma_up) + params.flat_margin;
-        let mut best = (0usize, 0usize);
-        let mut lo = 0;
-        for hi in 0..zs.len() {
-            while zs[hi].0 - zs[lo].0 > 2.0 * half {
-                lo += 1;
-            }
-            if hi + 1 - lo > best.1 - best.0 {
-                best = (lo, hi + 1);
-            }
-        }
-        if best.1 - best.0 < params.min_level_points {
+        let Some(window) = densest_window(&zs, half, params.min_level_points) else {
             continue;
-        }
+        };
         // The window holds wall points too (a wall's foot, or a band of wall at one height
         // in a frame degrees off): the plane through most of its points, rather than through
         // all of them, starts the rounds.
-        let window: Vec<usize> = zs[best.0..best.1].iter().map(|&(_, i)| i).collect();
         let stepping: Vec<usize> = window.iter().copied().filter(|&i| levelish[i]).collect();
         let cos = params.refine_level_cos();
-        let mut members = sampled_plane(
-            grid,
-            &window,
-            &stepping,
-            |n| n.dot(up).abs() >= cos,
-            s,
-            params,
-        )
-        .unwrap_or(window);
-        // A few rounds of refit and reassignment: the window's plane is only as level as the
-        // provisional up, so far points fall outside it at first.
-        let mut fit = None;
-        for round in 0..LEVEL_ROUNDS {
-            if members.len() < params.min_level_points || !two_rows_support(grid, &members) {
-                fit = None;
-                break;
-            }
-            let Some(f) = fit_members(grid, &members, s) else {
-                fit = None;
-                break;
-            };
-            fit = Some(f);
-            if round + 1 == LEVEL_ROUNDS {
-                break;
-            }
-            let model = LevelModel::new(&f, s);
-            members = zs
-                .iter()
-                .map(|&(_, i)| i)
-                .filter(|&i| {
-                    grid.points[i].as_ref().is_some_and(|g| {
-                        let (d, sd) = model.distance_sd(g, s, params.min_sigma);
-                        d <= params.refine_k * sd
-                    })
-                })
-                .collect();
-        }
-        if let Some(f) = fit {
+        let level = |n: &Vector3<f64>| n.dot(up).abs() >= cos;
+        let members = sampled_plane(grid, &window, &stepping, level, s, params).unwrap_or(window);
+        if let Some(f) = refit_rounds(grid, &zs, members, params, s) {
             if f.normal.dot(up).abs() >= params.refine_level_cos()
                 && f.misfit_ratio(s) <= params.refine_level_misfit
                 && clear_of_scanner(&f.normal, &f.centroid)
@@ -188,6 +133,73 @@ pub(crate) fn find_levels(
         }
     }
     out
+}
+
+/// The candidates for the floor (`floor`) or the ceiling: the usable (`ok`) points more than
+/// `MIN_LEVEL_DISTANCE` below or above the scanner in the level frame, as (height, grid
+/// index), ascending by height.
+fn level_candidates(lv: &Leveled, ok: &[bool], floor: bool) -> Vec<(f64, usize)> {
+    let mut zs: Vec<(f64, usize)> =
+        lv.q.iter()
+            .enumerate()
+            .filter_map(|(i, q)| {
+                let (q, _) = q.as_ref()?;
+                (ok[i] && (q.z < -MIN_LEVEL_DISTANCE) == floor && q.z.abs() > MIN_LEVEL_DISTANCE)
+                    .then_some((q.z, i))
+            })
+            .collect();
+    zs.sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
+    zs
+}
+
+/// The grid indices of the most populous height window `2 half` wide over the ascending
+/// heights `zs` (the first such window), or `None` when it holds fewer than `min_points`.
+fn densest_window(zs: &[(f64, usize)], half: f64, min_points: usize) -> Option<Vec<usize>> {
+    let mut best = (0usize, 0usize);
+    let mut lo = 0;
+    for hi in 0..zs.len() {
+        while zs[hi].0 - zs[lo].0 > 2.0 * half {
+            lo += 1;
+        }
+        if hi + 1 - lo > best.1 - best.0 {
+            best = (lo, hi + 1);
+        }
+    }
+    (best.1 - best.0 >= min_points).then(|| zs[best.0..best.1].iter().map(|&(_, i)| i).collect())
+}
+
+/// `LEVEL_ROUNDS` rounds of refit and reassignment from `members`: the window's plane is only
+/// as level as the provisional up, so far points fall outside it at first. Each round takes
+/// the candidates `zs` within `refine_k` of their distance's standard deviation
+/// ([`LevelModel`]); `None` once too few points or scan lines remain.
+fn refit_rounds(
+    grid: &PoseGrid,
+    zs: &[(f64, usize)],
+    mut members: Vec<usize>,
+    params: &LevelParams,
+    s: f64,
+) -> Option<PlaneFit> {
+    for round in 0..LEVEL_ROUNDS {
+        if members.len() < params.min_level_points || !two_rows_support(grid, &members) {
+            return None;
+        }
+        let f = fit_members(grid, &members, s)?;
+        if round + 1 == LEVEL_ROUNDS {
+            return Some(f);
+        }
+        let model = LevelModel::new(&f, s);
+        members = zs
+            .iter()
+            .map(|&(_, i)| i)
+            .filter(|&i| {
+                grid.points[i].as_ref().is_some_and(|g| {
+                    let (d, sd) = model.distance_sd(g, s, params.min_sigma);
+                    d <= params.refine_k * sd
+                })
+            })
+            .collect();
+    }
+    None
 }
 
 /// The height in the level frame that a fiftieth of the points lie below (`lowest`) or

@@ -46,25 +46,49 @@ pub(crate) fn level_lines(
     kind: SurfaceKind,
     params: &LevelParams,
 ) -> LevelEvidence {
-    let (grid, lv, s) = (ctx.grid, ctx.lv, ctx.s);
-    let floor = kind == SurfaceKind::Floor;
-    // Height key growing away from the surface's side: the outermost level surface first.
-    let key = |z: f64| if floor { z } else { -z };
-    let mut zs: Vec<(f64, usize)> =
-        lv.q.iter()
-            .enumerate()
-            .filter_map(|(i, q)| {
-                let (q, _) = q.as_ref()?;
-                (ctx.levelish[i] && !ctx.taken[i] && key(q.z) < -MIN_LEVEL_DISTANCE)
-                    .then_some((key(q.z), i))
-            })
-            .collect();
+    let (grid, s) = (ctx.grid, ctx.s);
+    let zs = line_candidates(ctx, kind == SurfaceKind::Floor);
     let min_points = params.level_line_min_points.max(3);
     if zs.len() < min_points {
         return LevelEvidence::None;
     }
-    zs.sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
     let half = params.refine_k * (0.3 * s + 2.0 * ctx.sigma_up) + params.flat_margin;
+    let Some(height) = outermost_height(&zs, half, min_points) else {
+        return LevelEvidence::None;
+    };
+    let short = PLANE_LINE_MIN_POINTS.min(min_points);
+    let found: Vec<(LevelLine, Vec<usize>)> = rows_at_height(ctx, &zs, height, params)
+        .into_iter()
+        .filter_map(|row| fit_line(grid, row, ctx.up, Some(ctx.sigma_up), s, params, short))
+        .collect();
+    lines_evidence(ctx, found, min_points, params)
+}
+
+/// The candidates of [`level_lines`]: the points stepping like a level surface not yet in a
+/// model, more than `MIN_LEVEL_DISTANCE` below (`floor`) or above the scanner, as (height key
+/// growing away from the surface's side, grid index), ascending: the outermost level surface
+/// first.
+fn line_candidates(ctx: &LineContext, floor: bool) -> Vec<(f64, usize)> {
+    let key = |z: f64| if floor { z } else { -z };
+    let mut zs: Vec<(f64, usize)> = ctx
+        .lv
+        .q
+        .iter()
+        .enumerate()
+        .filter_map(|(i, q)| {
+            let (q, _) = q.as_ref()?;
+            (ctx.levelish[i] && !ctx.taken[i] && key(q.z) < -MIN_LEVEL_DISTANCE)
+                .then_some((key(q.z), i))
+        })
+        .collect();
+    zs.sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
+    zs
+}
+
+/// The level surface's height key in [`level_lines`]: the middle of the outermost window
+/// `2 half` wide over the ascending keys `zs` that holds `min_points` and a third as many as
+/// the densest window (a box top is not the floor).
+fn outermost_height(zs: &[(f64, usize)], half: f64, min_points: usize) -> Option<f64> {
     // Window counts, from each start.
     let mut counts = Vec::with_capacity(zs.len());
     let mut hi = 0;
@@ -75,18 +99,26 @@ pub(crate) fn level_lines(
         counts.push((lo, hi));
     }
     let densest = counts.iter().map(|(lo, hi)| hi - lo).max().unwrap_or(0);
-    let Some(&(lo, hi)) = counts
+    let &(lo, hi) = counts
         .iter()
-        .find(|(lo, hi)| hi - lo >= min_points && 3 * (hi - lo) >= densest)
-    else {
-        return LevelEvidence::None;
-    };
-    let height = zs[(lo + hi) / 2].0;
-    let k = params.refine_k;
-    let mut rows: Vec<Vec<usize>> = vec![Vec::new(); grid.rows()];
-    let rc = grid.row_col();
-    for &(z, i) in &zs {
-        let Some((q, d)) = lv.q[i].as_ref() else {
+        .find(|(lo, hi)| hi - lo >= min_points && 3 * (hi - lo) >= densest)?;
+    Some(zs[(lo + hi) / 2].0)
+}
+
+/// Per scan (grid row), the candidates `zs` within their own vertical tolerance of `height`:
+/// `refine_k` standard deviations of the range noise along the vertical and an error of up
+/// `sigma_up` at their horizontal distance, plus `flat_margin`.
+fn rows_at_height(
+    ctx: &LineContext,
+    zs: &[(f64, usize)],
+    height: f64,
+    params: &LevelParams,
+) -> Vec<Vec<usize>> {
+    let (s, k) = (ctx.s, params.refine_k);
+    let mut rows: Vec<Vec<usize>> = vec![Vec::new(); ctx.grid.rows()];
+    let rc = ctx.grid.row_col();
+    for &(z, i) in zs {
+        let Some((q, d)) = ctx.lv.q[i].as_ref() else {
             continue;
         };
         let lever = q.xy().norm() * ctx.sigma_up;
@@ -95,11 +127,20 @@ pub(crate) fn level_lines(
             rows[rc.row(i)].push(i);
         }
     }
-    let short = PLANE_LINE_MIN_POINTS.min(min_points);
-    let found: Vec<(LevelLine, Vec<usize>)> = rows
-        .into_iter()
-        .filter_map(|row| fit_line(grid, row, ctx.up, Some(ctx.sigma_up), s, params, short))
-        .collect();
+    rows
+}
+
+/// What the fitted per-scan lines `found` are evidence of ([`level_lines`]): one plane when a
+/// full line (`min_points`) and short ones fit one, else the full lines alone, as one plane
+/// when two or more fit one ([`level_plane`]), else as lines when they are not skew beyond
+/// `LINES_PLANE_MISFIT`; nothing when they cannot be one floor.
+fn lines_evidence(
+    ctx: &LineContext,
+    found: Vec<(LevelLine, Vec<usize>)>,
+    min_points: usize,
+    params: &LevelParams,
+) -> LevelEvidence {
+    let (grid, s) = (ctx.grid, ctx.s);
     let full = |(l, _): &(LevelLine, Vec<usize>)| l.n >= min_points;
     // Short lines count only in a plane with a full one; without short lines, the full lines
     // alone are tried below.
