@@ -8,6 +8,7 @@ use super::patches::Patch;
 use super::polygons::Polygon;
 use super::up::{self, PlaneObs, UpSolution};
 use super::{Estimator, FailReason, LevelEstimate, LevelParams, SurfaceKind, refine};
+use crate::level::params::first_pass::*;
 use nalgebra::Vector3;
 
 /// Failure detection (sect. 5.5) and the up vector. When the walls seen cannot fix up (too
@@ -87,16 +88,6 @@ pub(crate) fn robust_obs<'a>(
         )
         .collect()
 }
-
-/// Fewest scan lines, each with a fair share of its points, that a floor or ceiling patch
-/// needs to be a level plane of the first solution from `level_steep_min_sigma` (3 cm) of noise
-/// up. Two lines always lie in one plane, and a wall's line with the next scan's floor line made
-/// a "floor" 8 degrees off, which with one wall leveled a pose 7 degrees off with a sigma of
-/// 0.4 degrees. Re-segmentation still takes such floors, checked against the provisional up.
-/// Over 172,800 protocol poses (two seed sets, nine plans) poses reported ok and more than 5
-/// degrees off fell from 16 to 13 and those beyond 3 sigmas from 78 to 64 (seeds 1-16), for
-/// 0.4 points fewer leveled at 5-10 cm; 1 cm is unchanged.
-pub(crate) const LEVEL_MIN_ROWS_NOISY: usize = 3;
 
 /// Floor and ceiling planes usable as level (when `level_surfaces` is on): each floor or
 /// ceiling patch cleaned of the points that do not behave like a level surface, and refitted.

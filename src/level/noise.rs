@@ -11,6 +11,7 @@
 //! does not ignore bias it (+3-6% over nine plans at 1-10 cm; the trimmed RMS +0-2%, with 40% less
 //! spread from pose to pose).
 
+use crate::level::params::noise::*;
 use crate::scan::Scan;
 
 /// Median absolute deviation to standard deviation for a Gaussian.
@@ -75,16 +76,6 @@ fn looks_heteroscedastic(z: &[u64], ranges: &[f64], mad: f64) -> bool {
     let rms = |(sum, n): (f64, usize)| (sum / n as f64).sqrt();
     near.1 >= 20 && far.1 >= 20 && rms(far) > SCREEN_RATIO * rms(near)
 }
-
-/// The screen's ratio, below [`HETEROSCEDASTIC_RATIO`], since its split and cut differ from
-/// the halves' own: with it, `level` gave the same output as with no screen on 2700 poses
-/// under each of five noise models (constant, 1% and 2% of the range, 0.5 cm + 0.5%, given as
-/// `readings_sigma`).
-const SCREEN_RATIO: f64 = 1.2;
-
-/// How much noisier than the nearer half of the readings the farther half must be for the
-/// range noise to be taken as the farther half's ([`far_if_noisier`]).
-pub const HETEROSCEDASTIC_RATIO: f64 = 1.5;
 
 /// The noise of all readings, `pooled`, or the farther half's when it exceeds the nearer
 /// half's by [`HETEROSCEDASTIC_RATIO`] (`halves`: near, far). Many scanners' noise grows

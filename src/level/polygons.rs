@@ -3,6 +3,7 @@
 
 use super::grid::{PlaneAccumulator, PlaneFit, PoseGrid};
 use super::{LevelParams, SurfaceKind};
+use crate::level::params::quads::*;
 use nalgebra::{Point3, Vector3};
 
 /// One extracted quadrilateral.
@@ -96,13 +97,6 @@ pub fn extract_quads_sized(
     }
     out
 }
-
-/// How far from the diagonals' plane, in coplanarity tolerances, a quad's point may lie before
-/// the quad is refused without a fit. At 1.5 rather than 3 it spares fits that the final test
-/// would refuse, 2.6% of `level`'s CPU time at 1 cm; the wall quads kept changed by 0.007% at
-/// 1 cm and 0.18% at 10 cm, and no accuracy statistic moved beyond its noise (148,500
-/// protocol poses, 1-10 cm).
-const DIAGONAL_PLANE_TOLERANCES: f64 = 1.5;
 
 #[allow(clippy::too_many_arguments)]
 fn quad_at(

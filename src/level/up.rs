@@ -10,6 +10,7 @@
 
 use super::grid::PlaneFit;
 use crate::geometry::Attitude;
+use crate::level::params::up::*;
 use nalgebra::{Matrix2, Matrix3, Vector2, Vector3};
 
 /// A straight run of floor (or ceiling) points in one scan. A scan's plane meets a level
@@ -296,19 +297,6 @@ fn tangent_basis(up: &Vector3<f64>) -> [Vector3<f64>; 2] {
     let t2 = up.cross(&t1);
     [t1, t2]
 }
-
-/// Cauchy scale for the robust weights, in standard deviations.
-const CAUCHY_C: f64 = 2.385;
-
-/// Largest tilt of the robot considered \[deg\], the one place of this limit: the paper assumes
-/// floors below 45 degrees. The up search and the frameless level start
-/// ([`refine::level_start`](super::refine::level_start)) keep a margin beyond that; the gate
-/// refuses an up past `wall_min_angle_deg`.
-pub(crate) const MAX_TILT_DEG: f64 = 50.0;
-
-/// [`MAX_TILT_DEG`] in radians, as the up search has always computed it (`50 pi / 180`, which
-/// can differ from `to_radians` in the last bit).
-const MAX_TILT: f64 = MAX_TILT_DEG * std::f64::consts::PI / 180.0;
 
 /// Iteratively reweighted least squares for up over plane fits with range noise `sigma` \[m\].
 ///

@@ -166,12 +166,7 @@ pub fn split_members(
 /// considers: where the key changes and both parts span two rows, each as (lower bound on the
 /// two planes' RSS, `which`, boundary index), with the ordering's prefix plane sums. The
 /// bounds let [`best_cut`] skip most eigen decompositions.
-fn candidate_cuts(
-    grid: &PoseGrid,
-    sorted: &[usize],
-    which: usize,
-    params: &LevelParams,
-) -> Cuts {
+fn candidate_cuts(grid: &PoseGrid, sorted: &[usize], which: usize, params: &LevelParams) -> Cuts {
     let rc = grid.row_col();
     let by_row = which == 1;
     let key = |i: usize| if by_row { rc.row(i) } else { rc.col(i) };
@@ -221,10 +216,7 @@ type Cuts = (Vec<(f64, usize, usize)>, Vec<PlaneAccumulator>);
 /// boundary index). They are fitted in order of their bounds, and a cut whose bound exceeds
 /// the best RSS found cannot win, so most need no eigen decomposition. The winner is the same
 /// as fitting every cut in turn: the least RSS, ties to the first ordering and boundary.
-fn best_cut(
-    cuts: &[Cuts; 2],
-    sigma: f64,
-) -> Option<(usize, usize)> {
+fn best_cut(cuts: &[Cuts; 2], sigma: f64) -> Option<(usize, usize)> {
     let mut candidates: Vec<(f64, usize, usize)> =
         cuts.iter().flat_map(|c| c.0.iter().copied()).collect();
     candidates.sort_by(|x, y| x.0.total_cmp(&y.0));

@@ -2,6 +2,7 @@
 //! plane (a wall patch that took in the floor at its foot).
 
 use super::*;
+use crate::level::params::patches::*;
 
 /// The members without the rows at either edge of the patch that the plane of its other rows
 /// does not explain; `None` when no row goes, and none at all (an empty list) when the patch
@@ -148,10 +149,6 @@ impl EdgeRows<'_> {
     }
 }
 
-/// Fewest points, as a share of the patch's, in each of three adjacent rows that a trimmed
-/// patch keeps.
-const MIN_TRIMMED_ROW_SHARE: f64 = 0.15;
-
 /// The members (ascending) without the runs of points at either end of their rows that stand
 /// in front of the plane `fit`; `None` when no run does.
 ///
@@ -220,10 +217,6 @@ pub(super) fn without_front_row_ends(
             .collect(),
     )
 }
-
-/// Shortest run at a row's end that [`without_front_row_ends`] tests: shorter ones are single
-/// noisy points rather than another surface.
-const MIN_FRONT_RUN: usize = 3;
 
 /// Length of the leading run of `residuals` whose sum (with their variances) stands out most in
 /// standard deviations of that sum, when by more than `k` and the run is at least

@@ -31,10 +31,6 @@ pub(crate) fn opaque(grid: &PoseGrid, fit: &PlaneFit, s: f64, params: &LevelPara
     beyond <= MAX_BEYOND
 }
 
-/// Points beyond a level plane that [`opaque`] lets pass: true planes have a few (allowing
-/// none leveled 7 points fewer poses at 5-10 cm noise, allowing two 0.4 points fewer).
-pub(crate) const MAX_BEYOND: usize = 5;
-
 /// Squared angle between a level model's normal and up, in variances: the model's normal
 /// noise, inflated by its misfit, and up's own (`sigma_up` \[rad\]).
 pub(crate) fn level_z2(fit: &PlaneFit, up: &Vector3<f64>, s: f64, sigma_up: f64) -> f64 {
@@ -124,10 +120,7 @@ pub(crate) fn find_levels(
         let level = |n: &Vector3<f64>| n.dot(up).abs() >= cos;
         let members = sampled_plane(grid, &window, &stepping, level, s, params).unwrap_or(window);
         if let Some(f) = refit_rounds(grid, &zs, members, params, s) {
-            if f.normal.dot(up).abs() >= params.refine_level_cos()
-                && f.misfit_ratio(s) <= params.refine_level_misfit
-                && clear_of_scanner(&f.normal, &f.centroid)
-            {
+            if checks::refined_level(&f, up, s, params) {
                 out.push(f);
             }
         }
@@ -234,28 +227,4 @@ pub(crate) fn level_band<'a>(
         let into = if above { q.z - height } else { height - q.z };
         (into < band).then_some(i)
     })
-}
-
-/// Fewest points stepping as a ceiling does ([`LevelSteps::ceiling`]) among the highest
-/// points for these to stand for a ceiling in [`refine`]. Over 405,000 protocol poses at
-/// 1-10 cm (seeds 101-150, nine plans): poses more than 3 degrees off 498 -> 477, beyond 3
-/// sigmas 409 -> 395, ok and more than 5 degrees off 28 -> 27, for 0.02 points fewer leveled
-/// (at 15 the same within a few poses; with no such condition, a point fewer leveled).
-pub(crate) const CEILING_BAND_MIN_STEPS: usize = 5;
-
-/// Refit-and-reassign rounds when a floor or ceiling is first found.
-pub(crate) const LEVEL_ROUNDS: usize = 3;
-
-/// Floor or ceiling candidates must be this far from the scanner's height \[m\]: a level plane
-/// through the scanner is seen edge-on.
-pub(crate) const MIN_LEVEL_DISTANCE: f64 = 0.1;
-
-/// Whether the plane through `point` with unit `normal` passes clear of the scanner, as a
-/// floor's or ceiling's must, not only its points: each scan's points lie in that scan's own
-/// plane through the scanner whatever they hit, so a band of wall points from one or two scans
-/// (near the hinge axis the scans nearly coincide) fits a plane through the scanner that can
-/// pass for level. One such "ceiling", 7 cm above the scanner over wall points alone, leveled
-/// a pose 6 degrees off with a sigma of 0.7.
-pub(crate) fn clear_of_scanner(normal: &Vector3<f64>, point: &nalgebra::Point3<f64>) -> bool {
-    normal.dot(&point.coords).abs() >= MIN_LEVEL_DISTANCE
 }

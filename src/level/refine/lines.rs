@@ -177,16 +177,6 @@ fn lines_evidence(
     LevelEvidence::Lines(found.into_iter().map(|(l, _)| l).collect())
 }
 
-/// Fewest points of a scan's floor line that joins a plane through another scan's line of
-/// `level_line_min_points` or more ([`level_lines`]): in the plane it adds its distance from
-/// the other line, a lever arm, not a direction of its own. Traced, floor points of 7 and 11
-/// in two scans beside a third scan's line of 15-18 were left out, and the poses (Cramér-Rao
-/// bounds under 0.1 degree) failed. Over 432,000 protocol poses at 5-10 cm (nine plans, seeds
-/// 101-180), leveled 74.36 -> 74.71% with 40 -> 41 poses ok and more than 5 degrees off and
-/// 752 -> 744 more than 3 degrees off (at 5 points: 74.62%, 41 and 745); over 129,600 more
-/// (seeds 1-8, 11-14, 21-32), 74.32 -> 74.64% with 4 and 4; at 1 cm, 99.09 -> 99.12%.
-pub(crate) const PLANE_LINE_MIN_POINTS: usize = 3;
-
 /// The plane through level lines' points, with those points (ascending).
 pub(crate) fn lines_plane(
     grid: &PoseGrid,
@@ -209,16 +199,10 @@ pub(crate) fn level_plane(
 ) -> Option<LevelEvidence> {
     let s = ctx.s;
     (params.level_line_plane
-        && fit.misfit_ratio(s) <= params.refine_level_misfit
-        && fit.normal.dot(ctx.up).abs() >= params.refine_level_cos()
-        && clear_of_scanner(&fit.normal, &fit.centroid)
+        && checks::refined_level(&fit, ctx.up, s, params)
         && opaque(ctx.grid, &fit, s, params))
     .then_some(LevelEvidence::Plane(fit, members))
 }
-
-/// Largest misfit ratio of the plane through two or more level lines' points for the lines to
-/// stand as one floor or ceiling ([`level_lines`]).
-pub(crate) const LINES_PLANE_MISFIT: f64 = 3.0;
 
 /// Whether level lines (each with its points) can all lie in one plane: with three or more,
 /// each must lie in the plane of the others' points. Any two lines pass, as do lines of one
@@ -274,9 +258,6 @@ pub(crate) fn line_offset_sigmas(
     let sd = (var / (n * n) + lever2 * model.tilt * model.tilt).sqrt();
     (sum / n).abs() / sd.max(1e-12)
 }
-
-/// Rounds of outlier removal of a level line.
-pub(crate) const LINE_ROUNDS: usize = 3;
 
 /// One scan's points on a level surface as a [`LevelLine`], refitted without the points
 /// farther than `refine_k` sigmas from it (vertically and horizontally, each with its range

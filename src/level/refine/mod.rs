@@ -19,6 +19,7 @@
 //! measurably help). The walls' planes are refitted free (not forced vertical): their tilt
 //! is the evidence of up; verticality only steers which points they get.
 
+use super::checks::{self, clear_of_scanner};
 use super::grid::{GridPoint, PlaneFit, PoseGrid};
 use super::patches::Patch;
 use super::up::{self, LevelLine, PlaneObs, UpSolution};
@@ -35,6 +36,7 @@ mod support;
 mod tests;
 mod walls;
 
+use crate::level::params::refine::*;
 pub(crate) use floor::opaque;
 use floor::*;
 pub use lines::start_lines;
@@ -475,9 +477,7 @@ fn models_of(
         } else {
             SurfaceKind::Ceiling
         };
-        if fit.misfit_ratio(s) > params.refine_level_misfit
-            || fit.normal.dot(&up).abs() < params.refine_level_cos()
-            || !clear_of_scanner(&fit.normal, &fit.centroid)
+        if !checks::refined_level(&fit, &up, s, params)
             // Over two scans it must agree with up (one leveled a pose 7 degrees off
             // with a sigma of 0.1); over three, it may overrule a wrong start.
             || (!three_rows_support(grid, &members) && level_z2(&fit, &up, s, sigma_up) > k * k)
@@ -589,12 +589,6 @@ fn solve_models(
     Some((sol, flat_lines))
 }
 
-/// Passes stop when up moves by less than this fraction of its uncertainty.
-const CONVERGED: f64 = 0.05;
-
-/// Largest up uncertainty used for assignment tolerances \[rad\].
-const MAX_SIGMA_UP: f64 = 0.06;
-
 fn start_sigma(start: &UpSolution, params: &LevelParams) -> f64 {
     let s = start.max_attitude_sigma();
     if s.is_finite() {
@@ -603,6 +597,3 @@ fn start_sigma(start: &UpSolution, params: &LevelParams) -> f64 {
         MAX_SIGMA_UP
     }
 }
-
-/// Lines closer in direction than this \[deg\] are pieces of one wall when both reach a point.
-const SIMILAR_LINES_DEG: f64 = 20.0;

@@ -75,11 +75,6 @@ pub(crate) fn supported_rows(per_row: &[usize], share: f64) -> usize {
     per_row.iter().filter(|&&n| n as f64 >= least).count()
 }
 
-/// A wall's rows count towards `refine_min_rows` only with this share of its points each: a
-/// scan line plus a few stray points of another scan leaves the plane free to turn about the
-/// line.
-pub(crate) const WALL_ROW_SHARE: f64 = 0.15;
-
 /// A level plane from one scan line is that scan's own plane (a line on the floor leaves the
 /// plane free to turn about it): at least two rows must each hold a fifth of the points.
 pub(crate) fn two_rows_support(grid: &PoseGrid, members: &[usize]) -> bool {
