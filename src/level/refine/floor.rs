@@ -146,19 +146,30 @@ fn level_candidates(lv: &Leveled, ok: &[bool], floor: bool) -> Vec<(f64, usize)>
 }
 
 /// The grid indices of the most populous height window `2 half` wide over the ascending
-/// heights `zs` (the first such window), or `None` when it holds fewer than `min_points`.
+/// heights `zs` (the lowest such window), or `None` when it holds fewer than `min_points`.
 fn densest_window(zs: &[(f64, usize)], half: f64, min_points: usize) -> Option<Vec<usize>> {
-    let mut best = (0usize, 0usize);
-    let mut lo = 0;
-    for hi in 0..zs.len() {
-        while zs[hi].0 - zs[lo].0 > 2.0 * half {
-            lo += 1;
+    let windows = height_windows(zs, half);
+    let most = windows.iter().map(|(lo, hi)| hi - lo).max().unwrap_or(0);
+    let (lo, hi) = windows
+        .into_iter()
+        .find(|(lo, hi)| hi - lo == most)
+        .unwrap_or((0, 0));
+    (hi - lo >= min_points).then(|| zs[lo..hi].iter().map(|&(_, i)| i).collect())
+}
+
+/// Per start `lo` over the ascending heights `zs`, the window `lo..hi` of the heights within
+/// `2 half` of `zs[lo]`: the one height-window scan behind the floor and ceiling searches
+/// ([`densest_window`] by height, `level_lines` by lines).
+pub(crate) fn height_windows(zs: &[(f64, usize)], half: f64) -> Vec<(usize, usize)> {
+    let mut windows = Vec::with_capacity(zs.len());
+    let mut hi = 0;
+    for lo in 0..zs.len() {
+        while hi < zs.len() && zs[hi].0 - zs[lo].0 <= 2.0 * half {
+            hi += 1;
         }
-        if hi + 1 - lo > best.1 - best.0 {
-            best = (lo, hi + 1);
-        }
+        windows.push((lo, hi));
     }
-    (best.1 - best.0 >= min_points).then(|| zs[best.0..best.1].iter().map(|&(_, i)| i).collect())
+    windows
 }
 
 /// `LEVEL_ROUNDS` rounds of refit and reassignment from `members`: the window's plane is only

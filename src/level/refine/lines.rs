@@ -89,15 +89,7 @@ fn line_candidates(ctx: &LineContext, floor: bool) -> Vec<(f64, usize)> {
 /// `2 half` wide over the ascending keys `zs` that holds `min_points` and a third as many as
 /// the densest window (a box top is not the floor).
 fn outermost_height(zs: &[(f64, usize)], half: f64, min_points: usize) -> Option<f64> {
-    // Window counts, from each start.
-    let mut counts = Vec::with_capacity(zs.len());
-    let mut hi = 0;
-    for lo in 0..zs.len() {
-        while hi < zs.len() && zs[hi].0 - zs[lo].0 <= 2.0 * half {
-            hi += 1;
-        }
-        counts.push((lo, hi));
-    }
+    let counts = height_windows(zs, half);
     let densest = counts.iter().map(|(lo, hi)| hi - lo).max().unwrap_or(0);
     let &(lo, hi) = counts
         .iter()

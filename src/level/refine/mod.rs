@@ -282,17 +282,8 @@ fn assign_levels(
     level_fits: &[PlaneFit],
     level_ok: &[bool],
 ) -> (Vec<Vec<usize>>, Vec<bool>) {
-    let Frame {
-        grid,
-        params,
-        steps,
-        ref lv,
-        up,
-        s,
-        k,
-        sigma_up,
-        ..
-    } = *f;
+    let (grid, params, steps, lv, up, s, k, sigma_up) =
+        (f.grid, f.params, f.steps, &f.lv, f.up, f.s, f.k, f.sigma_up);
     let mut level_members: Vec<Vec<usize>> = vec![Vec::new(); level_fits.len()];
     let mut near_level = vec![false; grid.points.len()];
     let level_models: Vec<LevelModel> = level_fits.iter().map(|f| LevelModel::new(f, s)).collect();
@@ -361,17 +352,16 @@ fn assign_walls(
     discover: bool,
     seed_width: usize,
 ) -> WallAssignment {
-    let Frame {
-        grid,
-        params,
-        steps,
-        ref lv,
-        level_from_robot,
-        s,
-        k,
-        sigma_up,
-        ..
-    } = *f;
+    let (grid, params, steps, lv, level_from_robot, s, k, sigma_up) = (
+        f.grid,
+        f.params,
+        f.steps,
+        &f.lv,
+        f.level_from_robot,
+        f.s,
+        f.k,
+        f.sigma_up,
+    );
     // Walls: merge those that are one wall, then assign by horizontal distance.
     let mut lines: Vec<Line> = wall_fits
         .iter()
@@ -432,16 +422,8 @@ fn models_of(
     level_fits: &[PlaneFit],
     level_members: Vec<Vec<usize>>,
 ) -> (Vec<Model>, usize) {
-    let Frame {
-        grid,
-        params,
-        up,
-        s,
-        sigma,
-        k,
-        sigma_up,
-        ..
-    } = *f;
+    let (grid, params, up, s, sigma, k, sigma_up) =
+        (f.grid, f.params, f.up, f.s, f.sigma, f.k, f.sigma_up);
     let min_rows = params.refine_min_rows.max(2);
     let mut models: Vec<Model> = Vec::new();
     for members in wall_members {
@@ -497,17 +479,8 @@ fn level_line_evidence(
     walls: &WallAssignment,
     models: &mut Vec<Model>,
 ) -> Vec<LevelLine> {
-    let Frame {
-        grid,
-        params,
-        steps,
-        ref lv,
-        up,
-        s,
-        k,
-        sigma_up,
-        ..
-    } = *f;
+    let (grid, params, steps, lv, up, s, k, sigma_up) =
+        (f.grid, f.params, f.steps, &f.lv, f.up, f.s, f.k, f.sigma_up);
     let (lines, candidate, in_reach) = (&walls.lines, &walls.candidate, &walls.in_reach);
     let mut flat_lines: Vec<LevelLine> = Vec::new();
     if params.level_surfaces && params.level_lines {
