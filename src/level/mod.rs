@@ -17,18 +17,18 @@
 //! and every accept/reject rule in one table, [`checks`].
 
 pub mod checks;
-pub mod eigen3;
+pub(crate) mod eigen3;
 mod failure;
 mod first_pass;
 pub mod grid;
 pub(crate) mod ml;
-pub mod noise;
+pub(crate) mod noise;
 mod params;
 pub mod patches;
-pub mod polygons;
+pub(crate) mod polygons;
 pub mod refine;
 mod resegment;
-pub mod up;
+pub(crate) mod up;
 
 pub use first_pass::level_fits;
 pub use params::LevelParams;

@@ -19,13 +19,14 @@ const MAD_TO_SIGMA: f64 = 1.482_602_218_505_602;
 
 /// Estimates the range noise sigma \[m\] from the scans of one or more poses; `None` when
 /// there are too few triples of consecutive valid rays (fewer than 20).
-pub fn estimate_range_sigma(scans: &[Scan]) -> Option<f64> {
+#[cfg(test)]
+pub(crate) fn estimate_range_sigma(scans: &[Scan]) -> Option<f64> {
     estimate_range_sigma_with(scans, None)
 }
 
 /// [`estimate_range_sigma`], given the `(sin, cos)` of the bearings when every scan shares
 /// them ([`super::grid::BearingTrigCache`]).
-pub fn estimate_range_sigma_with(
+pub(crate) fn estimate_range_sigma_with(
     scans: &[Scan],
     shared_trig: Option<&[(f64, f64)]>,
 ) -> Option<f64> {
@@ -86,7 +87,7 @@ fn looks_heteroscedastic(z: &[u64], ranges: &[f64], mad: f64) -> bool {
 /// sigmas 24 -> 6; at 2% of the range, more than 3 degrees off 21 -> 10 for 5 points fewer
 /// leveled. With noise the same at every range it never applies (243,000 protocol poses at
 /// 1-10 cm gave the same results).
-pub fn far_if_noisier(pooled: f64, halves: Option<(f64, f64)>) -> f64 {
+pub(crate) fn far_if_noisier(pooled: f64, halves: Option<(f64, f64)>) -> f64 {
     match halves {
         Some((near, far)) if far > HETEROSCEDASTIC_RATIO * near => far.max(pooled),
         _ => pooled,
@@ -95,7 +96,10 @@ pub fn far_if_noisier(pooled: f64, halves: Option<(f64, f64)>) -> f64 {
 
 /// `values` split into those whose `ranges` lie below the median range and the rest; `None`
 /// when either half has fewer than 20.
-pub fn split_at_median_range<T: Copy>(values: &[T], ranges: &[f64]) -> Option<(Vec<T>, Vec<T>)> {
+pub(crate) fn split_at_median_range<T: Copy>(
+    values: &[T],
+    ranges: &[f64],
+) -> Option<(Vec<T>, Vec<T>)> {
     if ranges.len() < 40 || ranges.len() != values.len() {
         return None;
     }

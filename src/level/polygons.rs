@@ -25,7 +25,7 @@ pub struct Polygon {
 
 impl Polygon {
     /// Grid indices of the points in its span.
-    pub fn span(&self, cols_total: usize) -> impl Iterator<Item = usize> + '_ {
+    pub(crate) fn span(&self, cols_total: usize) -> impl Iterator<Item = usize> + '_ {
         (self.row..self.row + self.rows)
             .flat_map(move |r| (self.col..self.col + self.cols).map(move |c| r * cols_total + c))
     }
@@ -36,7 +36,7 @@ impl Polygon {
 /// when the plane passes below the scanner (along its up-pointing normal) and ceiling when above.
 /// (A point's robot-frame z would not do: a beam tilted up in the robot frame still meets the
 /// floor when the robot pitches down.)
-pub fn classify(
+pub(crate) fn classify(
     normal: &Vector3<f64>,
     centroid: &Point3<f64>,
     params: &LevelParams,
@@ -60,12 +60,12 @@ fn classify_below(normal: &Vector3<f64>, centroid: &Point3<f64>, wall_cos: f64) 
 /// ceilings are all returned (with their kind), so that failure detection can tell a robot
 /// facing the floor from one that sees nothing. Greedy per band: after a kept quad the next one
 /// starts on its right edge; after a rejected one, one column further right.
-pub fn extract_quads(grid: &PoseGrid, params: &LevelParams, sigma: f64) -> Vec<Polygon> {
+pub(crate) fn extract_quads(grid: &PoseGrid, params: &LevelParams, sigma: f64) -> Vec<Polygon> {
     extract_quads_sized(grid, params, sigma, params.quad_rows, params.quad_cols)
 }
 
 /// [`extract_quads`] with a given quad size (rows high, columns wide).
-pub fn extract_quads_sized(
+pub(crate) fn extract_quads_sized(
     grid: &PoseGrid,
     params: &LevelParams,
     sigma: f64,

@@ -30,7 +30,7 @@ pub struct Patch {
 
 /// The height in the level frame (`level_from_robot` applied) of the patches of `kind`: the
 /// median over all their points, or `None` with fewer than `min_points` of them.
-pub fn level_height(
+pub(crate) fn level_height(
     grid: &PoseGrid,
     patches: &[Patch],
     kind: SurfaceKind,
@@ -90,7 +90,7 @@ pub fn seed_cols(grid: &PoseGrid, params: &LevelParams, sigma: f64) -> usize {
 }
 
 /// No patch.
-pub const UNLABELLED: u32 = u32::MAX;
+pub(crate) const UNLABELLED: u32 = u32::MAX;
 
 /// Grows patches from seed quads: walls first, best-fitting first, then floors and ceilings;
 /// three-row seeds before two-row ones (a wall that only two scans reach, e.g. ahead of a robot
@@ -101,7 +101,7 @@ pub const UNLABELLED: u32 = u32::MAX;
 /// refitted as the patch grows. Finally members farther than that from the final plane are
 /// released and the plane refitted once more.
 /// Returns the patches and, per grid point, the index of its patch or [`UNLABELLED`].
-pub fn grow_patches(
+pub(crate) fn grow_patches(
     grid: &PoseGrid,
     quads: &[Polygon],
     params: &LevelParams,

@@ -333,7 +333,7 @@ pub(crate) fn fit_line(
 /// the adjacent scans like the floor's ([`LevelSteps::floor`]) as one line, and likewise the
 /// ceiling's. Their height is not checked (no frame to check it in); the lines only start
 /// re-segmentation, which finds them again in its provisional level frame.
-pub fn start_lines(
+pub(crate) fn start_lines(
     grid: &PoseGrid,
     steps: &LevelSteps,
     params: &LevelParams,

@@ -39,7 +39,7 @@ mod walls;
 use crate::level::params::refine::*;
 pub(crate) use floor::opaque;
 use floor::*;
-pub use lines::start_lines;
+pub(crate) use lines::start_lines;
 use lines::*;
 pub use ransac::level_start;
 use ransac::*;
@@ -86,7 +86,7 @@ pub struct Refined {
 impl Refined {
     /// Up from the models alone, without the lines (`None` when they do not fix it), for
     /// range noise `sigma` as given to [`refine`].
-    pub fn without_lines(&self, params: &LevelParams, sigma: f64) -> Option<UpSolution> {
+    pub(crate) fn without_lines(&self, params: &LevelParams, sigma: f64) -> Option<UpSolution> {
         let s = sigma.max(params.min_sigma);
         let obs: Vec<PlaneObs> = self.models.iter().map(|m| m.obs(s, params)).collect();
         up::up_robust(&obs, s, params.iterations)
@@ -167,7 +167,7 @@ fn line_of(fit: &PlaneFit, level_from_robot: &Rotation3<f64>) -> Option<Line> {
 /// Refines up from a provisional solution by re-segmenting the grid in its level frame.
 /// `walls` are the wall patches of region growing (the first walls to assign points to); the
 /// floor and ceiling are found afresh. `None` when the refined model does not fix up.
-pub fn refine(
+pub(crate) fn refine(
     grid: &PoseGrid,
     start: &UpSolution,
     walls: &[&Patch],
