@@ -139,7 +139,7 @@ pub(crate) fn clean_level_fit(
 /// The members of `p` (in its order) whose range steps to the next scan in their column like a
 /// level surface's, in the patch's prevailing direction: by more than `r de` per elevation
 /// step `de` (signed, in units of `r de`), or whose member below does. `None` with fewer than
-/// 10 steps to judge from.
+/// `MIN_LEVEL_STEPS` steps to judge from.
 fn level_stepping_members(grid: &PoseGrid, p: &Patch) -> Option<Vec<usize>> {
     let cols = grid.cols;
     // A mask rather than a binary search: `step` asks several times per member.
@@ -167,7 +167,7 @@ fn level_stepping_members(grid: &PoseGrid, p: &Patch) -> Option<Vec<usize>> {
         step_at[i] = step(i);
     }
     let mut steps: Vec<f64> = p.members.iter().filter_map(|&i| step_at[i]).collect();
-    if steps.len() < 10 {
+    if steps.len() < MIN_LEVEL_STEPS {
         return None;
     }
     let mid = steps.len() / 2;
@@ -227,7 +227,7 @@ fn fit_without_steep(
         rows_all[rc.row(i)] += 1;
     }
     let veto = params.level_steep_veto
-        && (noisy || refine::supported_rows(&rows_all, 0.2) < LEVEL_MIN_ROWS_NOISY);
+        && (noisy || refine::supported_rows(&rows_all, LEVEL_ROW_SHARE) < LEVEL_MIN_ROWS_NOISY);
     // The fit with every kept point, and (for the veto) without those on a steep surface.
     let mut all = grid::PlaneAccumulator::default();
     let mut flat = grid::PlaneAccumulator::default();
@@ -241,7 +241,7 @@ fn fit_without_steep(
     }
     let min_rows = if noisy { LEVEL_MIN_ROWS_NOISY } else { 2 };
     let usable = |acc: &grid::PlaneAccumulator, per_row: &[usize]| -> Option<PlaneFit> {
-        let supported = refine::supported_rows(per_row, 0.2);
+        let supported = refine::supported_rows(per_row, LEVEL_ROW_SHARE);
         if acc.n < params.min_level_points || supported < min_rows {
             return None;
         }
@@ -249,7 +249,7 @@ fn fit_without_steep(
     };
     let fit = usable(&all, &rows_all)?;
     let steep = if veto { all.n - flat.n } else { 0 };
-    if steep > 0 && usable(&flat, &rows_flat).is_none() && 5 * steep > all.n {
+    if steep > 0 && usable(&flat, &rows_flat).is_none() && STEEP_SHARE_INV * steep > all.n {
         return None;
     }
     Some(fit)

@@ -164,9 +164,10 @@ impl LevelEstimate {
         }
     }
 
-    fn failed(reason: FailReason, range_sigma: f64) -> Self {
+    /// An estimate of no grid and no solution yet, at range noise `range_sigma`.
+    fn empty(range_sigma: f64) -> Self {
         LevelEstimate {
-            failure: Some(reason),
+            failure: None,
             attitude: None,
             sigmas: None,
             up: None,
@@ -178,6 +179,13 @@ impl LevelEstimate {
             wall_mask: Vec::new(),
             base_scan: None,
             bearing_trig: None,
+        }
+    }
+
+    fn failed(reason: FailReason, range_sigma: f64) -> Self {
+        LevelEstimate {
+            failure: Some(reason),
+            ..Self::empty(range_sigma)
         }
     }
 }
@@ -283,18 +291,12 @@ fn segmented(
         Estimator::Paper => (Vec::new(), vec![UNLABELLED; grid.points.len()]),
     };
     LevelEstimate {
-        failure: None,
-        attitude: None,
-        sigmas: None,
-        up: None,
-        range_sigma: sigma,
-        base_scan: None,
         quads,
         patches,
         labels,
-        wall_mask: Vec::new(),
         grid: Some(grid),
         bearing_trig: trig,
+        ..LevelEstimate::empty(sigma)
     }
 }
 

@@ -349,6 +349,20 @@ pub(crate) mod up {
 
 /// Fixed constants of the first pass's level surfaces (sect. 5.3, `first_pass`).
 pub(crate) mod first_pass {
+    /// Share of a level plane's points each of its scan lines must hold (or half of an even
+    /// split, `refine::supported_rows`) to count as one of the plane's lines: a level plane from
+    /// one scan line is that scan's own plane, free to turn about the line. Used by the first
+    /// pass and by re-segmentation (`two_rows_support`).
+    pub(crate) const LEVEL_ROW_SHARE: f64 = 0.2;
+
+    /// Fewest scan-to-scan range steps inside a floor or ceiling patch to tell its prevailing
+    /// step direction from (`first_pass::level_stepping_members`).
+    pub(crate) const MIN_LEVEL_STEPS: usize = 10;
+
+    /// With `level_steep_veto`, a plane that only its points on a steep surface make is no
+    /// floor when those are more than one in this many of its points (a fifth).
+    pub(crate) const STEEP_SHARE_INV: usize = 5;
+
     /// Fewest scan lines, each with a fair share of its points, that a floor or ceiling patch needs
     /// to be a level plane of the first solution from `level_steep_min_sigma` (3 cm) of noise up.
     /// Two lines always lie in one plane, and a wall's line with the next scan's floor line made a
@@ -404,6 +418,13 @@ pub(crate) mod resegment {
 
 /// Fixed constants of re-segmentation's engine (`refine`).
 pub(crate) mod refine {
+    /// The vertical tolerance of a typical grazing floor hit, which sizes the height windows
+    /// of the floor and ceiling searches: its ray's share along the vertical \[1\] ...
+    pub(crate) const GRAZING_RAY_DZ: f64 = 0.3;
+
+    /// ... and its horizontal distance \[m\], the lever arm of an error in up.
+    pub(crate) const GRAZING_LEVER: f64 = 2.0;
+
     /// Points beyond a level plane that `refine::opaque` lets pass: true planes have a few
     /// (allowing none leveled 7 points fewer poses at 5-10 cm noise, allowing two 0.4 points
     /// fewer).

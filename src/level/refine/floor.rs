@@ -107,8 +107,7 @@ pub(crate) fn find_levels(
         if zs.len() < params.min_level_points {
             continue;
         }
-        // A window as wide as the vertical tolerance of a typical grazing floor hit.
-        let half = params.refine_k * (0.3 * s + 2.0 * sigma_up) + params.flat_margin;
+        let half = window_half(params, s, sigma_up);
         let Some(window) = densest_window(&zs, half, params.min_level_points) else {
             continue;
         };
@@ -155,6 +154,13 @@ fn densest_window(zs: &[(f64, usize)], half: f64, min_points: usize) -> Option<V
         .find(|(lo, hi)| hi - lo == most)
         .unwrap_or((0, 0));
     (hi - lo >= min_points).then(|| zs[lo..hi].iter().map(|&(_, i)| i).collect())
+}
+
+/// Half the height window of the floor and ceiling searches \[m\]: `refine_k` times the
+/// vertical tolerance of a typical grazing floor hit (`GRAZING_RAY_DZ` of the noise `s` and
+/// up's error `sigma_up` over `GRAZING_LEVER`), plus `flat_margin`.
+pub(crate) fn window_half(params: &LevelParams, s: f64, sigma_up: f64) -> f64 {
+    params.refine_k * (GRAZING_RAY_DZ * s + GRAZING_LEVER * sigma_up) + params.flat_margin
 }
 
 /// Per start `lo` over the ascending heights `zs`, the window `lo..hi` of the heights within

@@ -52,7 +52,7 @@ pub(crate) fn level_lines(
     if zs.len() < min_points {
         return LevelEvidence::None;
     }
-    let half = params.refine_k * (0.3 * s + 2.0 * ctx.sigma_up) + params.flat_margin;
+    let half = window_half(params, s, ctx.sigma_up);
     let Some(height) = outermost_height(&zs, half, min_points) else {
         return LevelEvidence::None;
     };
