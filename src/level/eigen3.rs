@@ -9,13 +9,13 @@ use nalgebra::{Matrix3, SymmetricEigen, Vector3};
 
 /// Eigenvalues in ascending order and their unit eigenvectors (`vectors[k]` for `values[k]`).
 #[derive(Clone, Copy, Debug)]
-pub struct Eigen3 {
-    pub values: [f64; 3],
-    pub vectors: [Vector3<f64>; 3],
+pub(crate) struct Eigen3 {
+    pub(crate) values: [f64; 3],
+    pub(crate) vectors: [Vector3<f64>; 3],
 }
 
 /// Decomposes a symmetric matrix (only its upper triangle is read).
-pub fn sym_eigen3(a: &Matrix3<f64>) -> Eigen3 {
+pub(crate) fn sym_eigen3(a: &Matrix3<f64>) -> Eigen3 {
     sym_eigen3_upper(&upper_triangle(a), 0.0)
 }
 
@@ -34,7 +34,7 @@ fn upper_triangle(a: &Matrix3<f64>) -> [f64; 6] {
 /// [`sym_eigen3`] of the symmetric matrix with upper triangle `upper` (xx, xy, xz, yy, yz, zz)
 /// and smallest eigenvalue expected at or above `floor` (0 for a scatter; a guess, which only
 /// speeds the solve when it holds).
-pub fn sym_eigen3_upper(upper: &[f64; 6], floor: f64) -> Eigen3 {
+pub(crate) fn sym_eigen3_upper(upper: &[f64; 6], floor: f64) -> Eigen3 {
     let scale = upper.iter().fold(0.0f64, |m, v| m.max(v.abs()));
     if scale == 0.0 || !scale.is_finite() {
         return fallback(upper);

@@ -3,6 +3,7 @@
 //! exceed `max_sigma_deg`, or when up lies beyond `wall_min_angle_deg` of the robot's z axis;
 //! the facing test is [`LevelEstimate::facing`](super::LevelEstimate::facing).
 
+use super::checks::Check;
 use super::up::UpSolution;
 use super::{FailReason, LevelParams};
 use nalgebra::Vector3;
@@ -22,7 +23,7 @@ pub(crate) fn acceptable(
     params: &LevelParams,
     with_level: bool,
 ) -> Result<(), FailReason> {
-    acceptable_within(sol, params, with_level, params.max_sigma_deg)
+    acceptable_within(sol, params, with_level, Check::MaxSigma.threshold(params))
 }
 
 /// [`acceptable`] with the sigma gate at `max_sigma_deg` instead of the parameters' own.
@@ -33,7 +34,8 @@ pub(crate) fn acceptable_within(
     max_sigma_deg: f64,
 ) -> Result<(), FailReason> {
     let (lo, hi) = sol.info_eigenvalues;
-    if hi.is_nan() || hi <= 0.0 || (!with_level && lo < params.parallel_ratio * hi) {
+    if hi.is_nan() || hi <= 0.0 || (!with_level && lo < Check::ParallelRatio.threshold(params) * hi)
+    {
         return Err(FailReason::ParallelWalls);
     }
     if !within_wall_angle(&sol.up, params) {

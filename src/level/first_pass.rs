@@ -8,6 +8,7 @@ use super::patches::Patch;
 use super::polygons::Polygon;
 use super::up::{self, PlaneObs, UpSolution};
 use super::{Estimator, FailReason, LevelEstimate, LevelParams, SurfaceKind, refine};
+use crate::level::params::first_pass::*;
 use nalgebra::Vector3;
 
 /// Failure detection (sect. 5.5) and the up vector. When the walls seen cannot fix up (too
@@ -88,16 +89,6 @@ pub(crate) fn robust_obs<'a>(
         .collect()
 }
 
-/// Fewest scan lines, each with a fair share of its points, that a floor or ceiling patch
-/// needs to be a level plane of the first solution from `level_steep_min_sigma` (3 cm) of noise
-/// up. Two lines always lie in one plane, and a wall's line with the next scan's floor line made
-/// a "floor" 8 degrees off, which with one wall leveled a pose 7 degrees off with a sigma of
-/// 0.4 degrees. Re-segmentation still takes such floors, checked against the provisional up.
-/// Over 172,800 protocol poses (two seed sets, nine plans) poses reported ok and more than 5
-/// degrees off fell from 16 to 13 and those beyond 3 sigmas from 78 to 64 (seeds 1-16), for
-/// 0.4 points fewer leveled at 5-10 cm; 1 cm is unchanged.
-pub(crate) const LEVEL_MIN_ROWS_NOISY: usize = 3;
-
 /// Floor and ceiling planes usable as level (when `level_surfaces` is on): each floor or
 /// ceiling patch cleaned of the points that do not behave like a level surface, and refitted.
 ///
@@ -125,12 +116,31 @@ pub fn level_fits(est: &LevelEstimate, params: &LevelParams) -> Vec<PlaneFit> {
         .collect()
 }
 
+/// One floor or ceiling patch cleaned for [`level_fits`] and refitted: its members that step
+/// like a level surface ([`level_stepping_members`]), fitted without those on a steep surface
+/// ([`fit_without_steep`]), kept when the plane is near level (within `max_wall_tilt_deg` of
+/// the robot's z axis), explains its points (`max_level_misfit`) and is opaque (sect. 5.3's
+/// floor and ceiling constraints must be real surfaces).
 pub(crate) fn clean_level_fit(
     grid: &PoseGrid,
     p: &Patch,
     sigma: f64,
     params: &LevelParams,
 ) -> Option<PlaneFit> {
+    let kept = level_stepping_members(grid, p)?;
+    let fit = fit_without_steep(grid, &kept, sigma, params)?;
+    let floorlike = fit.normal.z.abs() > params.wall_cos();
+    (floorlike
+        && fit.misfit_ratio(sigma) <= params.max_level_misfit
+        && refine::opaque(grid, &fit, sigma, params))
+    .then_some(fit)
+}
+
+/// The members of `p` (in its order) whose range steps to the next scan in their column like a
+/// level surface's, in the patch's prevailing direction: by more than `r de` per elevation
+/// step `de` (signed, in units of `r de`), or whose member below does. `None` with fewer than
+/// `MIN_LEVEL_STEPS` steps to judge from.
+fn level_stepping_members(grid: &PoseGrid, p: &Patch) -> Option<Vec<usize>> {
     let cols = grid.cols;
     // A mask rather than a binary search: `step` asks several times per member.
     let mut in_patch = vec![false; grid.points.len()];
@@ -157,84 +167,92 @@ pub(crate) fn clean_level_fit(
         step_at[i] = step(i);
     }
     let mut steps: Vec<f64> = p.members.iter().filter_map(|&i| step_at[i]).collect();
-    if steps.len() < 10 {
+    if steps.len() < MIN_LEVEL_STEPS {
         return None;
     }
     let mid = steps.len() / 2;
     let sign = steps.select_nth_unstable_by(mid, f64::total_cmp).1.signum();
     let levelish = |i: usize| step_at[i].is_some_and(|x| x * sign > 1.0);
-    // A point whose range hardly changes to a neighbouring scan's, member or not, lies on a
-    // steep surface with it: a wall line at the foot of a wall joins a floor patch through the
-    // floor line below it (their step is a floor's), but the wall above it gives it away.
-    let on_steep = |i: usize| -> bool {
-        let Some(a) = grid.points[i].as_ref() else {
-            return false;
-        };
-        let r = rc.row(i);
-        [
-            (r > 0).then(|| i - cols),
-            (i + cols < grid.points.len()).then_some(i + cols),
-        ]
-        .into_iter()
-        .flatten()
-        .any(|j| {
-            grid.points[j].as_ref().is_some_and(|b| {
-                let de = grid.elevation[rc.row(j)] - grid.elevation[r];
-                (b.range - a.range).abs() <= 0.5 * (a.range + b.range) * de.abs()
-            })
-        })
-    };
     let kept = |i: usize| {
         let from_below = i >= cols && member(i - cols) && levelish(i - cols);
         levelish(i) || from_below
     };
+    Some(p.members.iter().copied().filter(|&i| kept(i)).collect())
+}
+
+/// Whether grid point `i`'s range hardly changes to a neighbouring scan's (member or not): it
+/// lies on a steep surface with it. A wall line at the foot of a wall joins a floor patch
+/// through the floor line below it (their step is a floor's), but the wall above it gives it
+/// away.
+fn on_steep(grid: &PoseGrid, i: usize) -> bool {
+    let Some(a) = grid.points[i].as_ref() else {
+        return false;
+    };
+    let (cols, rc) = (grid.cols, grid.row_col());
+    let r = rc.row(i);
+    [
+        (r > 0).then(|| i - cols),
+        (i + cols < grid.points.len()).then_some(i + cols),
+    ]
+    .into_iter()
+    .flatten()
+    .any(|j| {
+        grid.points[j].as_ref().is_some_and(|b| {
+            let de = grid.elevation[rc.row(j)] - grid.elevation[r];
+            (b.range - a.range).abs() <= 0.5 * (a.range + b.range) * de.abs()
+        })
+    })
+}
+
+/// The plane of the `kept` members, over at least `min_level_points` points and enough scan
+/// lines (`LEVEL_MIN_ROWS_NOISY` from `level_steep_min_sigma` of noise, else 2). With
+/// `level_steep_veto`, from that noise up (or below it on two scan lines only, where a wall's
+/// line and a floor line still pass for one plane when parallel), a plane that only the
+/// points on a steep surface ([`on_steep`]) make, over a fifth of them, is no floor: a floor
+/// line and a wall's line at its foot, coplanar within the noise.
+fn fit_without_steep(
+    grid: &PoseGrid,
+    kept: &[usize],
+    sigma: f64,
+    params: &LevelParams,
+) -> Option<PlaneFit> {
+    let rc = grid.row_col();
     let noisy = sigma >= params.level_steep_min_sigma;
     let kept_points = || {
-        p.members
-            .iter()
-            .filter(|&&i| kept(i))
+        kept.iter()
             .filter_map(|&i| Some((i, grid.points[i].as_ref()?)))
     };
     let mut rows_all = vec![0usize; grid.rows()];
     for (i, _) in kept_points() {
         rows_all[rc.row(i)] += 1;
     }
-    // From `level_steep_min_sigma` of noise a wall's line and a floor line can pass for one
-    // plane; below it, on two scan lines only they still can, when they are parallel.
     let veto = params.level_steep_veto
-        && (noisy || refine::supported_rows(&rows_all, 0.2) < LEVEL_MIN_ROWS_NOISY);
+        && (noisy || refine::supported_rows(&rows_all, LEVEL_ROW_SHARE) < LEVEL_MIN_ROWS_NOISY);
     // The fit with every kept point, and (for the veto) without those on a steep surface.
     let mut all = grid::PlaneAccumulator::default();
     let mut flat = grid::PlaneAccumulator::default();
     let mut rows_flat = vec![0usize; grid.rows()];
     for (i, g) in kept_points() {
         all.add(g);
-        if veto && !on_steep(i) {
+        if veto && !on_steep(grid, i) {
             flat.add(g);
             rows_flat[rc.row(i)] += 1;
         }
     }
     let min_rows = if noisy { LEVEL_MIN_ROWS_NOISY } else { 2 };
     let usable = |acc: &grid::PlaneAccumulator, per_row: &[usize]| -> Option<PlaneFit> {
-        let supported = refine::supported_rows(per_row, 0.2);
+        let supported = refine::supported_rows(per_row, LEVEL_ROW_SHARE);
         if acc.n < params.min_level_points || supported < min_rows {
             return None;
         }
         acc.fit(sigma)
     };
-    let fit_all = usable(&all, &rows_all);
+    let fit = usable(&all, &rows_all)?;
     let steep = if veto { all.n - flat.n } else { 0 };
-    // A plane that only the steep points make (a floor line and a wall's line at its foot,
-    // coplanar within the noise) is no floor.
-    let fit = fit_all?;
-    if steep > 0 && usable(&flat, &rows_flat).is_none() && 5 * steep > all.n {
+    if steep > 0 && usable(&flat, &rows_flat).is_none() && STEEP_SHARE_INV * steep > all.n {
         return None;
     }
-    let floorlike = fit.normal.z.abs() > params.wall_cos();
-    (floorlike
-        && fit.misfit_ratio(sigma) <= params.max_level_misfit
-        && refine::opaque(grid, &fit, sigma, params))
-    .then_some(fit)
+    Some(fit)
 }
 
 pub(crate) fn grid_rows(est: &LevelEstimate) -> usize {

@@ -43,7 +43,7 @@ pub struct BearingTrigCache {
 
 impl BearingTrigCache {
     /// The shared `(sin, cos)`, `None` when the scans' bearings differ (or there are none).
-    pub fn shared(&mut self, scans: &[Scan]) -> Option<Arc<[(f64, f64)]>> {
+    pub(crate) fn shared(&mut self, scans: &[Scan]) -> Option<Arc<[(f64, f64)]>> {
         let first = &scans.first()?.theta;
         if !scans.iter().all(|s| same_bits(&s.theta, first)) {
             return None;
@@ -114,7 +114,7 @@ impl PoseGrid {
 
     /// [`PoseGrid::from_scans`], given the `(sin, cos)` of the bearings when every scan shares
     /// them ([`BearingTrigCache`]).
-    pub fn from_scans_with(
+    pub(crate) fn from_scans_with(
         scans: &[Scan],
         shared_trig: Option<&[(f64, f64)]>,
     ) -> Result<PoseGrid, GridError> {
@@ -154,12 +154,12 @@ impl PoseGrid {
         })
     }
 
-    pub fn rows(&self) -> usize {
+    pub(crate) fn rows(&self) -> usize {
         self.scan_index.len()
     }
 
     /// The plane sums of the valid points among `members` (grid indices), in their order.
-    pub fn accumulate(&self, members: &[usize]) -> PlaneAccumulator {
+    pub(crate) fn accumulate(&self, members: &[usize]) -> PlaneAccumulator {
         let mut acc = PlaneAccumulator::default();
         for g in members.iter().filter_map(|&i| self.points[i].as_ref()) {
             acc.add(g);
@@ -172,7 +172,7 @@ impl PoseGrid {
     }
 
     /// Row and column of grid indices without a hardware division (see [`RowCol`]).
-    pub fn row_col(&self) -> RowCol {
+    pub(crate) fn row_col(&self) -> RowCol {
         RowCol::new(self.cols)
     }
 }
@@ -183,7 +183,7 @@ impl PoseGrid {
 /// `i cols <= 2^40` (Granlund and Montgomery 1994: `i m / 2^40 = i / cols + i e / (cols 2^40)`
 /// with `0 <= e < cols`, and the second term stays below `1 / cols`); larger grids divide.
 #[derive(Clone, Copy, Debug)]
-pub struct RowCol {
+pub(crate) struct RowCol {
     cols: usize,
     m: u64,
     /// Indices below this take the multiply.
@@ -193,7 +193,7 @@ pub struct RowCol {
 impl RowCol {
     const SHIFT: u32 = 40;
 
-    pub fn new(cols: usize) -> Self {
+    pub(crate) fn new(cols: usize) -> Self {
         let cols = cols.max(1);
         let m = (1u64 << Self::SHIFT).div_ceil(cols as u64);
         // i * cols <= 2^40 for the exactness bound, and i * m below 2^64.
@@ -207,7 +207,7 @@ impl RowCol {
 
     /// `i / cols`.
     #[inline]
-    pub fn row(&self, i: usize) -> usize {
+    pub(crate) fn row(&self, i: usize) -> usize {
         if (i as u64) < self.fast_below {
             ((i as u64 * self.m) >> Self::SHIFT) as usize
         } else {
@@ -217,7 +217,7 @@ impl RowCol {
 
     /// `i % cols`.
     #[inline]
-    pub fn col(&self, i: usize) -> usize {
+    pub(crate) fn col(&self, i: usize) -> usize {
         i - self.row(i) * self.cols
     }
 }
@@ -232,9 +232,9 @@ impl RowCol {
 #[derive(Clone, Copy, Debug, Default)]
 pub struct PlaneAccumulator {
     /// Points added.
-    pub n: usize,
+    pub(crate) n: usize,
     /// Sum of their weights (= n when unweighted).
-    pub weight: f64,
+    pub(crate) weight: f64,
     /// Weighted sums in the layout of [`Moments`]: p, p p^T and d d^T over the ray directions.
     sums: Moments,
 }
@@ -280,7 +280,7 @@ impl PlaneAccumulator {
     }
 
     /// Adds a point with weight `w` in [0, 1] (robust refits).
-    pub fn add_weighted(&mut self, gp: &GridPoint, w: f64) {
+    pub(crate) fn add_weighted(&mut self, gp: &GridPoint, w: f64) {
         self.n += 1;
         self.weight += w;
         for (s, m) in self.sums.iter_mut().zip(&moments(&gp.p.coords, &gp.dir)) {
@@ -289,18 +289,10 @@ impl PlaneAccumulator {
     }
 
     /// Scales every weight by `k` (the point count stays).
-    pub fn scale(&mut self, k: f64) {
+    pub(crate) fn scale(&mut self, k: f64) {
         self.weight *= k;
         for s in &mut self.sums {
             *s *= k;
-        }
-    }
-
-    pub fn merge(&mut self, o: &PlaneAccumulator) {
-        self.n += o.n;
-        self.weight += o.weight;
-        for (s, m) in self.sums.iter_mut().zip(&o.sums) {
-            *s += m;
         }
     }
 
@@ -310,11 +302,6 @@ impl PlaneAccumulator {
 
     fn sum_pp(&self, k: usize) -> f64 {
         self.sums[PP + k]
-    }
-
-    /// The weighted mean of the points added.
-    pub fn centroid(&self) -> Point3<f64> {
-        Point3::from(self.sum() / self.weight.max(1e-300))
     }
 
     /// The accumulator of the points in `self` but not in `part` (a subset of them).
@@ -435,14 +422,14 @@ pub struct PlaneFit {
 }
 
 impl PlaneFit {
-    pub fn distance(&self, p: &Point3<f64>) -> f64 {
+    pub(crate) fn distance(&self, p: &Point3<f64>) -> f64 {
         self.normal.dot(&(p - self.centroid))
     }
 
     /// Variance of `n . u` for a unit vector `u` (nearly) in the plane, from first-order TLS
     /// perturbation: `sigma_n^2 * sum_k (u . e_k)^2 / lambda_k` over the in-plane eigenpairs,
     /// with `sigma_n^2 = sigma^2 * mean (d . n)^2` the noise along the normal.
-    pub fn normal_variance_along(&self, u: &Vector3<f64>, sigma: f64) -> f64 {
+    pub(crate) fn normal_variance_along(&self, u: &Vector3<f64>, sigma: f64) -> f64 {
         let sn2 = (sigma * sigma * self.dn2).max(1e-12);
         self.in_plane
             .iter()
@@ -456,7 +443,7 @@ impl PlaneFit {
 
     /// Observed over expected residual variance (1 for a clean planar patch); more than 1
     /// means the points are not one plane with this noise (a corner, clutter, floor points).
-    pub fn misfit_ratio(&self, sigma: f64) -> f64 {
+    pub(crate) fn misfit_ratio(&self, sigma: f64) -> f64 {
         let dof = (self.weight - 3.0).max(1.0);
         let expected = (sigma * sigma * self.dn2).max(1e-12) * dof;
         self.residual_ss / expected

@@ -11,6 +11,7 @@
 //! does not ignore bias it (+3-6% over nine plans at 1-10 cm; the trimmed RMS +0-2%, with 40% less
 //! spread from pose to pose).
 
+use crate::level::params::noise::*;
 use crate::scan::Scan;
 
 /// Median absolute deviation to standard deviation for a Gaussian.
@@ -18,13 +19,14 @@ const MAD_TO_SIGMA: f64 = 1.482_602_218_505_602;
 
 /// Estimates the range noise sigma \[m\] from the scans of one or more poses; `None` when
 /// there are too few triples of consecutive valid rays (fewer than 20).
-pub fn estimate_range_sigma(scans: &[Scan]) -> Option<f64> {
+#[cfg(test)]
+pub(crate) fn estimate_range_sigma(scans: &[Scan]) -> Option<f64> {
     estimate_range_sigma_with(scans, None)
 }
 
 /// [`estimate_range_sigma`], given the `(sin, cos)` of the bearings when every scan shares
 /// them ([`super::grid::BearingTrigCache`]).
-pub fn estimate_range_sigma_with(
+pub(crate) fn estimate_range_sigma_with(
     scans: &[Scan],
     shared_trig: Option<&[(f64, f64)]>,
 ) -> Option<f64> {
@@ -76,16 +78,6 @@ fn looks_heteroscedastic(z: &[u64], ranges: &[f64], mad: f64) -> bool {
     near.1 >= 20 && far.1 >= 20 && rms(far) > SCREEN_RATIO * rms(near)
 }
 
-/// The screen's ratio, below [`HETEROSCEDASTIC_RATIO`], since its split and cut differ from
-/// the halves' own: with it, `level` gave the same output as with no screen on 2700 poses
-/// under each of five noise models (constant, 1% and 2% of the range, 0.5 cm + 0.5%, given as
-/// `readings_sigma`).
-const SCREEN_RATIO: f64 = 1.2;
-
-/// How much noisier than the nearer half of the readings the farther half must be for the
-/// range noise to be taken as the farther half's ([`far_if_noisier`]).
-pub const HETEROSCEDASTIC_RATIO: f64 = 1.5;
-
 /// The noise of all readings, `pooled`, or the farther half's when it exceeds the nearer
 /// half's by [`HETEROSCEDASTIC_RATIO`] (`halves`: near, far). Many scanners' noise grows
 /// with range, and one sigma for all made far walls' fits overconfident: with noise of 1% of
@@ -95,7 +87,7 @@ pub const HETEROSCEDASTIC_RATIO: f64 = 1.5;
 /// sigmas 24 -> 6; at 2% of the range, more than 3 degrees off 21 -> 10 for 5 points fewer
 /// leveled. With noise the same at every range it never applies (243,000 protocol poses at
 /// 1-10 cm gave the same results).
-pub fn far_if_noisier(pooled: f64, halves: Option<(f64, f64)>) -> f64 {
+pub(crate) fn far_if_noisier(pooled: f64, halves: Option<(f64, f64)>) -> f64 {
     match halves {
         Some((near, far)) if far > HETEROSCEDASTIC_RATIO * near => far.max(pooled),
         _ => pooled,
@@ -104,7 +96,10 @@ pub fn far_if_noisier(pooled: f64, halves: Option<(f64, f64)>) -> f64 {
 
 /// `values` split into those whose `ranges` lie below the median range and the rest; `None`
 /// when either half has fewer than 20.
-pub fn split_at_median_range<T: Copy>(values: &[T], ranges: &[f64]) -> Option<(Vec<T>, Vec<T>)> {
+pub(crate) fn split_at_median_range<T: Copy>(
+    values: &[T],
+    ranges: &[f64],
+) -> Option<(Vec<T>, Vec<T>)> {
     if ranges.len() < 40 || ranges.len() != values.len() {
         return None;
     }

@@ -3,6 +3,7 @@
 
 use super::grid::{PlaneAccumulator, PlaneFit, PoseGrid};
 use super::{LevelParams, SurfaceKind};
+use crate::level::params::quads::*;
 use nalgebra::{Point3, Vector3};
 
 /// One extracted quadrilateral.
@@ -24,7 +25,7 @@ pub struct Polygon {
 
 impl Polygon {
     /// Grid indices of the points in its span.
-    pub fn span(&self, cols_total: usize) -> impl Iterator<Item = usize> + '_ {
+    pub(crate) fn span(&self, cols_total: usize) -> impl Iterator<Item = usize> + '_ {
         (self.row..self.row + self.rows)
             .flat_map(move |r| (self.col..self.col + self.cols).map(move |c| r * cols_total + c))
     }
@@ -35,7 +36,7 @@ impl Polygon {
 /// when the plane passes below the scanner (along its up-pointing normal) and ceiling when above.
 /// (A point's robot-frame z would not do: a beam tilted up in the robot frame still meets the
 /// floor when the robot pitches down.)
-pub fn classify(
+pub(crate) fn classify(
     normal: &Vector3<f64>,
     centroid: &Point3<f64>,
     params: &LevelParams,
@@ -59,12 +60,12 @@ fn classify_below(normal: &Vector3<f64>, centroid: &Point3<f64>, wall_cos: f64) 
 /// ceilings are all returned (with their kind), so that failure detection can tell a robot
 /// facing the floor from one that sees nothing. Greedy per band: after a kept quad the next one
 /// starts on its right edge; after a rejected one, one column further right.
-pub fn extract_quads(grid: &PoseGrid, params: &LevelParams, sigma: f64) -> Vec<Polygon> {
+pub(crate) fn extract_quads(grid: &PoseGrid, params: &LevelParams, sigma: f64) -> Vec<Polygon> {
     extract_quads_sized(grid, params, sigma, params.quad_rows, params.quad_cols)
 }
 
 /// [`extract_quads`] with a given quad size (rows high, columns wide).
-pub fn extract_quads_sized(
+pub(crate) fn extract_quads_sized(
     grid: &PoseGrid,
     params: &LevelParams,
     sigma: f64,
@@ -96,13 +97,6 @@ pub fn extract_quads_sized(
     }
     out
 }
-
-/// How far from the diagonals' plane, in coplanarity tolerances, a quad's point may lie before
-/// the quad is refused without a fit. At 1.5 rather than 3 it spares fits that the final test
-/// would refuse, 2.6% of `level`'s CPU time at 1 cm; the wall quads kept changed by 0.007% at
-/// 1 cm and 0.18% at 10 cm, and no accuracy statistic moved beyond its noise (148,500
-/// protocol poses, 1-10 cm).
-const DIAGONAL_PLANE_TOLERANCES: f64 = 1.5;
 
 #[allow(clippy::too_many_arguments)]
 fn quad_at(

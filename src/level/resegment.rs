@@ -2,12 +2,14 @@
 //! solution is kept and gated, and how the kept solution's covariance is widened when two
 //! readings of the same ranges disagree. The engine is [`refine`](super::refine).
 
+use super::checks::Check;
 use super::failure::{acceptable, acceptable_within, attitude_sigmas};
 use super::first_pass::robust_obs;
 use super::grid::{PlaneFit, PoseGrid};
 use super::patches::Patch;
 use super::up::{self, UpSolution};
 use super::{Estimator, FailReason, LevelEstimate, LevelParams, SurfaceKind, refine};
+use crate::level::params::resegment::*;
 
 /// The solution of a pose after re-segmentation (robust estimator, `refine_passes` > 0): a
 /// first solution pinned down to `refine_above_sigma_deg` stands; otherwise the refined one
@@ -23,7 +25,7 @@ pub(crate) fn resegmented(
     let needs_refine = match &first {
         Ok(sol) => attitude_sigmas(sol, params)
             .iter()
-            .any(|s| s.to_degrees() > params.refine_above_sigma_deg),
+            .any(|s| s.to_degrees() > Check::RefineAboveSigma.threshold(params)),
         Err(_) => true,
     };
     if params.estimator != Estimator::Robust || params.refine_passes == 0 || !needs_refine {
@@ -55,10 +57,6 @@ pub(crate) fn resegmented(
         None => result,
     }
 }
-
-/// Largest attitude sigma of any start of re-segmentation \[rad\] (11.5 degrees): at 0.2 it
-/// leveled 0.3 points fewer poses at 10 cm (3 scans), at 0.1 up to 0.7 points fewer.
-pub(crate) const START_MAX_SIGMA: f64 = 0.2;
 
 /// Re-segmentation in the provisional level frame ([`refine`]): its start, its refined model
 /// (not yet gated), and the other starts' refined solutions that pass the gate.
@@ -101,7 +99,7 @@ pub fn refine_estimate(
         // From a start this loose, re-segmentation can settle on a wrong but self-consistent
         // set of planes (a pose 16 degrees off at the start, 23 degrees of sigma, ended 7
         // degrees off with sigmas near one degree); it rescues almost nothing from there.
-        .filter(|start| start.max_attitude_sigma() <= START_MAX_SIGMA)
+        .filter(|start| start.max_attitude_sigma() <= Check::StartMaxSigma.threshold(params))
         .filter_map(|start| {
             let r = refine::refine(grid, &start, &walls, &steps, params, sigma)?;
             Some((start, r))
@@ -192,7 +190,9 @@ pub(crate) fn refined_solution(
         // A line pins up down across it only: the other direction rests on the walls that
         // alone could not pass the gate, so it is held to a stricter one; failing that, the
         // models without the lines are gated as usual.
-        let strict = params.max_sigma_deg.min(params.level_line_max_sigma_deg);
+        let strict = Check::MaxSigma
+            .threshold(params)
+            .min(Check::LineMaxSigma.threshold(params));
         if acceptable_within(&refined.solution, params, true, strict).is_ok() {
             Some(refined.solution)
         } else {
@@ -237,18 +237,6 @@ pub(crate) fn widened_against_first(kept: &UpSolution, first: &UpSolution) -> Op
     }
     widened_by_disagreement(kept, first)
 }
-
-/// How many times tighter than the first solution a re-segmented one must be to stand without
-/// widening by their disagreement. Traced, 6 of 16 protocol poses that failed while their
-/// Cramér-Rao bounds were under 0.12 degree had a first solution 2-3 of its sigmas off and a
-/// re-segmented one 5-30 times tighter and within 0.1 degree of the truth. Over 432,000
-/// protocol poses at 5-10 cm (nine plans, seeds 101-180), leveled 74.71 -> 74.80% with the same
-/// 41 poses ok and more than 5 degrees off and 744 more than 3 (at 1.5, the more cautious 2's
-/// equal: 74.84%, the same counts, 3 more poses beyond 3 sigmas; never widening: 11 more poses
-/// more than 5 degrees off);
-/// over 129,600 more (seeds 1-8, 11-14, 21-32), 74.64 -> 74.76% with 4 and 4; at 1 cm, 99.12 ->
-/// 99.17%.
-pub(crate) const TIGHTER_THAN_FIRST: f64 = 2.0;
 
 /// `kept` with its covariance widened by its distance from `other` when the two disagree
 /// beyond [`DISAGREEMENT_SIGMAS`] of their joint uncertainty; `None` when they agree. The
@@ -302,26 +290,3 @@ pub(crate) fn widened_beyond(
         ..*kept
     })
 }
-
-/// How far apart, in joint sigmas, the first and the re-segmented solutions may lie before
-/// the kept one's covariance takes in their distance. The sum of the two covariances
-/// overstates their difference's (they share most of their data), so 2.5 of it is a stricter
-/// test than it looks. Over 145,800 poses of nine plans, it cut the poses reported ok and more
-/// than 5 degrees off from 22 to 17 for 0.25 points fewer leveled at 5-10 cm (3: 20 and 0.1;
-/// 2: 13 and 0.65).
-pub(crate) const DISAGREEMENT_SIGMAS: f64 = 2.5;
-
-/// How far, in the first solution's own sigmas, a re-segmentation that failed the gate may lie
-/// from it before its covariance takes in their distance ([`widened_unconfirmed`]). Over
-/// 75,600 protocol poses at 5-10 cm (nine plans, seeds 1-8 and 11-16), poses reported ok and
-/// more than 5 degrees off fell from 17 to 9 and those beyond 3 sigmas from 96 to 79, for 0.76
-/// points fewer leveled; over 97,200 more at 1-10 cm (seeds 21-28), from 16 to 10, for 0.77
-/// points. At 2.5: 8 and 7 such poses, for 1.1 points.
-pub(crate) const UNCONFIRMED_SIGMAS: f64 = 3.0;
-
-/// How far, in the start's sigmas, a refined solution that stands alone may lie from the
-/// solution its re-segmentation started from ([`widened_from_start`]). Over the same two sets
-/// (172,800 poses) poses reported ok and more than 5 degrees off fell from 19 to 16, and those
-/// more than 4 sigmas off from 23 to 20 (seeds 21-28), for 0.09 points fewer leveled; at 3
-/// sigmas the same, for 0.2 points.
-pub(crate) const FROM_START_SIGMAS: f64 = 4.0;

@@ -10,6 +10,7 @@
 
 use super::grid::PlaneFit;
 use crate::geometry::Attitude;
+use crate::level::params::up::*;
 use nalgebra::{Matrix2, Matrix3, Vector2, Vector3};
 
 /// A straight run of floor (or ceiling) points in one scan. A scan's plane meets a level
@@ -20,11 +21,11 @@ use nalgebra::{Matrix2, Matrix3, Vector2, Vector3};
 #[derive(Clone, Copy, Debug)]
 pub struct LevelLine {
     /// Unit direction in the robot frame (sign arbitrary).
-    pub dir: Vector3<f64>,
+    pub(crate) dir: Vector3<f64>,
     /// Mean of the points \[m\], robot frame.
-    pub centroid: nalgebra::Point3<f64>,
+    pub(crate) centroid: nalgebra::Point3<f64>,
     /// Points behind it.
-    pub n: usize,
+    pub(crate) n: usize,
     /// `sum_i t_i^2 d_i d_i^T` over the points' positions `t_i` along the line (from the
     /// centroid) and their ray directions `d_i`.
     spread_dd: Matrix3<f64>,
@@ -39,7 +40,7 @@ impl LevelLine {
     /// the range-noise bias removed from the scatter (as [`super::grid::PlaneAccumulator`]
     /// does for planes: grazing rays run nearly along the line, and their noise would tilt
     /// it). `None` with fewer than three points.
-    pub fn fit(
+    pub(crate) fn fit(
         points: &[(nalgebra::Point3<f64>, Vector3<f64>)],
         sigma: f64,
         min_sigma: f64,
@@ -80,7 +81,7 @@ impl LevelLine {
     /// Variance of `dir . u` for a unit `u` perpendicular to `dir`, from first-order TLS
     /// perturbation: `sum_i t_i^2 Var(u . e_i) / (sum_i t_i^2)^2`, where each point's error
     /// `e_i` is its range noise along its ray plus the `min_sigma` floor.
-    pub fn variance_along(&self, u: &Vector3<f64>, sigma: f64) -> f64 {
+    pub(crate) fn variance_along(&self, u: &Vector3<f64>, sigma: f64) -> f64 {
         let along = (u.transpose() * self.spread_dd * u)[0];
         (sigma * sigma * along + self.min_sigma * self.min_sigma * self.spread)
             / (self.spread * self.spread)
@@ -89,7 +90,7 @@ impl LevelLine {
 
 /// What one piece of evidence says about up.
 #[derive(Clone, Copy, Debug)]
-pub enum Evidence<'a> {
+pub(crate) enum Evidence<'a> {
     /// A wall plane: vertical, so `n . up = 0` (one residual).
     Wall(&'a PlaneFit),
     /// A floor or ceiling plane taken as level: up along its normal, so `e_k . up = 0` for
@@ -101,10 +102,10 @@ pub enum Evidence<'a> {
 
 /// A piece of evidence with a variance inflation (>= 1) for misfit.
 #[derive(Clone, Copy, Debug)]
-pub struct PlaneObs<'a> {
-    pub evidence: Evidence<'a>,
+pub(crate) struct PlaneObs<'a> {
+    pub(crate) evidence: Evidence<'a>,
     /// Multiplies the evidence's variance.
-    pub inflate: f64,
+    pub(crate) inflate: f64,
 }
 
 /// One scalar residual `a . up` with its variance.
@@ -112,7 +113,7 @@ type Term = (Vector3<f64>, f64);
 
 impl PlaneObs<'_> {
     /// A wall plane.
-    pub fn wall(fit: &PlaneFit, inflate: f64) -> PlaneObs<'_> {
+    pub(crate) fn wall(fit: &PlaneFit, inflate: f64) -> PlaneObs<'_> {
         PlaneObs {
             evidence: Evidence::Wall(fit),
             inflate,
@@ -120,7 +121,7 @@ impl PlaneObs<'_> {
     }
 
     /// A floor or ceiling plane taken as level.
-    pub fn level(fit: &PlaneFit, inflate: f64) -> PlaneObs<'_> {
+    pub(crate) fn level(fit: &PlaneFit, inflate: f64) -> PlaneObs<'_> {
         PlaneObs {
             evidence: Evidence::Level(fit),
             inflate,
@@ -128,7 +129,7 @@ impl PlaneObs<'_> {
     }
 
     /// A line on a floor or ceiling.
-    pub fn level_line(line: &LevelLine, inflate: f64) -> PlaneObs<'_> {
+    pub(crate) fn level_line(line: &LevelLine, inflate: f64) -> PlaneObs<'_> {
         PlaneObs {
             evidence: Evidence::LevelLine(line),
             inflate,
@@ -209,7 +210,7 @@ impl PlaneObs<'_> {
 }
 
 /// The paper's estimator (eq. of sect. 5.3); `None` when no pair of normals is independent.
-pub fn up_paper(normals: &[(Vector3<f64>, f64)]) -> Option<Vector3<f64>> {
+pub(crate) fn up_paper(normals: &[(Vector3<f64>, f64)]) -> Option<Vector3<f64>> {
     let mut sum = Vector3::zeros();
     for (i, (ni, ai)) in normals.iter().enumerate() {
         for (nj, aj) in &normals[i + 1..] {
@@ -248,13 +249,13 @@ impl UpSolution {
 
     /// Its covariance expressed in another tangent `basis` (of a nearby up): `J cov J^T` with
     /// `J[i][j] = basis[i] . self.basis[j]`.
-    pub fn cov_in(&self, basis: &[Vector3<f64>; 2]) -> Matrix2<f64> {
+    pub(crate) fn cov_in(&self, basis: &[Vector3<f64>; 2]) -> Matrix2<f64> {
         let j = Matrix2::from_fn(|i, k| basis[i].dot(&self.basis[k]));
         j * self.cov * j.transpose()
     }
 
     /// The larger of [`Self::attitude_sigmas`] \[rad\].
-    pub fn max_attitude_sigma(&self) -> f64 {
+    pub(crate) fn max_attitude_sigma(&self) -> f64 {
         self.attitude_sigmas().iter().fold(0f64, |a, &b| a.max(b))
     }
 
@@ -297,19 +298,6 @@ fn tangent_basis(up: &Vector3<f64>) -> [Vector3<f64>; 2] {
     [t1, t2]
 }
 
-/// Cauchy scale for the robust weights, in standard deviations.
-const CAUCHY_C: f64 = 2.385;
-
-/// Largest tilt of the robot considered \[deg\], the one place of this limit: the paper assumes
-/// floors below 45 degrees. The up search and the frameless level start
-/// ([`refine::level_start`](super::refine::level_start)) keep a margin beyond that; the gate
-/// refuses an up past `wall_min_angle_deg`.
-pub(crate) const MAX_TILT_DEG: f64 = 50.0;
-
-/// [`MAX_TILT_DEG`] in radians, as the up search has always computed it (`50 pi / 180`, which
-/// can differ from `to_radians` in the last bit).
-const MAX_TILT: f64 = MAX_TILT_DEG * std::f64::consts::PI / 180.0;
-
 /// Iteratively reweighted least squares for up over plane fits with range noise `sigma` \[m\].
 ///
 /// A wrongly extracted plane (a seed across a wall's foot, clutter) can outweigh the good ones
@@ -319,7 +307,7 @@ const MAX_TILT: f64 = MAX_TILT_DEG * std::f64::consts::PI / 180.0;
 /// proposal with the least total Cauchy loss over all planes wins; only proposals within
 /// 50 degrees of the robot's own up are considered. `None` with fewer than two planes or when
 /// no proposal qualifies.
-pub fn up_robust(planes: &[PlaneObs], sigma: f64, iterations: usize) -> Option<UpSolution> {
+pub(crate) fn up_robust(planes: &[PlaneObs], sigma: f64, iterations: usize) -> Option<UpSolution> {
     let constraints: usize = planes.iter().map(|p| p.constraints()).sum();
     if constraints < 2 {
         return None;
@@ -415,7 +403,12 @@ const CHI2_PRIOR_DOF: f64 = 5.0;
 /// chi-square per degree of freedom (with `CHI2_PRIOR_DOF` pseudo degrees of freedom at
 /// one) when that exceeds one, so that a model that explains the normals worse than their
 /// noise predicts reports a larger, honest sigma.
-pub fn solution_at(up: Vector3<f64>, planes: &[PlaneObs], sigma: f64, robust: bool) -> UpSolution {
+pub(crate) fn solution_at(
+    up: Vector3<f64>,
+    planes: &[PlaneObs],
+    sigma: f64,
+    robust: bool,
+) -> UpSolution {
     let basis = tangent_basis(&up);
     let mut h = Matrix2::zeros();
     let mut chi2 = 0.0;

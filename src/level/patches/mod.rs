@@ -30,7 +30,7 @@ pub struct Patch {
 
 /// The height in the level frame (`level_from_robot` applied) of the patches of `kind`: the
 /// median over all their points, or `None` with fewer than `min_points` of them.
-pub fn level_height(
+pub(crate) fn level_height(
     grid: &PoseGrid,
     patches: &[Patch],
     kind: SurfaceKind,
@@ -90,7 +90,7 @@ pub fn seed_cols(grid: &PoseGrid, params: &LevelParams, sigma: f64) -> usize {
 }
 
 /// No patch.
-pub const UNLABELLED: u32 = u32::MAX;
+pub(crate) const UNLABELLED: u32 = u32::MAX;
 
 /// Grows patches from seed quads: walls first, best-fitting first, then floors and ceilings;
 /// three-row seeds before two-row ones (a wall that only two scans reach, e.g. ahead of a robot
@@ -101,15 +101,13 @@ pub const UNLABELLED: u32 = u32::MAX;
 /// refitted as the patch grows. Finally members farther than that from the final plane are
 /// released and the plane refitted once more.
 /// Returns the patches and, per grid point, the index of its patch or [`UNLABELLED`].
-pub fn grow_patches(
+pub(crate) fn grow_patches(
     grid: &PoseGrid,
     quads: &[Polygon],
     params: &LevelParams,
     sigma: f64,
 ) -> (Vec<Patch>, Vec<u32>) {
-    let n = grid.points.len();
-    let cols = grid.cols;
-    let mut labels = vec![UNLABELLED; n];
+    let mut labels = vec![UNLABELLED; grid.points.len()];
     let mut patches = Vec::new();
     let tol = params.grow_k * sigma.max(params.min_sigma);
     let width = seed_cols(grid, params, sigma);
@@ -120,25 +118,44 @@ pub fn grow_patches(
         wide = extract_quads_sized(grid, params, sigma, params.quad_rows, width);
         &wide
     };
-    // Floors and ceilings also seed from the paper's narrow quads when the seeds are wide:
-    // along a level surface's normal the grazing rays carry little noise, so a narrow quad
-    // pins its plane well, and a wide quad rarely fits where the floor is seen only near an
-    // edge of the scans (its far and near sides too unequal, or a wall inside it).
-    let narrow_level: Vec<&Polygon> = if params.narrow_level_seeds && width != params.quad_cols {
-        quads
-            .iter()
-            .filter(|q| q.kind != SurfaceKind::Wall)
-            .collect()
-    } else {
-        Vec::new()
-    };
+    let narrow_level = params.narrow_level_seeds && width != params.quad_cols;
+    let mut members = Vec::new();
+    for q in ordered_seeds(three_row, quads, narrow_level) {
+        let id = patches.len() as u32;
+        if let Some(p) = grow_seed(grid, q, id, &mut labels, &mut members, params, sigma, tol) {
+            patches.push(p);
+        }
+    }
+    let split = split_two_plane_patches(grid, patches, params, sigma, tol);
+    labels.fill(UNLABELLED);
+    for (id, p) in split.iter().enumerate() {
+        for &i in &p.members {
+            labels[i] = id as u32;
+        }
+    }
+    (split, labels)
+}
+
+/// The seeds of [`grow_patches`] in the order they are tried (sect. 5.2's quads as seeds):
+/// walls before floors and ceilings, then by mean squared residual, then by position, packed
+/// in one integer key (unique, so an unstable sort gives the stable order). With
+/// `narrow_level`, floors and ceilings also seed from the paper's narrow `quads` after the
+/// wide ones: along a level surface's normal the grazing rays carry little noise, so a narrow
+/// quad pins its plane well, and a wide quad rarely fits where the floor is seen only near an
+/// edge of the scans (its far and near sides too unequal, or a wall inside it).
+fn ordered_seeds<'a>(
+    three_row: &'a [Polygon],
+    quads: &'a [Polygon],
+    narrow_level: bool,
+) -> Vec<&'a Polygon> {
+    let narrow = quads
+        .iter()
+        .filter(|q| narrow_level && q.kind != SurfaceKind::Wall);
     let candidates: Vec<(u8, &Polygon)> = three_row
         .iter()
         .map(|q| (0u8, q))
-        .chain(narrow_level.iter().map(|q| (2u8, *q)))
+        .chain(narrow.map(|q| (2u8, q)))
         .collect();
-    // Ordered by rank, then mean squared residual, then position, packed in one integer key
-    // (unique, so an unstable sort gives the stable order).
     let mut keys: Vec<u128> = candidates
         .iter()
         .enumerate()
@@ -150,97 +167,139 @@ pub fn grow_patches(
         })
         .collect();
     keys.sort_unstable();
-    let seeds = keys.iter().map(|&k| candidates[(k as u32) as usize].1);
-    let mut members = Vec::new();
+    keys.iter()
+        .map(|&k| candidates[(k as u32) as usize].1)
+        .collect()
+}
+
+/// One patch grown from seed `q` as patch `id` (sect. 9's region growing from a sect. 5.2
+/// quad): nothing when the seed overlaps a patch already grown, or when the grown members
+/// make no patch ([`make_patch`]), in which case their labels are freed again. `members` is
+/// scratch space reused across seeds.
+#[allow(clippy::too_many_arguments)]
+fn grow_seed(
+    grid: &PoseGrid,
+    q: &Polygon,
+    id: u32,
+    labels: &mut [u32],
+    members: &mut Vec<usize>,
+    params: &LevelParams,
+    sigma: f64,
+    tol: f64,
+) -> Option<Patch> {
+    let cols = grid.cols;
+    if q.span(cols).any(|i| labels[i] != UNLABELLED) {
+        return None;
+    }
+    let mut acc = PlaneAccumulator::default();
+    members.clear();
+    for i in q.span(cols) {
+        labels[i] = id;
+        members.push(i);
+        if let Some(g) = &grid.points[i] {
+            acc.add(g);
+        }
+    }
+    let mut fit = acc.fit(sigma)?;
+    let s_eff = sigma.max(params.min_sigma);
+    let tol_at = |fit: &PlaneFit, g: &GridPoint| ray_tolerance(fit, g, tol, s_eff, params);
+    flood(
+        grid, id, labels, members, &mut acc, &mut fit, &tol_at, sigma,
+    );
+    // Release members that the final plane does not explain, then refit.
+    if let Some(f) = acc.fit(sigma) {
+        fit = f;
+    }
+    // Few are released: their sums come off the accumulator, rather than the kept ones'
+    // being summed again.
+    let mut released = PlaneAccumulator::default();
+    members.retain(|&i| {
+        let Some(g) = grid.points[i].as_ref() else {
+            return false;
+        };
+        if fit.distance(&g.p).abs() <= tol_at(&fit, g) {
+            true
+        } else {
+            released.add(g);
+            labels[i] = UNLABELLED;
+            false
+        }
+    });
+    let made = make_patch(grid, members, acc.minus(&released), params, sigma);
+    if made.is_none() {
+        for &i in members.iter() {
+            labels[i] = UNLABELLED;
+        }
+    }
+    made
+}
+
+/// The breadth-first growth of one patch (sect. 9's region growing): an unlabelled neighbour
+/// (left, right, previous or next row) of a member joins when within `tol_at` of the current
+/// plane `fit`, which is refitted each time the members grew by a third, so the plane follows
+/// the surface without a refit per point. The members not yet visited are the queue.
+#[allow(clippy::too_many_arguments)]
+fn flood(
+    grid: &PoseGrid,
+    id: u32,
+    labels: &mut [u32],
+    members: &mut Vec<usize>,
+    acc: &mut PlaneAccumulator,
+    fit: &mut PlaneFit,
+    tol_at: &impl Fn(&PlaneFit, &GridPoint) -> f64,
+    sigma: f64,
+) {
+    let (n, cols) = (grid.points.len(), grid.cols);
     // Columns without a division per visit.
     let rc = grid.row_col();
-    for q in seeds {
-        if q.span(cols).any(|i| labels[i] != UNLABELLED) {
-            continue;
+    let mut refit_at = acc.n + acc.n / 3 + 1;
+    let mut next = 0;
+    while let Some(&i) = members.get(next) {
+        next += 1;
+        let c = rc.col(i);
+        let mut neighbours = [usize::MAX; 4];
+        if c > 0 {
+            neighbours[0] = i - 1;
         }
-        let id = patches.len() as u32;
-        let mut acc = PlaneAccumulator::default();
-        members.clear();
-        for i in q.span(cols) {
-            labels[i] = id;
-            members.push(i);
-            if let Some(g) = &grid.points[i] {
+        if c + 1 < cols {
+            neighbours[1] = i + 1;
+        }
+        if i >= cols {
+            neighbours[2] = i - cols;
+        }
+        if i + cols < n {
+            neighbours[3] = i + cols;
+        }
+        for j in neighbours {
+            if j == usize::MAX || labels[j] != UNLABELLED {
+                continue;
+            }
+            let Some(g) = &grid.points[j] else { continue };
+            if fit.distance(&g.p).abs() <= tol_at(fit, g) {
+                labels[j] = id;
+                members.push(j);
                 acc.add(g);
-            }
-        }
-        let Some(mut fit) = acc.fit(sigma) else {
-            continue;
-        };
-        let s_eff = sigma.max(params.min_sigma);
-        let tol_at = |fit: &PlaneFit, g: &GridPoint| ray_tolerance(fit, g, tol, s_eff, params);
-        let mut refit_at = acc.n + acc.n / 3 + 1;
-        // Breadth first: the members not yet visited are the queue.
-        let mut next = 0;
-        while let Some(&i) = members.get(next) {
-            next += 1;
-            let c = rc.col(i);
-            let mut neighbours = [usize::MAX; 4];
-            if c > 0 {
-                neighbours[0] = i - 1;
-            }
-            if c + 1 < cols {
-                neighbours[1] = i + 1;
-            }
-            if i >= cols {
-                neighbours[2] = i - cols;
-            }
-            if i + cols < n {
-                neighbours[3] = i + cols;
-            }
-            for j in neighbours {
-                if j == usize::MAX || labels[j] != UNLABELLED {
-                    continue;
-                }
-                let Some(g) = &grid.points[j] else { continue };
-                if fit.distance(&g.p).abs() <= tol_at(&fit, g) {
-                    labels[j] = id;
-                    members.push(j);
-                    acc.add(g);
-                    if acc.n >= refit_at {
-                        if let Some(f) = acc.fit(sigma) {
-                            fit = f;
-                        }
-                        refit_at = acc.n + acc.n / 3 + 1;
+                if acc.n >= refit_at {
+                    if let Some(f) = acc.fit(sigma) {
+                        *fit = f;
                     }
-                }
-            }
-        }
-        // Release members that the final plane does not explain, then refit.
-        if let Some(f) = acc.fit(sigma) {
-            fit = f;
-        }
-        // Few are released: their sums come off the accumulator, rather than the kept ones'
-        // being summed again.
-        let mut released = PlaneAccumulator::default();
-        members.retain(|&i| {
-            let Some(g) = grid.points[i].as_ref() else {
-                return false;
-            };
-            if fit.distance(&g.p).abs() <= tol_at(&fit, g) {
-                true
-            } else {
-                released.add(g);
-                labels[i] = UNLABELLED;
-                false
-            }
-        });
-        let made = make_patch(grid, &members, acc.minus(&released), params, sigma);
-        match made {
-            Some(p) => patches.push(p),
-            None => {
-                for &i in &members {
-                    labels[i] = UNLABELLED;
+                    refit_at = acc.n + acc.n / 3 + 1;
                 }
             }
         }
     }
-    // Split patches that are really two planes (grown across a corner or a wall's foot),
-    // then label the points afresh.
+}
+
+/// Patches that are really two planes (grown across a corner or a wall's foot) split into
+/// their planes ([`split_members`]) when their misfit ratio exceeds `split_misfit`: sect. 9's
+/// EM would give each plane its own points; here a contiguous split does.
+fn split_two_plane_patches(
+    grid: &PoseGrid,
+    patches: Vec<Patch>,
+    params: &LevelParams,
+    sigma: f64,
+    tol: f64,
+) -> Vec<Patch> {
     let mut split = Vec::with_capacity(patches.len());
     for p in patches {
         if p.fit.misfit_ratio(sigma.max(params.min_sigma)) <= params.split_misfit {
@@ -251,13 +310,7 @@ pub fn grow_patches(
             split.extend(release_and_make(grid, &part, params, sigma, tol));
         }
     }
-    labels.fill(UNLABELLED);
-    for (id, p) in split.iter().enumerate() {
-        for &i in &p.members {
-            labels[i] = id as u32;
-        }
-    }
-    (split, labels)
+    split
 }
 
 /// [`rows_span`] of members in ascending order: their first and last.

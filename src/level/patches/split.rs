@@ -134,62 +134,91 @@ pub fn split_members(
     if depth == 0 || members.len() < 2 * params.min_patch_points {
         return whole;
     }
-    let cols = grid.cols;
-    let rc = grid.row_col();
     let Some(fit_all) = grid.accumulate(members).fit(sigma) else {
         return whole;
     };
-    let rss1 = fit_all.residual_ss;
-    // Candidate cuts (where the key changes, both parts spanning two rows), as (lower bound on
-    // the two planes' RSS, which ordering, boundary index). They are fitted in order of their
-    // bounds, and a cut whose bound exceeds the best RSS found cannot win, so most of them
-    // need no eigen decomposition. The winner is the same as fitting every cut in turn: the
-    // least RSS, ties to the first ordering and boundary.
-    let mut candidates: Vec<(f64, usize, usize)> = Vec::new();
     let orders: [Vec<usize>; 2] = [
         in_order(grid, members, false),
         in_order(grid, members, true),
     ];
-    let mut prefixes: [Vec<PlaneAccumulator>; 2] = [Vec::new(), Vec::new()];
-    for (which, sorted) in orders.iter().enumerate() {
-        let by_row = which == 1;
-        let key = |i: usize| if by_row { rc.row(i) } else { rc.col(i) };
-        let n = sorted.len();
-        // Prefix plane sums, and the rows spanned by every prefix and suffix.
-        let prefix = &mut prefixes[which];
-        prefix.reserve(n + 1);
-        let mut acc = PlaneAccumulator::default();
-        prefix.push(acc);
-        let (mut pre_lo, mut pre_hi) = (vec![usize::MAX; n + 1], vec![0usize; n + 1]);
-        for (k, &i) in sorted.iter().enumerate() {
-            if let Some(g) = &grid.points[i] {
-                acc.add(g);
-            }
-            prefix.push(acc);
-            pre_lo[k + 1] = pre_lo[k].min(rc.row(i));
-            pre_hi[k + 1] = pre_hi[k].max(rc.row(i));
-        }
-        let (mut suf_lo, mut suf_hi) = (vec![usize::MAX; n + 1], vec![0usize; n + 1]);
-        for k in (0..n).rev() {
-            suf_lo[k] = suf_lo[k + 1].min(rc.row(sorted[k]));
-            suf_hi[k] = suf_hi[k + 1].max(rc.row(sorted[k]));
-        }
-        let total = acc;
-        let half = params.min_patch_points / 2;
-        for b in half.max(1)..n.saturating_sub(half).max(1) {
-            // Only where the key changes (column or row boundaries).
-            if key(sorted[b]) == key(sorted[b - 1]) {
-                continue;
-            }
-            if pre_hi[b] <= pre_lo[b] || suf_hi[b] <= suf_lo[b] {
-                continue;
-            }
-            let l = prefix[b];
-            let r = total.minus(&l);
-            let bound = l.residual_lower_bound() + r.residual_lower_bound();
-            candidates.push((bound, which, b));
-        }
+    let cuts = [0, 1].map(|which| candidate_cuts(grid, &orders[which], which, params));
+    let Some((which, cut)) = best_cut(&cuts, sigma) else {
+        return whole;
+    };
+    let (a, b) = (orders[which][..cut].to_vec(), orders[which][cut..].to_vec());
+    if !split_significant(
+        grid,
+        members.len(),
+        fit_all.residual_ss,
+        &a,
+        &b,
+        params,
+        sigma,
+    ) {
+        return whole;
     }
+    let mut out = split_members(grid, &a, params, sigma, depth - 1);
+    out.extend(split_members(grid, &b, params, sigma, depth - 1));
+    out
+}
+
+/// The cuts of one member ordering (`which`: 0 by column, 1 by row) that [`split_members`]
+/// considers: where the key changes and both parts span two rows, each as (lower bound on the
+/// two planes' RSS, `which`, boundary index), with the ordering's prefix plane sums. The
+/// bounds let [`best_cut`] skip most eigen decompositions.
+fn candidate_cuts(grid: &PoseGrid, sorted: &[usize], which: usize, params: &LevelParams) -> Cuts {
+    let rc = grid.row_col();
+    let by_row = which == 1;
+    let key = |i: usize| if by_row { rc.row(i) } else { rc.col(i) };
+    let n = sorted.len();
+    // Prefix plane sums, and the rows spanned by every prefix and suffix.
+    let mut prefix = Vec::with_capacity(n + 1);
+    let mut acc = PlaneAccumulator::default();
+    prefix.push(acc);
+    let (mut pre_lo, mut pre_hi) = (vec![usize::MAX; n + 1], vec![0usize; n + 1]);
+    for (k, &i) in sorted.iter().enumerate() {
+        if let Some(g) = &grid.points[i] {
+            acc.add(g);
+        }
+        prefix.push(acc);
+        pre_lo[k + 1] = pre_lo[k].min(rc.row(i));
+        pre_hi[k + 1] = pre_hi[k].max(rc.row(i));
+    }
+    let (mut suf_lo, mut suf_hi) = (vec![usize::MAX; n + 1], vec![0usize; n + 1]);
+    for k in (0..n).rev() {
+        suf_lo[k] = suf_lo[k + 1].min(rc.row(sorted[k]));
+        suf_hi[k] = suf_hi[k + 1].max(rc.row(sorted[k]));
+    }
+    let total = acc;
+    let half = params.min_patch_points / 2;
+    let mut candidates = Vec::new();
+    for b in half.max(1)..n.saturating_sub(half).max(1) {
+        // Only where the key changes (column or row boundaries).
+        if key(sorted[b]) == key(sorted[b - 1]) {
+            continue;
+        }
+        if pre_hi[b] <= pre_lo[b] || suf_hi[b] <= suf_lo[b] {
+            continue;
+        }
+        let l = prefix[b];
+        let r = total.minus(&l);
+        let bound = l.residual_lower_bound() + r.residual_lower_bound();
+        candidates.push((bound, which, b));
+    }
+    (candidates, prefix)
+}
+
+/// One ordering's candidate cuts, as (lower bound on the two planes' RSS, ordering, boundary
+/// index), and its prefix plane sums.
+type Cuts = (Vec<(f64, usize, usize)>, Vec<PlaneAccumulator>);
+
+/// The cut of least two-plane RSS among both orderings' [`candidate_cuts`], as (ordering,
+/// boundary index). They are fitted in order of their bounds, and a cut whose bound exceeds
+/// the best RSS found cannot win, so most need no eigen decomposition. The winner is the same
+/// as fitting every cut in turn: the least RSS, ties to the first ordering and boundary.
+fn best_cut(cuts: &[Cuts; 2], sigma: f64) -> Option<(usize, usize)> {
+    let mut candidates: Vec<(f64, usize, usize)> =
+        cuts.iter().flat_map(|c| c.0.iter().copied()).collect();
     candidates.sort_by(|x, y| x.0.total_cmp(&y.0));
     // Best split so far: (RSS of the two planes, which ordering, boundary index).
     let mut best: Option<(f64, usize, usize)> = None;
@@ -197,7 +226,7 @@ pub fn split_members(
         if best.is_some_and(|(br, _, _)| bound > br) {
             break;
         }
-        let prefix = &prefixes[which];
+        let prefix = &cuts[which].1;
         let l = prefix[b];
         let r = prefix[prefix.len() - 1].minus(&l);
         let (Some(fl), Some(fr)) = (l.fit(sigma), r.fit(sigma)) else {
@@ -210,30 +239,32 @@ pub fn split_members(
             best = Some((rss2, which, b));
         }
     }
-    let Some((_, which, cut)) = best else {
-        return whole;
-    };
-    let (a, b) = (orders[which][..cut].to_vec(), orders[which][cut..].to_vec());
+    best.map(|(_, which, b)| (which, b))
+}
+
+/// Whether parts `a` and `b` of `n` members (one plane's RSS `rss1`) are two planes: each at
+/// least half a patch over two rows, and the F test of [`split_members`] above `split_f`.
+fn split_significant(
+    grid: &PoseGrid,
+    n: usize,
+    rss1: f64,
+    a: &[usize],
+    b: &[usize],
+    params: &LevelParams,
+    sigma: f64,
+) -> bool {
     let ok = |m: &[usize]| {
-        let (lo, hi) = rows_span(m, cols);
+        let (lo, hi) = rows_span(m, grid.cols);
         m.len() >= params.min_patch_points / 2 && hi > lo
     };
-    if !ok(&a) || !ok(&b) {
-        return whole;
+    if !ok(a) || !ok(b) {
+        return false;
     }
-    let (Some(fa), Some(fb)) = (
-        grid.accumulate(&a).fit(sigma),
-        grid.accumulate(&b).fit(sigma),
-    ) else {
-        return whole;
+    let (Some(fa), Some(fb)) = (grid.accumulate(a).fit(sigma), grid.accumulate(b).fit(sigma))
+    else {
+        return false;
     };
     let rss2 = fa.residual_ss + fb.residual_ss;
-    let n = members.len() as f64;
-    let f = ((rss1 - rss2) / 3.0) / (rss2 / (n - 6.0)).max(1e-300);
-    if f.is_nan() || f <= params.split_f {
-        return whole;
-    }
-    let mut out = split_members(grid, &a, params, sigma, depth - 1);
-    out.extend(split_members(grid, &b, params, sigma, depth - 1));
-    out
+    let f = ((rss1 - rss2) / 3.0) / (rss2 / (n as f64 - 6.0)).max(1e-300);
+    !(f.is_nan() || f <= params.split_f)
 }

@@ -2,6 +2,7 @@
 //! plane (a wall patch that took in the floor at its foot).
 
 use super::*;
+use crate::level::params::patches::*;
 
 /// The members without the rows at either edge of the patch that the plane of its other rows
 /// does not explain; `None` when no row goes, and none at all (an empty list) when the patch
@@ -46,22 +47,74 @@ pub(super) fn trim_edge_rows(
             per_row[rc.row(i)].add(g);
         }
     }
-    // Whether `row` stands off the plane of the rows `first..=last` other than it.
-    let stands_off = |row: usize, first: usize, last: usize| -> bool {
-        let others = (lo..=hi)
+    let rows = EdgeRows {
+        grid,
+        members,
+        all,
+        per_row: &per_row,
+        span: (lo, hi),
+        sigma,
+        params,
+    };
+    let (mut first, mut last) = (lo, hi);
+    if three {
+        // A wall line and the floor line at its foot, 2-15 cm out, with a few points of the
+        // third scan near the hinge axis: a "wall" 11.6 degrees off at 1 cm noise.
+        return (rows.stands_off(lo, lo, hi) || rows.stands_off(hi, lo, hi)).then(Vec::new);
+    }
+    if rows.stands_off(first, first, last) {
+        first += 1;
+    }
+    if last >= first + 3 && rows.stands_off(last, first, last) {
+        last -= 1;
+    }
+    if (first, last) == (lo, hi) || !rows.rest_holds(first, last) {
+        return None;
+    }
+    Some(
+        members
+            .iter()
+            .copied()
+            .filter(|&i| (first..=last).contains(&rc.row(i)))
+            .collect(),
+    )
+}
+
+/// A patch's rows for [`trim_edge_rows`]: its members, their sums, each row's own sums and the
+/// rows spanned `span`.
+struct EdgeRows<'a> {
+    grid: &'a PoseGrid,
+    members: &'a [usize],
+    all: &'a PlaneAccumulator,
+    per_row: &'a [PlaneAccumulator],
+    span: (usize, usize),
+    sigma: f64,
+    params: &'a LevelParams,
+}
+
+impl EdgeRows<'_> {
+    /// Whether `row` stands off the plane of the rows `first..=last` other than it: its mean
+    /// residual from that plane beyond `trim_sigmas` of its spread (the row's noise along the
+    /// normal, plus the plane's own offset and tilt uncertainty at the row, scaled by the
+    /// plane's misfit), as the doc of [`trim_edge_rows`] explains.
+    fn stands_off(&self, row: usize, first: usize, last: usize) -> bool {
+        let (params, s) = (self.params, self.sigma.max(self.params.min_sigma));
+        let rc = self.grid.row_col();
+        let others = (self.span.0..=self.span.1)
             .filter(|&r| r == row || !(first..=last).contains(&r))
-            .fold(*all, |acc, r| acc.minus(&per_row[r]));
+            .fold(*self.all, |acc, r| acc.minus(&self.per_row[r]));
         if others.n < params.min_patch_points {
             return false;
         }
-        let Some(fit) = others.fit(sigma) else {
+        let Some(fit) = others.fit(self.sigma) else {
             return false;
         };
         let (mut sum, mut var, mut at, mut n) = (0.0, 0.0, Vector3::zeros(), 0.0);
-        for g in members
+        for g in self
+            .members
             .iter()
             .filter(|&&i| rc.row(i) == row)
-            .filter_map(|&i| grid.points[i].as_ref())
+            .filter_map(|&i| self.grid.points[i].as_ref())
         {
             sum += fit.distance(&g.p);
             var += (s * g.dir.dot(&fit.normal).abs().max(params.min_ray_share)).powi(2);
@@ -81,44 +134,20 @@ pub(super) fn trim_edge_rows(
         let offset = s * s * fit.dn2 / fit.weight;
         let spread = (var / (n * n) + offset + tilt) * fit.misfit_ratio(s).max(1.0);
         (sum / n).abs() > params.trim_sigmas * spread.sqrt()
-    };
-    let (mut first, mut last) = (lo, hi);
-    if three {
-        // A wall line and the floor line at its foot, 2-15 cm out, with a few points of the
-        // third scan near the hinge axis: a "wall" 11.6 degrees off at 1 cm noise.
-        return (stands_off(lo, lo, hi) || stands_off(hi, lo, hi)).then(Vec::new);
     }
-    if stands_off(first, first, last) {
-        first += 1;
-    }
-    if last >= first + 3 && stands_off(last, first, last) {
-        last -= 1;
-    }
-    if (first, last) == (lo, hi) {
-        return None;
-    }
-    // What stays must still be a wall over three rows, each holding a fair share of its
-    // points. Else the row that stood off may be the true wall and the rest a wall line and
-    // the floor line at its foot, coplanar, with a few stray points in other rows: trimmed,
-    // such a patch leveled a pose 28 degrees off at 1 cm noise.
-    let held: Vec<usize> = (first..=last)
-        .filter(|&r| per_row[r].n as f64 >= MIN_TRIMMED_ROW_SHARE * all.n as f64)
-        .collect();
-    if held.len() < 3 || held.windows(2).any(|w| w[1] != w[0] + 1) {
-        return None;
-    }
-    Some(
-        members
-            .iter()
-            .copied()
-            .filter(|&i| (first..=last).contains(&rc.row(i)))
-            .collect(),
-    )
-}
 
-/// Fewest points, as a share of the patch's, in each of three adjacent rows that a trimmed
-/// patch keeps.
-const MIN_TRIMMED_ROW_SHARE: f64 = 0.15;
+    /// Whether the rows `first..=last` left after trimming are still a wall over three
+    /// adjacent rows, each holding a fair share ([`MIN_TRIMMED_ROW_SHARE`]) of its points.
+    /// Else the row that stood off may be the true wall and the rest a wall line and the floor
+    /// line at its foot, coplanar, with a few stray points in other rows: trimmed, such a patch
+    /// leveled a pose 28 degrees off at 1 cm noise.
+    fn rest_holds(&self, first: usize, last: usize) -> bool {
+        let held: Vec<usize> = (first..=last)
+            .filter(|&r| self.per_row[r].n as f64 >= MIN_TRIMMED_ROW_SHARE * self.all.n as f64)
+            .collect();
+        held.len() >= 3 && held.windows(2).all(|w| w[1] == w[0] + 1)
+    }
+}
 
 /// The members (ascending) without the runs of points at either end of their rows that stand
 /// in front of the plane `fit`; `None` when no run does.
@@ -188,10 +217,6 @@ pub(super) fn without_front_row_ends(
             .collect(),
     )
 }
-
-/// Shortest run at a row's end that [`without_front_row_ends`] tests: shorter ones are single
-/// noisy points rather than another surface.
-const MIN_FRONT_RUN: usize = 3;
 
 /// Length of the leading run of `residuals` whose sum (with their variances) stands out most in
 /// standard deviations of that sum, when by more than `k` and the run is at least

@@ -31,10 +31,6 @@ pub(crate) fn opaque(grid: &PoseGrid, fit: &PlaneFit, s: f64, params: &LevelPara
     beyond <= MAX_BEYOND
 }
 
-/// Points beyond a level plane that [`opaque`] lets pass: true planes have a few (allowing
-/// none leveled 7 points fewer poses at 5-10 cm noise, allowing two 0.4 points fewer).
-pub(crate) const MAX_BEYOND: usize = 5;
-
 /// Squared angle between a level model's normal and up, in variances: the model's normal
 /// noise, inflated by its misfit, and up's own (`sigma_up` \[rad\]).
 pub(crate) fn level_z2(fit: &PlaneFit, up: &Vector3<f64>, s: f64, sigma_up: f64) -> f64 {
@@ -80,7 +76,10 @@ impl<'a> LevelModel<'a> {
 
 /// The floor and ceiling planes to assign from: the ones given, else the densest height below
 /// (floor) and above (ceiling) the scanner in the level frame, where at least
-/// `min_level_points` points lie within the tolerance of one height.
+/// `min_level_points` points lie within the tolerance of one height ([`densest_window`]),
+/// refitted in rounds ([`refit_rounds`]) and kept when level within `refine_max_tilt_deg` of
+/// up, explaining its points and clear of the scanner (sect. 5.3 takes floors and ceilings as
+/// the level constraints).
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn find_levels(
     grid: &PoseGrid,
@@ -104,11 +103,36 @@ pub(crate) fn find_levels(
             }
             continue;
         }
-        // Heights of the candidates, with the tolerance of each: the noise along the vertical
-        // plus what an error in up does at the point's horizontal distance.
-        let mut zs: Vec<(f64, usize)> = lv
-            .q
-            .iter()
+        let zs = level_candidates(lv, ok, floor);
+        if zs.len() < params.min_level_points {
+            continue;
+        }
+        let half = window_half(params, s, sigma_up);
+        let Some(window) = densest_window(&zs, half, params.min_level_points) else {
+            continue;
+        };
+        // The window holds wall points too (a wall's foot, or a band of wall at one height
+        // in a frame degrees off): the plane through most of its points, rather than through
+        // all of them, starts the rounds.
+        let stepping: Vec<usize> = window.iter().copied().filter(|&i| levelish[i]).collect();
+        let cos = params.refine_level_cos();
+        let level = |n: &Vector3<f64>| n.dot(up).abs() >= cos;
+        let members = sampled_plane(grid, &window, &stepping, level, s, params).unwrap_or(window);
+        if let Some(f) = refit_rounds(grid, &zs, members, params, s) {
+            if checks::refined_level(&f, up, s, params) {
+                out.push(f);
+            }
+        }
+    }
+    out
+}
+
+/// The candidates for the floor (`floor`) or the ceiling: the usable (`ok`) points more than
+/// `MIN_LEVEL_DISTANCE` below or above the scanner in the level frame, as (height, grid
+/// index), ascending by height.
+fn level_candidates(lv: &Leveled, ok: &[bool], floor: bool) -> Vec<(f64, usize)> {
+    let mut zs: Vec<(f64, usize)> =
+        lv.q.iter()
             .enumerate()
             .filter_map(|(i, q)| {
                 let (q, _) = q.as_ref()?;
@@ -116,78 +140,76 @@ pub(crate) fn find_levels(
                     .then_some((q.z, i))
             })
             .collect();
-        if zs.len() < params.min_level_points {
-            continue;
+    zs.sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
+    zs
+}
+
+/// The grid indices of the most populous height window `2 half` wide over the ascending
+/// heights `zs` (the lowest such window), or `None` when it holds fewer than `min_points`.
+fn densest_window(zs: &[(f64, usize)], half: f64, min_points: usize) -> Option<Vec<usize>> {
+    let windows = height_windows(zs, half);
+    let most = windows.iter().map(|(lo, hi)| hi - lo).max().unwrap_or(0);
+    let (lo, hi) = windows
+        .into_iter()
+        .find(|(lo, hi)| hi - lo == most)
+        .unwrap_or((0, 0));
+    (hi - lo >= min_points).then(|| zs[lo..hi].iter().map(|&(_, i)| i).collect())
+}
+
+/// Half the height window of the floor and ceiling searches \[m\]: `refine_k` times the
+/// vertical tolerance of a typical grazing floor hit (`GRAZING_RAY_DZ` of the noise `s` and
+/// up's error `sigma_up` over `GRAZING_LEVER`), plus `flat_margin`.
+pub(crate) fn window_half(params: &LevelParams, s: f64, sigma_up: f64) -> f64 {
+    params.refine_k * (GRAZING_RAY_DZ * s + GRAZING_LEVER * sigma_up) + params.flat_margin
+}
+
+/// Per start `lo` over the ascending heights `zs`, the window `lo..hi` of the heights within
+/// `2 half` of `zs[lo]`: the one height-window scan behind the floor and ceiling searches
+/// ([`densest_window`] by height, `level_lines` by lines).
+pub(crate) fn height_windows(zs: &[(f64, usize)], half: f64) -> Vec<(usize, usize)> {
+    let mut windows = Vec::with_capacity(zs.len());
+    let mut hi = 0;
+    for lo in 0..zs.len() {
+        while hi < zs.len() && zs[hi].0 - zs[lo].0 <= 2.0 * half {
+            hi += 1;
         }
-        zs.sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
-        // A window as wide as the vertical tolerance of a typical grazing floor hit.
-        let half = params.refine_k * (0.3 * s + 2.0 * sigma_up) + params.flat_margin;
-        let mut best = (0usize, 0usize);
-        let mut lo = 0;
-        for hi in 0..zs.len() {
-            while zs[hi].0 - zs[lo].0 > 2.0 * half {
-                lo += 1;
-            }
-            if hi + 1 - lo > best.1 - best.0 {
-                best = (lo, hi + 1);
-            }
-        }
-        if best.1 - best.0 < params.min_level_points {
-            continue;
-        }
-        // The window holds wall points too (a wall's foot, or a band of wall at one height
-        // in a frame degrees off): the plane through most of its points, rather than through
-        // all of them, starts the rounds.
-        let window: Vec<usize> = zs[best.0..best.1].iter().map(|&(_, i)| i).collect();
-        let stepping: Vec<usize> = window.iter().copied().filter(|&i| levelish[i]).collect();
-        let cos = params.refine_level_cos();
-        let mut members = sampled_plane(
-            grid,
-            &window,
-            &stepping,
-            |n| n.dot(up).abs() >= cos,
-            s,
-            params,
-        )
-        .unwrap_or(window);
-        // A few rounds of refit and reassignment: the window's plane is only as level as the
-        // provisional up, so far points fall outside it at first.
-        let mut fit = None;
-        for round in 0..LEVEL_ROUNDS {
-            if members.len() < params.min_level_points || !two_rows_support(grid, &members) {
-                fit = None;
-                break;
-            }
-            let Some(f) = fit_members(grid, &members, s) else {
-                fit = None;
-                break;
-            };
-            fit = Some(f);
-            if round + 1 == LEVEL_ROUNDS {
-                break;
-            }
-            let model = LevelModel::new(&f, s);
-            members = zs
-                .iter()
-                .map(|&(_, i)| i)
-                .filter(|&i| {
-                    grid.points[i].as_ref().is_some_and(|g| {
-                        let (d, sd) = model.distance_sd(g, s, params.min_sigma);
-                        d <= params.refine_k * sd
-                    })
-                })
-                .collect();
-        }
-        if let Some(f) = fit {
-            if f.normal.dot(up).abs() >= params.refine_level_cos()
-                && f.misfit_ratio(s) <= params.refine_level_misfit
-                && clear_of_scanner(&f.normal, &f.centroid)
-            {
-                out.push(f);
-            }
-        }
+        windows.push((lo, hi));
     }
-    out
+    windows
+}
+
+/// `LEVEL_ROUNDS` rounds of refit and reassignment from `members`: the window's plane is only
+/// as level as the provisional up, so far points fall outside it at first. Each round takes
+/// the candidates `zs` within `refine_k` of their distance's standard deviation
+/// ([`LevelModel`]); `None` once too few points or scan lines remain.
+fn refit_rounds(
+    grid: &PoseGrid,
+    zs: &[(f64, usize)],
+    mut members: Vec<usize>,
+    params: &LevelParams,
+    s: f64,
+) -> Option<PlaneFit> {
+    for round in 0..LEVEL_ROUNDS {
+        if members.len() < params.min_level_points || !two_rows_support(grid, &members) {
+            return None;
+        }
+        let f = fit_members(grid, &members, s)?;
+        if round + 1 == LEVEL_ROUNDS {
+            return Some(f);
+        }
+        let model = LevelModel::new(&f, s);
+        members = zs
+            .iter()
+            .map(|&(_, i)| i)
+            .filter(|&i| {
+                grid.points[i].as_ref().is_some_and(|g| {
+                    let (d, sd) = model.distance_sd(g, s, params.min_sigma);
+                    d <= params.refine_k * sd
+                })
+            })
+            .collect();
+    }
+    None
 }
 
 /// The height in the level frame that a fiftieth of the points lie below (`lowest`) or
@@ -222,28 +244,4 @@ pub(crate) fn level_band<'a>(
         let into = if above { q.z - height } else { height - q.z };
         (into < band).then_some(i)
     })
-}
-
-/// Fewest points stepping as a ceiling does ([`LevelSteps::ceiling`]) among the highest
-/// points for these to stand for a ceiling in [`refine`]. Over 405,000 protocol poses at
-/// 1-10 cm (seeds 101-150, nine plans): poses more than 3 degrees off 498 -> 477, beyond 3
-/// sigmas 409 -> 395, ok and more than 5 degrees off 28 -> 27, for 0.02 points fewer leveled
-/// (at 15 the same within a few poses; with no such condition, a point fewer leveled).
-pub(crate) const CEILING_BAND_MIN_STEPS: usize = 5;
-
-/// Refit-and-reassign rounds when a floor or ceiling is first found.
-pub(crate) const LEVEL_ROUNDS: usize = 3;
-
-/// Floor or ceiling candidates must be this far from the scanner's height \[m\]: a level plane
-/// through the scanner is seen edge-on.
-pub(crate) const MIN_LEVEL_DISTANCE: f64 = 0.1;
-
-/// Whether the plane through `point` with unit `normal` passes clear of the scanner, as a
-/// floor's or ceiling's must, not only its points: each scan's points lie in that scan's own
-/// plane through the scanner whatever they hit, so a band of wall points from one or two scans
-/// (near the hinge axis the scans nearly coincide) fits a plane through the scanner that can
-/// pass for level. One such "ceiling", 7 cm above the scanner over wall points alone, leveled
-/// a pose 6 degrees off with a sigma of 0.7.
-pub(crate) fn clear_of_scanner(normal: &Vector3<f64>, point: &nalgebra::Point3<f64>) -> bool {
-    normal.dot(&point.coords).abs() >= MIN_LEVEL_DISTANCE
 }

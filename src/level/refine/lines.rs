@@ -46,47 +46,71 @@ pub(crate) fn level_lines(
     kind: SurfaceKind,
     params: &LevelParams,
 ) -> LevelEvidence {
-    let (grid, lv, s) = (ctx.grid, ctx.lv, ctx.s);
-    let floor = kind == SurfaceKind::Floor;
-    // Height key growing away from the surface's side: the outermost level surface first.
-    let key = |z: f64| if floor { z } else { -z };
-    let mut zs: Vec<(f64, usize)> =
-        lv.q.iter()
-            .enumerate()
-            .filter_map(|(i, q)| {
-                let (q, _) = q.as_ref()?;
-                (ctx.levelish[i] && !ctx.taken[i] && key(q.z) < -MIN_LEVEL_DISTANCE)
-                    .then_some((key(q.z), i))
-            })
-            .collect();
+    let (grid, s) = (ctx.grid, ctx.s);
+    let zs = line_candidates(ctx, kind == SurfaceKind::Floor);
     let min_points = params.level_line_min_points.max(3);
     if zs.len() < min_points {
         return LevelEvidence::None;
     }
-    zs.sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
-    let half = params.refine_k * (0.3 * s + 2.0 * ctx.sigma_up) + params.flat_margin;
-    // Window counts, from each start.
-    let mut counts = Vec::with_capacity(zs.len());
-    let mut hi = 0;
-    for lo in 0..zs.len() {
-        while hi < zs.len() && zs[hi].0 - zs[lo].0 <= 2.0 * half {
-            hi += 1;
-        }
-        counts.push((lo, hi));
-    }
-    let densest = counts.iter().map(|(lo, hi)| hi - lo).max().unwrap_or(0);
-    let Some(&(lo, hi)) = counts
-        .iter()
-        .find(|(lo, hi)| hi - lo >= min_points && 3 * (hi - lo) >= densest)
-    else {
+    let half = window_half(params, s, ctx.sigma_up);
+    let Some(height) = outermost_height(&zs, half, min_points) else {
         return LevelEvidence::None;
     };
-    let height = zs[(lo + hi) / 2].0;
-    let k = params.refine_k;
-    let mut rows: Vec<Vec<usize>> = vec![Vec::new(); grid.rows()];
-    let rc = grid.row_col();
-    for &(z, i) in &zs {
-        let Some((q, d)) = lv.q[i].as_ref() else {
+    let short = PLANE_LINE_MIN_POINTS.min(min_points);
+    let found: Vec<(LevelLine, Vec<usize>)> = rows_at_height(ctx, &zs, height, params)
+        .into_iter()
+        .filter_map(|row| fit_line(grid, row, ctx.up, Some(ctx.sigma_up), s, params, short))
+        .collect();
+    lines_evidence(ctx, found, min_points, params)
+}
+
+/// The candidates of [`level_lines`]: the points stepping like a level surface not yet in a
+/// model, more than `MIN_LEVEL_DISTANCE` below (`floor`) or above the scanner, as (height key
+/// growing away from the surface's side, grid index), ascending: the outermost level surface
+/// first.
+fn line_candidates(ctx: &LineContext, floor: bool) -> Vec<(f64, usize)> {
+    let key = |z: f64| if floor { z } else { -z };
+    let mut zs: Vec<(f64, usize)> = ctx
+        .lv
+        .q
+        .iter()
+        .enumerate()
+        .filter_map(|(i, q)| {
+            let (q, _) = q.as_ref()?;
+            (ctx.levelish[i] && !ctx.taken[i] && key(q.z) < -MIN_LEVEL_DISTANCE)
+                .then_some((key(q.z), i))
+        })
+        .collect();
+    zs.sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
+    zs
+}
+
+/// The level surface's height key in [`level_lines`]: the middle of the outermost window
+/// `2 half` wide over the ascending keys `zs` that holds `min_points` and a third as many as
+/// the densest window (a box top is not the floor).
+fn outermost_height(zs: &[(f64, usize)], half: f64, min_points: usize) -> Option<f64> {
+    let counts = height_windows(zs, half);
+    let densest = counts.iter().map(|(lo, hi)| hi - lo).max().unwrap_or(0);
+    let &(lo, hi) = counts
+        .iter()
+        .find(|(lo, hi)| hi - lo >= min_points && 3 * (hi - lo) >= densest)?;
+    Some(zs[(lo + hi) / 2].0)
+}
+
+/// Per scan (grid row), the candidates `zs` within their own vertical tolerance of `height`:
+/// `refine_k` standard deviations of the range noise along the vertical and an error of up
+/// `sigma_up` at their horizontal distance, plus `flat_margin`.
+fn rows_at_height(
+    ctx: &LineContext,
+    zs: &[(f64, usize)],
+    height: f64,
+    params: &LevelParams,
+) -> Vec<Vec<usize>> {
+    let (s, k) = (ctx.s, params.refine_k);
+    let mut rows: Vec<Vec<usize>> = vec![Vec::new(); ctx.grid.rows()];
+    let rc = ctx.grid.row_col();
+    for &(z, i) in zs {
+        let Some((q, d)) = ctx.lv.q[i].as_ref() else {
             continue;
         };
         let lever = q.xy().norm() * ctx.sigma_up;
@@ -95,11 +119,20 @@ pub(crate) fn level_lines(
             rows[rc.row(i)].push(i);
         }
     }
-    let short = PLANE_LINE_MIN_POINTS.min(min_points);
-    let found: Vec<(LevelLine, Vec<usize>)> = rows
-        .into_iter()
-        .filter_map(|row| fit_line(grid, row, ctx.up, Some(ctx.sigma_up), s, params, short))
-        .collect();
+    rows
+}
+
+/// What the fitted per-scan lines `found` are evidence of ([`level_lines`]): one plane when a
+/// full line (`min_points`) and short ones fit one, else the full lines alone, as one plane
+/// when two or more fit one ([`level_plane`]), else as lines when they are not skew beyond
+/// `LINES_PLANE_MISFIT`; nothing when they cannot be one floor.
+fn lines_evidence(
+    ctx: &LineContext,
+    found: Vec<(LevelLine, Vec<usize>)>,
+    min_points: usize,
+    params: &LevelParams,
+) -> LevelEvidence {
+    let (grid, s) = (ctx.grid, ctx.s);
     let full = |(l, _): &(LevelLine, Vec<usize>)| l.n >= min_points;
     // Short lines count only in a plane with a full one; without short lines, the full lines
     // alone are tried below.
@@ -136,16 +169,6 @@ pub(crate) fn level_lines(
     LevelEvidence::Lines(found.into_iter().map(|(l, _)| l).collect())
 }
 
-/// Fewest points of a scan's floor line that joins a plane through another scan's line of
-/// `level_line_min_points` or more ([`level_lines`]): in the plane it adds its distance from
-/// the other line, a lever arm, not a direction of its own. Traced, floor points of 7 and 11
-/// in two scans beside a third scan's line of 15-18 were left out, and the poses (Cramér-Rao
-/// bounds under 0.1 degree) failed. Over 432,000 protocol poses at 5-10 cm (nine plans, seeds
-/// 101-180), leveled 74.36 -> 74.71% with 40 -> 41 poses ok and more than 5 degrees off and
-/// 752 -> 744 more than 3 degrees off (at 5 points: 74.62%, 41 and 745); over 129,600 more
-/// (seeds 1-8, 11-14, 21-32), 74.32 -> 74.64% with 4 and 4; at 1 cm, 99.09 -> 99.12%.
-pub(crate) const PLANE_LINE_MIN_POINTS: usize = 3;
-
 /// The plane through level lines' points, with those points (ascending).
 pub(crate) fn lines_plane(
     grid: &PoseGrid,
@@ -168,16 +191,10 @@ pub(crate) fn level_plane(
 ) -> Option<LevelEvidence> {
     let s = ctx.s;
     (params.level_line_plane
-        && fit.misfit_ratio(s) <= params.refine_level_misfit
-        && fit.normal.dot(ctx.up).abs() >= params.refine_level_cos()
-        && clear_of_scanner(&fit.normal, &fit.centroid)
+        && checks::refined_level(&fit, ctx.up, s, params)
         && opaque(ctx.grid, &fit, s, params))
     .then_some(LevelEvidence::Plane(fit, members))
 }
-
-/// Largest misfit ratio of the plane through two or more level lines' points for the lines to
-/// stand as one floor or ceiling ([`level_lines`]).
-pub(crate) const LINES_PLANE_MISFIT: f64 = 3.0;
 
 /// Whether level lines (each with its points) can all lie in one plane: with three or more,
 /// each must lie in the plane of the others' points. Any two lines pass, as do lines of one
@@ -233,9 +250,6 @@ pub(crate) fn line_offset_sigmas(
     let sd = (var / (n * n) + lever2 * model.tilt * model.tilt).sqrt();
     (sum / n).abs() / sd.max(1e-12)
 }
-
-/// Rounds of outlier removal of a level line.
-pub(crate) const LINE_ROUNDS: usize = 3;
 
 /// One scan's points on a level surface as a [`LevelLine`], refitted without the points
 /// farther than `refine_k` sigmas from it (vertically and horizontally, each with its range
@@ -319,7 +333,7 @@ pub(crate) fn fit_line(
 /// the adjacent scans like the floor's ([`LevelSteps::floor`]) as one line, and likewise the
 /// ceiling's. Their height is not checked (no frame to check it in); the lines only start
 /// re-segmentation, which finds them again in its provisional level frame.
-pub fn start_lines(
+pub(crate) fn start_lines(
     grid: &PoseGrid,
     steps: &LevelSteps,
     params: &LevelParams,

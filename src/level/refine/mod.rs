@@ -19,6 +19,7 @@
 //! measurably help). The walls' planes are refitted free (not forced vertical): their tilt
 //! is the evidence of up; verticality only steers which points they get.
 
+use super::checks::{self, clear_of_scanner};
 use super::grid::{GridPoint, PlaneFit, PoseGrid};
 use super::patches::Patch;
 use super::up::{self, LevelLine, PlaneObs, UpSolution};
@@ -35,9 +36,10 @@ mod support;
 mod tests;
 mod walls;
 
+use crate::level::params::refine::*;
 pub(crate) use floor::opaque;
 use floor::*;
-pub use lines::start_lines;
+pub(crate) use lines::start_lines;
 use lines::*;
 pub use ransac::level_start;
 use ransac::*;
@@ -84,7 +86,7 @@ pub struct Refined {
 impl Refined {
     /// Up from the models alone, without the lines (`None` when they do not fix it), for
     /// range noise `sigma` as given to [`refine`].
-    pub fn without_lines(&self, params: &LevelParams, sigma: f64) -> Option<UpSolution> {
+    pub(crate) fn without_lines(&self, params: &LevelParams, sigma: f64) -> Option<UpSolution> {
         let s = sigma.max(params.min_sigma);
         let obs: Vec<PlaneObs> = self.models.iter().map(|m| m.obs(s, params)).collect();
         up::up_robust(&obs, s, params.iterations)
@@ -165,7 +167,7 @@ fn line_of(fit: &PlaneFit, level_from_robot: &Rotation3<f64>) -> Option<Line> {
 /// Refines up from a provisional solution by re-segmenting the grid in its level frame.
 /// `walls` are the wall patches of region growing (the first walls to assign points to); the
 /// floor and ceiling are found afresh. `None` when the refined model does not fix up.
-pub fn refine(
+pub(crate) fn refine(
     grid: &PoseGrid,
     start: &UpSolution,
     walls: &[&Patch],
@@ -280,17 +282,8 @@ fn assign_levels(
     level_fits: &[PlaneFit],
     level_ok: &[bool],
 ) -> (Vec<Vec<usize>>, Vec<bool>) {
-    let Frame {
-        grid,
-        params,
-        steps,
-        ref lv,
-        up,
-        s,
-        k,
-        sigma_up,
-        ..
-    } = *f;
+    let (grid, params, steps, lv, up, s, k, sigma_up) =
+        (f.grid, f.params, f.steps, &f.lv, f.up, f.s, f.k, f.sigma_up);
     let mut level_members: Vec<Vec<usize>> = vec![Vec::new(); level_fits.len()];
     let mut near_level = vec![false; grid.points.len()];
     let level_models: Vec<LevelModel> = level_fits.iter().map(|f| LevelModel::new(f, s)).collect();
@@ -359,17 +352,16 @@ fn assign_walls(
     discover: bool,
     seed_width: usize,
 ) -> WallAssignment {
-    let Frame {
-        grid,
-        params,
-        steps,
-        ref lv,
-        level_from_robot,
-        s,
-        k,
-        sigma_up,
-        ..
-    } = *f;
+    let (grid, params, steps, lv, level_from_robot, s, k, sigma_up) = (
+        f.grid,
+        f.params,
+        f.steps,
+        &f.lv,
+        f.level_from_robot,
+        f.s,
+        f.k,
+        f.sigma_up,
+    );
     // Walls: merge those that are one wall, then assign by horizontal distance.
     let mut lines: Vec<Line> = wall_fits
         .iter()
@@ -430,16 +422,8 @@ fn models_of(
     level_fits: &[PlaneFit],
     level_members: Vec<Vec<usize>>,
 ) -> (Vec<Model>, usize) {
-    let Frame {
-        grid,
-        params,
-        up,
-        s,
-        sigma,
-        k,
-        sigma_up,
-        ..
-    } = *f;
+    let (grid, params, up, s, sigma, k, sigma_up) =
+        (f.grid, f.params, f.up, f.s, f.sigma, f.k, f.sigma_up);
     let min_rows = params.refine_min_rows.max(2);
     let mut models: Vec<Model> = Vec::new();
     for members in wall_members {
@@ -475,9 +459,7 @@ fn models_of(
         } else {
             SurfaceKind::Ceiling
         };
-        if fit.misfit_ratio(s) > params.refine_level_misfit
-            || fit.normal.dot(&up).abs() < params.refine_level_cos()
-            || !clear_of_scanner(&fit.normal, &fit.centroid)
+        if !checks::refined_level(&fit, &up, s, params)
             // Over two scans it must agree with up (one leveled a pose 7 degrees off
             // with a sigma of 0.1); over three, it may overrule a wrong start.
             || (!three_rows_support(grid, &members) && level_z2(&fit, &up, s, sigma_up) > k * k)
@@ -497,17 +479,8 @@ fn level_line_evidence(
     walls: &WallAssignment,
     models: &mut Vec<Model>,
 ) -> Vec<LevelLine> {
-    let Frame {
-        grid,
-        params,
-        steps,
-        ref lv,
-        up,
-        s,
-        k,
-        sigma_up,
-        ..
-    } = *f;
+    let (grid, params, steps, lv, up, s, k, sigma_up) =
+        (f.grid, f.params, f.steps, &f.lv, f.up, f.s, f.k, f.sigma_up);
     let (lines, candidate, in_reach) = (&walls.lines, &walls.candidate, &walls.in_reach);
     let mut flat_lines: Vec<LevelLine> = Vec::new();
     if params.level_surfaces && params.level_lines {
@@ -589,12 +562,6 @@ fn solve_models(
     Some((sol, flat_lines))
 }
 
-/// Passes stop when up moves by less than this fraction of its uncertainty.
-const CONVERGED: f64 = 0.05;
-
-/// Largest up uncertainty used for assignment tolerances \[rad\].
-const MAX_SIGMA_UP: f64 = 0.06;
-
 fn start_sigma(start: &UpSolution, params: &LevelParams) -> f64 {
     let s = start.max_attitude_sigma();
     if s.is_finite() {
@@ -603,6 +570,3 @@ fn start_sigma(start: &UpSolution, params: &LevelParams) -> f64 {
         MAX_SIGMA_UP
     }
 }
-
-/// Lines closer in direction than this \[deg\] are pieces of one wall when both reach a point.
-const SIMILAR_LINES_DEG: f64 = 20.0;

@@ -3,12 +3,13 @@
 //! exists.
 
 use super::*;
+use crate::level::params::up::*;
 
 /// A start for poses where no first solution exists (the walls and region-grown floor could not
 /// fix up): the plane through most of the points whose range steps like a level surface's
 /// ([`LevelSteps::levelish`], which needs no up), found by a deterministic sample of point triples
 /// (RANSAC, Fischler and Bolles 1981), taken as level. `None` when no such plane holds
-/// `min_level_points` points in at least two scans with a normal within `up::MAX_TILT_DEG` (50 degrees) of the
+/// `min_level_points` points in at least two scans with a normal within `MAX_TILT_DEG` (50 degrees) of the
 /// robot's own up.
 pub fn level_start(
     grid: &PoseGrid,
@@ -24,7 +25,7 @@ pub fn level_start(
     if idx.len() < params.min_level_points {
         return None;
     }
-    let min_z = up::MAX_TILT_DEG.to_radians().cos();
+    let min_z = MAX_TILT_DEG.to_radians().cos();
     let members = sampled_plane(grid, &idx, &idx, |n| n.z.abs() >= min_z, s, params)?;
     let members = without_standing_rows(grid, members, s, params);
     if members.len() < params.min_level_points || !two_rows_support(grid, &members) {
@@ -130,6 +131,3 @@ pub(crate) fn count_beating(
     }
     best.is_none_or(|b| count > b).then_some(count)
 }
-
-/// Point triples tried by [`level_start`].
-pub(crate) const START_HYPOTHESES: usize = 48;

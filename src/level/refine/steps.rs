@@ -35,14 +35,6 @@ pub struct LevelSteps {
     pub floor_line: Vec<bool>,
 }
 
-/// Steps beyond this many standard deviations of the difference of two ranges count for
-/// [`LevelSteps::floor_line`] by their sign alone. Over 432,000 protocol poses at 5-10 cm
-/// (nine plans, seeds 101-180), leveled 74.16 -> 74.36% with 41 -> 40 poses ok and more than 5
-/// degrees off, and 764 -> 752 more than 3 degrees off (with floor and ceiling lines: at 1,
-/// 74.57% but 62 poses; at 3, 74.17% and 41); over 129,600 more (seeds 1-8, 11-14, 21-32),
-/// 74.15 -> 74.32% with 4 and 4; at 1 cm (seeds 1-8), 99.01 -> 99.09%.
-pub(crate) const LINE_STEP_SIGMAS: f64 = 2.0;
-
 /// [`LevelSteps`] of a grid at range noise `sigma`, each adjacent-row step judged once.
 pub fn level_steps(grid: &PoseGrid, params: &LevelParams, sigma: f64) -> LevelSteps {
     let two_ranges = std::f64::consts::SQRT_2 * sigma.max(params.min_sigma);

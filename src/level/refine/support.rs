@@ -3,6 +3,7 @@
 //! than one over three: one place for the rules that follow from that.
 
 use super::*;
+use crate::level::params::first_pass::LEVEL_ROW_SHARE;
 
 /// A level surface's members without an edge row (the lowest or highest scan among them) that
 /// stands off the plane of the other rows by more than `refine_k` sigmas ([`line_offset_sigmas`]).
@@ -75,15 +76,10 @@ pub(crate) fn supported_rows(per_row: &[usize], share: f64) -> usize {
     per_row.iter().filter(|&&n| n as f64 >= least).count()
 }
 
-/// A wall's rows count towards `refine_min_rows` only with this share of its points each: a
-/// scan line plus a few stray points of another scan leaves the plane free to turn about the
-/// line.
-pub(crate) const WALL_ROW_SHARE: f64 = 0.15;
-
 /// A level plane from one scan line is that scan's own plane (a line on the floor leaves the
 /// plane free to turn about it): at least two rows must each hold a fifth of the points.
 pub(crate) fn two_rows_support(grid: &PoseGrid, members: &[usize]) -> bool {
-    rows_supported(grid, members, 0.2) >= 2
+    rows_supported(grid, members, LEVEL_ROW_SHARE) >= 2
 }
 
 /// Whether a level plane spans three scans. Two scan lines that meet are coplanar whatever

@@ -90,13 +90,6 @@ pub(crate) fn discover_lines(
     out
 }
 
-/// A seed's points must fit its line within this multiple of the residual their noise
-/// explains \[1\].
-pub(crate) const SEED_MISFIT: f64 = 2.0;
-
-/// Rays without a usable point that a growing line may step over.
-pub(crate) const MAX_GAP: usize = 2;
-
 /// Sums for a 2D total-least-squares line.
 #[derive(Clone, Copy, Debug, Default)]
 pub(crate) struct Line2 {
