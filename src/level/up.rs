@@ -327,7 +327,7 @@ pub(crate) fn up_robust(planes: &[PlaneObs], sigma: f64, iterations: usize) -> O
         for b in &singles[i + 1..] {
             let c = a.cross(b);
             // Nearly parallel normals propose nothing reliable.
-            if c.norm() < 0.17 {
+            if c.norm() < PARALLEL_PROPOSAL_SIN {
                 continue;
             }
             candidates.push(c.normalize());
@@ -381,22 +381,6 @@ fn z2_of(terms: &[Term], up: &Vector3<f64>) -> f64 {
 fn cauchy2(z2: f64) -> f64 {
     1.0 / (1.0 + z2 / (CAUCHY_C * CAUCHY_C))
 }
-
-/// Pseudo degrees of freedom at a chi-square per degree of freedom of one, added to the
-/// weighted chi-square of [`solution_at`] before it scales the covariance. With a few planes
-/// (one to three degrees of freedom) the chi-square per degree of freedom is a noisy estimate
-/// of the variance's scale: a true model exceeds one by chance a third of the time and often
-/// by a factor of two or more, so the raw ratio inflated many good poses' sigmas at random,
-/// and the gate turned them away. The prior (the scaled inverse chi-square's, Gelman et al.
-/// 2013, *Bayesian Data Analysis*, sect. 3.2) pulls small samples towards one while a model
-/// that misfits over many planes still scales by its own ratio. Measured over 561,600
-/// protocol poses at 5-10 cm (nine plans, seeds 1-8, 11-14, 21-32 and 101-180): leveled
-/// 73.50 -> 74.16%, poses ok and more than 5 degrees off 45 -> 45; loosening the gate
-/// instead (1.4 -> 1.5 degrees) bought 1.4 points for 18 more such poses. A prior of 10
-/// levels 0.15 points more, but also a traced pose 4.3 degrees off at 3.03 of its sigmas
-/// (`tests/level_refine.rs`, ceiling seed 6). At 1 cm it is unchanged (99.0%, none beyond 3
-/// degrees).
-const CHI2_PRIOR_DOF: f64 = 5.0;
 
 /// The information matrix and covariance of `up` given the planes. With `robust`, the
 /// Cauchy weights of the fit are applied. The covariance is inflated by the weighted

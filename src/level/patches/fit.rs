@@ -32,7 +32,7 @@ pub(super) fn robust_fit(
 
 /// Cauchy weight of a point's residual over its own noise along the normal.
 pub(super) fn cauchy_weight(fit: &PlaneFit, g: &GridPoint, s: f64, params: &LevelParams) -> f64 {
-    let sd = s * g.dir.dot(&fit.normal).abs().max(0.3);
+    let sd = s * g.dir.dot(&fit.normal).abs().max(CAUCHY_RAY_SHARE);
     let z = fit.distance(&g.p) / (params.plane_cauchy * sd);
     1.0 / (1.0 + z * z)
 }

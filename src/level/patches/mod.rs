@@ -12,6 +12,7 @@ mod fit;
 mod split;
 mod trim;
 
+use crate::level::params::patches::*;
 use fit::*;
 pub use split::split_members;
 use split::*;

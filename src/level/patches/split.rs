@@ -75,7 +75,7 @@ pub(super) fn bent_across_rows(
         if let Some(g) = &grid.points[i] {
             let r = &mut rows[rc.row(i)];
             r.0 += fit.distance(&g.p);
-            r.1 += g.dir.dot(&fit.normal).powi(2).max(1e-4);
+            r.1 += g.dir.dot(&fit.normal).powi(2).max(ROW_BEND_DN2_FLOOR);
             r.2 += 1;
         }
     }

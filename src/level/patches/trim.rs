@@ -2,7 +2,6 @@
 //! plane (a wall patch that took in the floor at its foot).
 
 use super::*;
-use crate::level::params::patches::*;
 
 /// The members without the rows at either edge of the patch that the plane of its other rows
 /// does not explain; `None` when no row goes, and none at all (an empty list) when the patch

@@ -376,7 +376,7 @@ pub(crate) fn start_lines(
 /// directions span, within `refine_k` sigmas of their centroids' noise and their directions'
 /// uncertainty over the distance between them. Nearly parallel lines always can.
 pub(crate) fn coplanar(a: &LevelLine, b: &LevelLine, s: f64, params: &LevelParams) -> bool {
-    let Some(n) = a.dir.cross(&b.dir).try_normalize(0.05) else {
+    let Some(n) = a.dir.cross(&b.dir).try_normalize(PARALLEL_LINES_SIN) else {
         return true;
     };
     let gap = b.centroid - a.centroid;

@@ -94,7 +94,7 @@ pub(crate) fn sampled_plane(
         let (u, v) = (pb.p - pa.p, pc.p - pa.p);
         let cross = u.cross(&v);
         // Nearly collinear triples (one scan line) leave the plane free to turn.
-        if cross.norm() < 0.1 * u.norm() * v.norm() {
+        if cross.norm() < COLLINEAR_SIN * u.norm() * v.norm() {
             continue;
         }
         let normal = cross.normalize();
