@@ -125,7 +125,7 @@ fn a_far_wall_only_the_top_scan_reaches_is_kept() {
     let scans = scans_at(&room, &pose, &elevations(3, 5.0), 0.01, 4, 0);
     let e = level_pose(&scans, &LevelParams::default());
     assert!(e.is_ok(), "{:?}", e.failure);
-    let base = e.base_scan.unwrap();
+    let base = levelscan::pseudo_level::base_scan_index(&scans, &e, &PseudoLevelParams::default());
     let out = pseudo_level_scan(&scans, &e, &PseudoLevelParams::default());
     let hits = scans[base].hit.as_ref().unwrap();
     let mut front = 0;
@@ -160,7 +160,8 @@ fn floor_hits_at_a_walls_foot_are_not_kept_when_two_scans_see_the_floor() {
         let scans = scans_at(&room, &pose, &elevations(3, 5.0), 0.01, seed, 0);
         let e = level_pose(&scans, &LevelParams::default());
         assert!(e.is_ok(), "{:?}", e.failure);
-        let base = e.base_scan.unwrap();
+        let base =
+            levelscan::pseudo_level::base_scan_index(&scans, &e, &PseudoLevelParams::default());
         let hits = scans[base].hit.as_ref().unwrap();
         let out = pseudo_level_scan(&scans, &e, &PseudoLevelParams::default());
         let floor_kept = hits

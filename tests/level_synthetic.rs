@@ -307,7 +307,8 @@ fn pseudo_level_scan_keeps_walls_and_drops_floor_hits() {
         e.patches.len()
     );
     let out = pseudo_level_scan(&scans, &e, &PseudoLevelParams::default());
-    let base = &scans[e.base_scan.unwrap()];
+    let base =
+        &scans[levelscan::pseudo_level::base_scan_index(&scans, &e, &PseudoLevelParams::default())];
     assert_eq!(out.nrays(), base.nrays());
     assert_eq!(out.sequence, Some(7));
     assert!(out.true_pose.unwrap().is_planar());

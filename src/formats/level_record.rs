@@ -19,7 +19,7 @@ pub fn level_record(
 ) -> Scan {
     let mut scan = pseudo_level_scan(scans, est, pseudo);
     let base_elevation = scans
-        .get(base_scan_index(scans, est))
+        .get(base_scan_index(scans, est, pseudo))
         .and_then(|s| s.elevation);
     let level = json!({
         "status": if est.is_ok() { "ok" } else { "failed" },

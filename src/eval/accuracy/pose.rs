@@ -137,7 +137,7 @@ pub fn evaluate_pose(
         (att.theta_y - t.theta_y).abs(),
     );
     let pseudo = pseudo_level_scan(&seen, &est, &params.pseudo);
-    let base = &scans[base_scan_index(scans, &est)];
+    let base = &scans[base_scan_index(&seen, &est, &params.pseudo)];
     let planar = truth.to_pose2();
     let world_from_robot = truth.world_from_robot();
     let top = ceiling;

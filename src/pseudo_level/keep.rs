@@ -1,145 +1,11 @@
-//! Pseudo-level scans (paper sect. 6): one scan of the pose (the base scan) rotated into the
-//! level frame with `level_from_robot`, its z dropped, keeping only points on walls so that
-//! floor hits (phantom obstacles) never reach the 2D matcher.
-//!
-//! A point is kept when its ray had a return and it lies on a wall: inside a wall quad's span
-//! or a grown wall patch (the paper's test), or, beyond the paper, when the point in the same
-//! column of an adjacent scan lies nearly straight above or below it after leveling (walls are
-//! vertical; on the floor the same two rays land far apart horizontally at nearly the same
-//! height). That per-point test recovers corners and small features that no quad covers.
-//! Points at the floor's or ceiling's height (from floor/ceiling patches) are never kept. And a
-//! point clearly above the floor (and below the ceiling, or below the scanner when no ceiling
-//! was seen) is kept even when no other scan saw its wall: a far wall that only the highest
-//! scan reaches before the others meet the floor is still a wall. The floor's height comes from
-//! its patches, else from the lowest height at which many leveled points gather (a floor seen
-//! by fewer scans than a patch needs is still a crowd of points at one height, and nothing
-//! lies below it).
-//! Then gaps of at most `max_gap` rays between kept points are filled, for rays with a return.
+//! The pseudo-level scan's keep test (sect. 6, and beyond the paper): which points of one scan
+//! lie on walls, given the pose's estimate. See the module above for the rules.
 
-use crate::geometry::{Pose, rot_y};
+use super::PseudoLevelParams;
 use crate::level::grid::PoseGrid;
 use crate::level::patches::{UNLABELLED, level_height};
 use crate::level::{LevelEstimate, SurfaceKind, from_total_order_key, total_order_key};
-use crate::scan::Scan;
-use nalgebra::{Matrix3, Point3, Vector2, Vector3};
-
-/// Parameters of the pseudo-level scan.
-#[derive(Clone, Debug, PartialEq)]
-pub struct PseudoLevelParams {
-    /// Gaps of at most this many rays between kept points are filled \[rays\]. Default 3.
-    pub max_gap: usize,
-    /// The per-point vertical test: a pair of points in adjacent scans is wall-like when its
-    /// height difference exceeds this many times its horizontal distance (less noise) \[1\].
-    /// Default 1.5; 0 turns the test off.
-    pub vertical_ratio: f64,
-    /// Points within this height of the floor or ceiling (plus three sigmas of the range noise
-    /// along the vertical) are never kept \[m\]. Default 0.05.
-    pub floor_margin: f64,
-    /// Keep points that lie clear of the floor (and the ceiling) by their height alone, when
-    /// the floor's height is known: by `floor_margin`, plus three sigmas of the range noise
-    /// along the vertical, plus two sigmas of the attitude at the point's distance (two, not
-    /// three: the floor's height, measured from the same leveled points, shares much of that
-    /// error). Default true.
-    pub height_test: bool,
-}
-
-impl Default for PseudoLevelParams {
-    fn default() -> Self {
-        Self {
-            max_gap: 3,
-            vertical_ratio: 1.5,
-            floor_margin: 0.05,
-            height_test: true,
-        }
-    }
-}
-
-/// Builds the pseudo-level 2D scan of a pose from its scans and their estimate. Metadata come
-/// from the base scan: `sequence`, planar `odometry`/`true_pose`/`estimate`, `timestamp` and
-/// unknown fields. A failed pose gives a scan with every ray invalid.
-pub fn pseudo_level_scan(scans: &[Scan], est: &LevelEstimate, params: &PseudoLevelParams) -> Scan {
-    let base_index = base_scan_index(scans, est);
-    let Some(base) = scans.get(base_index) else {
-        return Scan::default();
-    };
-    let n = base.nrays();
-    let att = est.attitude.unwrap_or_default();
-    let level_from_robot: Matrix3<f64> = *att.level_from_robot().matrix();
-    let elevation = base.elevation.unwrap_or(0.0);
-    // Beam directions: `level_from_robot · Ry(e) · (cos phi, sin phi, 0)` (contract), with the
-    // rotations composed once.
-    let level_from_scanner: Matrix3<f64> = level_from_robot * rot_y(elevation).matrix();
-    let keep = if est.is_ok() {
-        kept_rays(scans, est, params, base_index, &level_from_robot)
-    } else {
-        vec![false; n]
-    };
-    let mut out = Scan {
-        sequence: base.sequence,
-        odometry: base.odometry.map(planar),
-        true_pose: base.true_pose.map(planar),
-        estimate: base.estimate.map(planar),
-        timestamp: base.timestamp,
-        extra: base.extra.clone(),
-        theta: Vec::with_capacity(n),
-        readings: Vec::with_capacity(n),
-        valid: Vec::with_capacity(n),
-        ..Scan::default()
-    };
-    // `Scan::point_in_robot`'s arithmetic, with its rotation and offset built once per scan
-    // and one sincos per ray shared with the direction.
-    let robot_from_scanner = rot_y(elevation);
-    let offset = base.hinge_offset_vector();
-    // The estimate's sines and cosines are those of every scan's bearings, the base's too.
-    let trig = est.bearing_trig.as_deref().filter(|t| t.len() == n);
-    for (i, &kept) in keep.iter().enumerate() {
-        let (sp, cp) = trig.map_or_else(|| base.theta[i].sin_cos(), |t| t[i]);
-        let ray = Vector3::new(cp, sp, 0.0);
-        // A hinge that moved while it scanned: this ray's own elevation (`Scan::ray_elevation`).
-        let own = base.ray_elevation.as_ref().map(|e| rot_y(e[i]));
-        let robot_from_ray = own.as_ref().unwrap_or(&robot_from_scanner);
-        let point = base
-            .range(i)
-            .map(|r| level_from_robot * (robot_from_ray * (offset + r * ray)));
-        let bearing = match &point {
-            Some(p) if p.x != 0.0 || p.y != 0.0 => p.y.atan2(p.x),
-            _ => {
-                let dir = match &own {
-                    Some(rot) => level_from_robot * (rot * ray),
-                    None => level_from_scanner * ray,
-                };
-                dir.y.atan2(dir.x)
-            }
-        };
-        out.theta.push(bearing);
-        match (kept, point) {
-            (true, Some(p)) => {
-                out.readings.push(Some(p.x.hypot(p.y)));
-                out.valid.push(true);
-            }
-            _ => {
-                out.readings.push(None);
-                out.valid.push(false);
-            }
-        }
-    }
-    out
-}
-
-/// The index of the base scan in `scans`: the one the estimate chose (most points on walls,
-/// sect. 6), or, for a pose that failed before choosing (too few scans, inconsistent scans),
-/// the scan nearest level elevation.
-pub fn base_scan_index(scans: &[Scan], est: &LevelEstimate) -> usize {
-    est.base_scan
-        .or_else(|| {
-            (0..scans.len()).min_by(|&a, &b| {
-                let ea = scans[a].elevation.unwrap_or(0.0).abs();
-                let eb = scans[b].elevation.unwrap_or(0.0).abs();
-                ea.total_cmp(&eb)
-            })
-        })
-        .unwrap_or(0)
-}
+use nalgebra::{Matrix3, Point3, Vector2};
 
 /// Fewest points that make a crowd at the floor's height.
 const MIN_GROUND_POINTS: usize = 20;
@@ -230,43 +96,67 @@ fn ground_crowd(
 /// Slack on how far a filled gap point may stray from its wall neighbours \[m\].
 const GAP_SLACK: f64 = 0.05;
 
-fn planar(p: Pose) -> Pose {
-    Pose::planar(p.x, p.y, p.rz)
+/// What the keep test needs of the whole pose, found once for all its scans: the floor's and
+/// ceiling's heights in the level frame and the band about the floor that blocks a point.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct Surfaces {
+    /// From ceiling patches (median of members).
+    ceiling_z: Option<f64>,
+    /// The floor's height for the height test: the floor patches', else the lowest crowd.
+    ground_z: Option<f64>,
+    /// The floor's height and the half-width about it, less the noise, that blocks a point.
+    floor_band: Option<(f64, f64)>,
+    /// The larger attitude sigma \[rad\].
+    attitude_sigma: f64,
 }
 
-/// Which rays of the base scan are wall points (before and after gap filling).
-fn kept_rays(
-    scans: &[Scan],
+impl Surfaces {
+    pub(super) fn of(
+        grid: &PoseGrid,
+        est: &LevelEstimate,
+        params: &PseudoLevelParams,
+        level_from_robot: &Matrix3<f64>,
+    ) -> Self {
+        let height_of = |kind| level_height(grid, &est.patches, kind, level_from_robot, 1);
+        let floor_z = height_of(SurfaceKind::Floor);
+        // The floor's height and the band about it that blocks a point. Without floor
+        // patches, only the floor's own hits: a crowd's height is exact to the noise, and a
+        // wider band would take the foot of every wall with it.
+        let (ground_z, floor_band) = match floor_z {
+            Some(f) => (Some(f), Some((f, params.floor_margin))),
+            None => {
+                let (crowd, floor) = ground_crowd(grid, level_from_robot, params.floor_margin);
+                (crowd, floor.map(|f| (f, GROUND_BAND)))
+            }
+        };
+        Surfaces {
+            ceiling_z: height_of(SurfaceKind::Ceiling),
+            ground_z,
+            floor_band,
+            attitude_sigma: est.sigmas.map_or(0.0, |s| s[0].max(s[1])),
+        }
+    }
+}
+
+/// Which points of grid row `row` are wall points (before and after gap filling), one per
+/// column.
+pub(super) fn kept_in_row(
+    grid: &PoseGrid,
     est: &LevelEstimate,
     params: &PseudoLevelParams,
-    base_index: usize,
+    surfaces: &Surfaces,
+    row: usize,
     level_from_robot: &Matrix3<f64>,
 ) -> Vec<bool> {
-    let base = &scans[base_index];
-    let n = base.nrays();
-    let Some(grid) = &est.grid else {
-        return vec![false; n];
-    };
-    let Some(row) = grid.scan_index.iter().position(|&s| s == base_index) else {
-        return vec![false; n];
-    };
+    let n = grid.cols;
     let sigma = est.range_sigma;
     let level = |p: &Point3<f64>| level_from_robot * p.coords;
-    // Floor and ceiling heights in the level frame, from their patches (median of members).
-    let height_of = |kind| level_height(grid, &est.patches, kind, level_from_robot, 1);
-    let floor_z = height_of(SurfaceKind::Floor);
-    let ceiling_z = height_of(SurfaceKind::Ceiling);
-    let attitude_sigma = est.sigmas.map_or(0.0, |s| s[0].max(s[1]));
-    // The floor's height and the band about it that blocks a point. Without floor patches,
-    // only the floor's own hits: a crowd's height is exact to the noise, and a wider band
-    // would take the foot of every wall with it.
-    let (ground_z, floor_band) = match floor_z {
-        Some(f) => (Some(f), Some((f, params.floor_margin))),
-        None => {
-            let (crowd, floor) = ground_crowd(grid, level_from_robot, params.floor_margin);
-            (crowd, floor.map(|f| (f, GROUND_BAND)))
-        }
-    };
+    let Surfaces {
+        ceiling_z,
+        ground_z,
+        floor_band,
+        attitude_sigma,
+    } = *surfaces;
     let mut is_wall = vec![false; n];
     let mut blocked = vec![false; n];
     let mut flat_points: Vec<Option<Vector2<f64>>> = vec![None; n];
