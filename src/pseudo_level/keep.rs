@@ -7,6 +7,9 @@ use crate::level::patches::{UNLABELLED, level_height};
 use crate::level::{LevelEstimate, SurfaceKind, from_total_order_key, total_order_key};
 use nalgebra::{Matrix3, Point3, Vector2};
 
+/// Height window of a crowd at the floor's height \[m\]: the floor's hits of one pose, leveled,
+/// gather within it at the noise of a level scan's rays (their vertical component is small).
+const CROWD_WINDOW: f64 = 0.05;
 /// Fewest points that make a crowd at the floor's height.
 const MIN_GROUND_POINTS: usize = 20;
 /// Half-width of the band around a crowd-found floor whose points are floor hits \[m\].
@@ -125,7 +128,7 @@ impl Surfaces {
         let (ground_z, floor_band) = match floor_z {
             Some(f) => (Some(f), Some((f, params.floor_margin))),
             None => {
-                let (crowd, floor) = ground_crowd(grid, level_from_robot, params.floor_margin);
+                let (crowd, floor) = ground_crowd(grid, level_from_robot, CROWD_WINDOW);
                 (crowd, floor.map(|f| (f, GROUND_BAND)))
             }
         };

@@ -14,7 +14,8 @@
 //! its patches, else from the lowest height at which many leveled points gather (a floor seen
 //! by fewer scans than a patch needs is still a crowd of points at one height, and nothing
 //! lies below it).
-//! Then gaps of at most `max_gap` rays between kept points are filled, for rays with a return.
+//! Then gaps of at most `max_gap` rays between kept points are filled, for rays with a return
+//! (`keep.rs`). The base scan is the one whose points this test keeps most of (`base.rs`).
 
 use crate::geometry::{Pose, rot_y};
 use crate::level::LevelEstimate;
@@ -33,8 +34,14 @@ pub struct PseudoLevelParams {
     /// height difference exceeds this many times its horizontal distance (less noise) \[1\].
     /// Default 1.5; 0 turns the test off.
     pub vertical_ratio: f64,
-    /// Points within this height of the floor or ceiling (plus three sigmas of the range noise
-    /// along the vertical) are never kept \[m\]. Default 0.05.
+    /// Points within this height of the floor or ceiling, plus three sigmas of their own
+    /// vertical noise (the range noise times the leveled ray's vertical component,
+    /// `sigma |u_z|`), are never kept \[m\]. It stands for what that noise model leaves out: a
+    /// floor flat to about a centimetre, and its height's own error (the median of its
+    /// patches' points, a few millimetres). Default 0.01: at 0.05, the wall hits within that
+    /// band of the floor, a wall's foot, were two thirds of the wall hits lost (1.7-8% of the
+    /// base scan's wall hits at 1-10 cm, docs/ESTIMATOR.md sect. 2), for no fewer floor hits
+    /// kept.
     pub floor_margin: f64,
     /// Keep points that lie clear of the floor (and the ceiling) by their height alone, when
     /// the floor's height is known: by `floor_margin`, plus three sigmas of the range noise
@@ -49,7 +56,7 @@ impl Default for PseudoLevelParams {
         Self {
             max_gap: 3,
             vertical_ratio: 1.5,
-            floor_margin: 0.05,
+            floor_margin: 0.01,
             height_test: true,
         }
     }
@@ -132,7 +139,7 @@ pub fn pseudo_level_scan(scans: &[Scan], est: &LevelEstimate, params: &PseudoLev
 }
 
 /// The index of the base scan in `scans` (sect. 6): for a leveled pose, the scan whose
-/// pseudo-level scan keeps most wall points ([`base::most_kept`]); for a failed pose, the one
+/// pseudo-level scan keeps most wall points (`base.rs`); for a failed pose, the one
 /// the estimate chose (most points on walls), or, when it failed before choosing (too few
 /// scans, inconsistent scans), the scan nearest level elevation.
 pub fn base_scan_index(scans: &[Scan], est: &LevelEstimate, params: &PseudoLevelParams) -> usize {
