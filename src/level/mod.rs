@@ -16,6 +16,7 @@
 //! Every parameter and fixed constant sits in `params` (per stage, with unit, default and why),
 //! and every accept/reject rule in one table, [`checks`].
 
+mod adopt;
 pub mod checks;
 pub(crate) mod eigen3;
 mod failure;
@@ -119,7 +120,8 @@ pub struct LevelEstimate {
     pub grid: Option<PoseGrid>,
     /// All coplanar quads, walls, floors and ceilings (see `kind`).
     pub quads: Vec<Polygon>,
-    /// Grown patches (all kinds).
+    /// Grown patches (all kinds); the refined segmentation's models instead when the attitude
+    /// comes from re-segmentation.
     pub patches: Vec<Patch>,
     /// Per grid point: patch index or [`UNLABELLED`].
     pub labels: Vec<u32>,
@@ -262,7 +264,11 @@ pub fn level_pose_with(
     let levels = first_pass::level_fits(&est, params);
     let first = first_pass::solve(&est, &levels, params, sigma);
     // Re-segmentation in the provisional level frame (after sect. 9), gated again.
-    let result = resegment::resegmented(&est, &levels, first, params);
+    let (result, refined) = resegment::resegmented(&est, &levels, first, params);
+    // The stages after it take the segmentation that produced the attitude.
+    if let Some(models) = refined {
+        adopt::adopt_refined(&mut est, models);
+    }
     // The wall points and base scan of the pseudo-level scan (sect. 6), then the attitude.
     est.wall_mask = wall_mask(&est);
     est.base_scan = est.grid.as_ref().map(|g| base_scan(g, &est.wall_mask));
@@ -300,8 +306,8 @@ fn segmented(
     }
 }
 
-/// Per grid point, whether it lies on a wall: inside a wall quad's span or a wall patch (the
-/// first segmentation's, sect. 6).
+/// Per grid point, whether it lies on a wall: inside a wall quad's span or a wall patch (of
+/// the segmentation that produced the attitude, sect. 6).
 fn wall_mask(est: &LevelEstimate) -> Vec<bool> {
     let Some(grid) = &est.grid else {
         return Vec::new();

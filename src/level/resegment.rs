@@ -15,13 +15,13 @@ use crate::level::params::resegment::*;
 /// first solution pinned down to `refine_above_sigma_deg` stands; otherwise the refined one
 /// replaces it when it passes the gate, and the kept one is widened by its distance from the
 /// other ([`widened_against_first`], [`widened_unconfirmed`], [`widened_from_start`]) and gated
-/// again.
+/// again. With it, the refined segmentation's models when the solution kept is the refined one.
 pub(crate) fn resegmented(
     est: &LevelEstimate,
     levels: &[PlaneFit],
     first: Result<UpSolution, FailReason>,
     params: &LevelParams,
-) -> Result<UpSolution, FailReason> {
+) -> (Result<UpSolution, FailReason>, Option<Vec<refine::Model>>) {
     let needs_refine = match &first {
         Ok(sol) => attitude_sigmas(sol, params)
             .iter()
@@ -29,13 +29,14 @@ pub(crate) fn resegmented(
         Err(_) => true,
     };
     if params.estimator != Estimator::Robust || params.refine_passes == 0 || !needs_refine {
-        return first;
+        return (first, None);
     }
     let mut result = first;
     let Refinement {
         accepted,
         raw,
         start,
+        models,
     } = refined_solution(est, levels, &result, params);
     let confirmed = accepted.is_some();
     // The solution kept and the other one of the two: the first when the refined one is
@@ -51,11 +52,12 @@ pub(crate) fn resegmented(
         (Ok(kept), None) => start.and_then(|s| widened_from_start(kept, &s)),
         (Err(_), _) => None,
     };
-    match widened {
+    let result = match widened {
         // Only its sigma changed: the walls' spread was judged already.
         Some(widened) => acceptable(&widened, params, true).map(|()| widened),
         None => result,
-    }
+    };
+    (result, models)
 }
 
 /// Re-segmentation in the provisional level frame ([`refine`]): its start, its refined model
@@ -212,6 +214,7 @@ pub(crate) fn refined_solution(
             .then_some(widened)
     });
     Refinement {
+        models: accepted.is_some().then_some(refined.models),
         accepted,
         raw,
         start,
@@ -219,12 +222,14 @@ pub(crate) fn refined_solution(
 }
 
 /// What re-segmentation gave: the refined solution when it passed the gate, the refined
-/// solution gated or not, and the solution it started from.
+/// solution gated or not, the solution it started from, and the refined models when accepted.
 #[derive(Default)]
 pub(crate) struct Refinement {
     pub(crate) accepted: Option<UpSolution>,
     pub(crate) raw: Option<UpSolution>,
     pub(crate) start: Option<UpSolution>,
+    /// The refined segmentation's models when its solution was accepted.
+    pub(crate) models: Option<Vec<refine::Model>>,
 }
 
 /// The re-segmented solution `kept`, widened by its disagreement with the first solution
