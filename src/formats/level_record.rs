@@ -4,7 +4,7 @@
 //! by the demo.
 
 use crate::level::{LevelEstimate, SurfaceKind};
-use crate::pseudo_level::{PseudoLevelParams, base_scan_index, pseudo_level_scan};
+use crate::pseudo_level::{PseudoLevelParams, pseudo_level_scan_and_base};
 use crate::scan::Scan;
 use nalgebra::Point3;
 use serde_json::{Value, json};
@@ -17,10 +17,8 @@ pub fn level_record(
     pseudo: &PseudoLevelParams,
     polygons: bool,
 ) -> Scan {
-    let mut scan = pseudo_level_scan(scans, est, pseudo);
-    let base_elevation = scans
-        .get(base_scan_index(scans, est, pseudo))
-        .and_then(|s| s.elevation);
+    let (mut scan, base) = pseudo_level_scan_and_base(scans, est, pseudo);
+    let base_elevation = scans.get(base).and_then(|s| s.elevation);
     let level = json!({
         "status": if est.is_ok() { "ok" } else { "failed" },
         "reason": est.failure.map(|r| r.as_str()),

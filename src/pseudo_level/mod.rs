@@ -66,6 +66,16 @@ impl Default for PseudoLevelParams {
 /// from the base scan: `sequence`, planar `odometry`/`true_pose`/`estimate`, `timestamp` and
 /// unknown fields. A failed pose gives a scan with every ray invalid.
 pub fn pseudo_level_scan(scans: &[Scan], est: &LevelEstimate, params: &PseudoLevelParams) -> Scan {
+    pseudo_level_scan_and_base(scans, est, params).0
+}
+
+/// [`pseudo_level_scan`] and its base scan's index in `scans` ([`base_scan_index`]), for a
+/// caller that needs both: the choice tries every scan's keep test, once.
+pub fn pseudo_level_scan_and_base(
+    scans: &[Scan],
+    est: &LevelEstimate,
+    params: &PseudoLevelParams,
+) -> (Scan, usize) {
     let level_from_robot = base::level_from_robot(est);
     // The base scan and its kept rays: for a leveled pose, the scan that keeps most.
     let (base_index, kept) = match base::most_kept_row(est, params, &level_from_robot) {
@@ -76,7 +86,7 @@ pub fn pseudo_level_scan(scans: &[Scan], est: &LevelEstimate, params: &PseudoLev
         None => (base_scan_index(scans, est, params), None),
     };
     let Some(base) = scans.get(base_index) else {
-        return Scan::default();
+        return (Scan::default(), base_index);
     };
     let n = base.nrays();
     let keep = kept
@@ -135,7 +145,7 @@ pub fn pseudo_level_scan(scans: &[Scan], est: &LevelEstimate, params: &PseudoLev
             }
         }
     }
-    out
+    (out, base_index)
 }
 
 /// The index of the base scan in `scans` (sect. 6): for a leveled pose, the scan whose

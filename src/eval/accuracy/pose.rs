@@ -6,7 +6,7 @@ use crate::eval::true_segments::TrueSegmentsFit;
 use crate::geometry::Pose;
 use crate::level::{FailReason, LevelParams, level_pose};
 use crate::plan::Segment;
-use crate::pseudo_level::{base_scan_index, pseudo_level_scan};
+use crate::pseudo_level::pseudo_level_scan_and_base;
 use crate::scan::{Hit, Scan};
 use nalgebra::Point2;
 use std::borrow::Cow;
@@ -136,8 +136,8 @@ pub fn evaluate_pose(
         (att.theta_x - t.theta_x).abs(),
         (att.theta_y - t.theta_y).abs(),
     );
-    let pseudo = pseudo_level_scan(&seen, &est, &params.pseudo);
-    let base = &scans[base_scan_index(&seen, &est, &params.pseudo)];
+    let (pseudo, base) = pseudo_level_scan_and_base(&seen, &est, &params.pseudo);
+    let base = &scans[base];
     let planar = truth.to_pose2();
     let world_from_robot = truth.world_from_robot();
     let top = ceiling;
