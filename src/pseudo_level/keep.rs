@@ -212,9 +212,20 @@ pub(super) fn kept_in_row(
             });
         }
     }
-    // Fill short gaps between wall points, only with rays that had a return, are not known
-    // floor or ceiling points, and lie near the two wall points either side: a ray through a
-    // doorway that meets the floor metres beyond is exactly the phantom to keep out.
+    filled_gaps(&is_wall, &blocked, &flat_points, sigma, params.max_gap)
+}
+
+/// `is_wall` with short gaps filled: runs of at most `max_gap` rays between two wall points,
+/// only with rays that had a return, are not known floor or ceiling points (`blocked`), and lie
+/// near the two wall points either side (`flat_points`, their level-frame positions): a ray
+/// through a doorway that meets the floor metres beyond is exactly the phantom to keep out.
+fn filled_gaps(
+    is_wall: &[bool],
+    blocked: &[bool],
+    flat_points: &[Option<Vector2<f64>>],
+    sigma: f64,
+    max_gap: usize,
+) -> Vec<bool> {
     let near_gap = |k: usize, l: usize, c: usize| -> bool {
         let (Some(p), Some(a), Some(b)) = (flat_points[k], flat_points[l], flat_points[c]) else {
             return false;
@@ -223,7 +234,7 @@ pub(super) fn kept_in_row(
         let t = ((p - a).dot(&ab) / ab.norm_squared().max(1e-12)).clamp(0.0, 1.0);
         (p - (a + ab * t)).norm() <= 0.5 * ab.norm() + 3.0 * sigma + GAP_SLACK
     };
-    let mut keep = is_wall.clone();
+    let mut keep = is_wall.to_vec();
     let mut last: Option<usize> = None;
     for (c, &wall) in is_wall.iter().enumerate() {
         if !wall {
@@ -231,7 +242,7 @@ pub(super) fn kept_in_row(
         }
         if let Some(l) = last {
             let gap = c - l - 1;
-            if gap > 0 && gap <= params.max_gap {
+            if gap > 0 && gap <= max_gap {
                 for k in l + 1..c {
                     keep[k] |= !blocked[k] && near_gap(k, l, c);
                 }
