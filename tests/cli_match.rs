@@ -307,7 +307,7 @@ fn help_shows_every_default() {
         "--format",
     ];
     // Switches (flags without a value) have no default to show.
-    let switches = ["--odometry-prior", "--one-way"];
+    let switches = ["--odometry-prior", "--one-way", "--whole-fallback"];
     let mut checked = 0;
     for b in &blocks {
         let flag_line = b.lines().next().unwrap().trim();

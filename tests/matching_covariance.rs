@@ -153,6 +153,14 @@ fn along_a_corridor_the_variance_is_much_larger() {
     assert!((t - s).norm() < 0.05 * s.norm(), "{t:?} vs {s:?}");
 }
 
+/// The odometry model's covariance of a step of 0.51 m and 0.02 rad: 2% of the step + 5 mm;
+/// 2% of 0.02 rad + 0.5 degree.
+fn odometry_covariance_of_corridor_step() -> Matrix3<f64> {
+    let s_xy = 0.02 * 0.5f64.hypot(0.1) + 0.005;
+    let s_th = 0.02 * 0.02 + 0.5f64.to_radians();
+    Matrix3::from_diagonal(&Vector3::new(s_xy * s_xy, s_xy * s_xy, s_th * s_th))
+}
+
 #[test]
 fn a_fallback_reports_the_odometry_model() {
     let walls = corridor();
@@ -162,13 +170,41 @@ fn a_fallback_reports_the_odometry_model() {
         (scan_at(&a, &walls, 181, 0.005, 1), Some(a)),
         (scan_at(&b, &walls, 181, 0.005, 2), Some(b)),
     ];
-    let reports = match_run(&scans, &MatcherParams::default());
+    // All-or-nothing matching throws the corridor's step away whole.
+    let mut whole = MatcherParams::default();
+    whole.checks.min_information_ratio = None;
+    let reports = match_run(&scans, &whole);
     assert!(matches!(reports[1].status, MatchStatus::Fallback(_)));
-    // 2% of the 0.51 m step + 5 mm; 2% of 0.02 rad + 0.5 degree.
-    let s_xy = 0.02 * 0.5f64.hypot(0.1) + 0.005;
-    let s_th = 0.02 * 0.02 + 0.5f64.to_radians();
-    let expected = Matrix3::from_diagonal(&Vector3::new(s_xy * s_xy, s_xy * s_xy, s_th * s_th));
+    let expected = odometry_covariance_of_corridor_step();
     assert!((reports[1].covariance - expected).norm() < 1e-15);
+    assert_eq!(reports[1].degenerate_directions().len(), 3);
+}
+
+#[test]
+fn along_a_corridor_without_an_end_the_length_carries_the_odometry_variance() {
+    let walls = corridor();
+    let a = Pose2::new(0.0, 0.0, 0.0);
+    let b = Pose2::new(0.5, 0.1, 0.02);
+    let scans = vec![
+        (scan_at(&a, &walls, 181, 0.005, 1), Some(a)),
+        (scan_at(&b, &walls, 181, 0.005, 2), Some(b)),
+    ];
+    let reports = match_run(&scans, &MatcherParams::default());
+    assert_eq!(reports[1].status, MatchStatus::Ok);
+    let odometry = odometry_covariance_of_corridor_step();
+    let c = &reports[1].covariance;
+    // x is the odometry's (the noisy normals tilt the free axis by a fraction of a degree);
+    // y and the heading the scan's, far below the odometry's and nearly uncorrelated with x.
+    assert!(
+        (c[(0, 0)] - odometry[(0, 0)]).abs() < 0.01 * odometry[(0, 0)],
+        "{c}"
+    );
+    for k in [1, 2] {
+        let rho = c[(0, k)] / (c[(0, 0)] * c[(k, k)]).sqrt();
+        assert!(rho.abs() < 0.1, "{c}");
+    }
+    assert!(c[(1, 1)] < 0.01 * odometry[(1, 1)] && c[(2, 2)] < 0.01 * odometry[(2, 2)]);
+    assert!(c.determinant() > 0.0);
 }
 
 /// The configurations the covariance must be honest at: rays, range noise sigma.

@@ -41,6 +41,23 @@ impl Sandwich {
         let c = h_inv * self.b * h_inv;
         Some((c + c.transpose()) * 0.5)
     }
+
+    /// The sandwich of the estimate's part along `basis` (pose-space vectors, the directions a
+    /// remapped solve took from the scan): with `x = x₀ + G z`, the rows' Jacobians over `z`
+    /// are `Gᵀ J`, so `H_z = Gᵀ H G`, `B_z = Gᵀ B G` and the covariance is
+    /// `G H_z⁻¹ B_z H_z⁻¹ Gᵀ` (rank `basis.len()`). `None` when `H_z` is singular.
+    pub fn covariance_along(&self, basis: &[Vector3<f64>]) -> Option<Matrix3<f64>> {
+        let g = nalgebra::Matrix3xX::from_columns(basis);
+        let h = g.transpose() * self.h * &g;
+        let scale = h.trace().abs();
+        if scale.is_nan() || scale <= 0.0 {
+            return None;
+        }
+        let h_inv = h.clone().cholesky()?.inverse();
+        let c = &g * (&h_inv * (g.transpose() * self.b * &g) * &h_inv) * g.transpose();
+        let c = Matrix3::from_iterator(c.iter().copied());
+        Some((c + c.transpose()) * 0.5)
+    }
 }
 
 /// The variance factor for what the sandwich cannot see:

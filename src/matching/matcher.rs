@@ -7,13 +7,14 @@
 
 use super::correlative::correlative_search;
 use super::covariance::{fuse, inflation, rays_per_degree, rotate_into};
-use super::icp::{IcpParams, IcpResult, icp, icp_with_prior};
+use super::icp::{IcpParams, IcpResult, icp, icp_remapped, icp_with_prior};
 use super::map::VoxelMap;
 pub use super::params::{
     CheckParams, Coarse, CovarianceParams, MatcherParams, Mode, OdometryPrior, RangeParams,
 };
 use super::reference::{Line, ScanReference, Target, estimate_lines};
 pub use super::report::{FallbackReason, MatchReport, MatchStatus};
+use super::solve::Remap;
 use crate::geometry::Pose2;
 use crate::scan::Scan;
 use nalgebra::{Matrix3, Point2, Vector2};
@@ -116,6 +117,7 @@ impl Matcher {
             residual: None,
             coarse: false,
             covariance: Matrix3::zeros(),
+            remapped: None,
         }
     }
 
@@ -210,7 +212,9 @@ impl Matcher {
         reference: &ScanReference,
         r: IcpResult,
     ) -> IcpResult {
-        if !self.params.symmetric {
+        // A match that took directions from the odometry keeps them exactly: the way back
+        // would move them by half its own (unpinned) answer.
+        if !self.params.symmetric || r.remapped.is_some_and(|m| m.free > 0) {
             return r;
         }
         let current = ScanReference::new(points.to_vec(), &Point2::origin(), &self.params.normals);
@@ -270,9 +274,11 @@ impl Matcher {
                 start = kf.estimate.compose(&r.pose);
                 // In the world frame, as the map's result is.
                 let covariance = r.covariance.map(|c| rotate_into(&c, -kf.estimate.theta));
+                let remapped = r.remapped.map(|m| m.rotated_into(-kf.estimate.theta));
                 local_ok = Some(IcpResult {
                     pose: start,
                     covariance,
+                    remapped,
                     ..r
                 });
             }
@@ -292,7 +298,11 @@ impl Matcher {
             .odometry_prior
             .filter(|_| self.has_odometry)
             .map(|o| o.around(guess, &step));
-        let result = icp_with_prior(points, &self.map, start, prior, &refine)
+        let result = match self.remap_around(guess, &step) {
+            Some(remap) => icp_remapped(points, &self.map, start, remap, &refine),
+            None => icp_with_prior(points, &self.map, start, prior, &refine),
+        };
+        let result = result
             .ok_or(FallbackReason::TooFewCorrespondences)
             .and_then(|r| self.check(r))
             .and_then(|r| self.gate(r, &guess));
@@ -372,9 +382,13 @@ impl Matcher {
             .odometry_prior
             .filter(|_| self.has_odometry)
             .map(|o| o.around(guess, &guess));
+        let remap = self.remap_around(guess, &guess);
         let run = |g: Pose2| {
-            icp_with_prior(points, target, g, prior, &p.icp)
-                .ok_or(FallbackReason::TooFewCorrespondences)
+            match remap {
+                Some(remap) => icp_remapped(points, target, g, remap, &p.icp),
+                None => icp_with_prior(points, target, g, prior, &p.icp),
+            }
+            .ok_or(FallbackReason::TooFewCorrespondences)
         };
         match p.coarse {
             Coarse::Never => (run(guess).and_then(|r| self.check(r)), false),
@@ -409,6 +423,21 @@ impl Matcher {
         }
     }
 
+    /// The anchor of a degeneracy-aware solve: the odometry's answer `at` for the odometry step
+    /// `step`, with the odometry model's information. `None` when switched off, or when the
+    /// odometry prior takes part in the solve (the MAP estimate already leans on the odometry
+    /// where the scan is weak).
+    fn remap_around(&self, at: Pose2, step: &Pose2) -> Option<Remap> {
+        if self.params.odometry_prior.is_some() && self.has_odometry {
+            return None;
+        }
+        Some(Remap {
+            anchor: self.odometry_model().around(at, step),
+            min_ratio: self.params.checks.min_information_ratio?,
+            min_constraint_ratio: self.params.checks.min_constraint_ratio,
+        })
+    }
+
     fn check(&self, r: IcpResult) -> Result<IcpResult, FallbackReason> {
         let c = &self.params.checks;
         if r.degenerate {
@@ -420,8 +449,11 @@ impl Matcher {
         if r.residual > c.max_residual {
             return Err(FallbackReason::HighResidual);
         }
-        if r.constraint_ratio
-            .is_some_and(|ratio| ratio < c.min_constraint_ratio)
+        // A remapped solve has tested each direction itself (and taken the weak ones from the
+        // odometry); the ratio is the all-or-nothing test.
+        if r.remapped.is_none()
+            && r.constraint_ratio
+                .is_some_and(|ratio| ratio < c.min_constraint_ratio)
         {
             return Err(FallbackReason::Degenerate);
         }
@@ -450,6 +482,7 @@ impl Matcher {
                     residual: Some(r.residual),
                     coarse,
                     covariance,
+                    remapped: r.remapped.map(|m| m.rotated_into(reference.theta)),
                 }
             }
             Err(reason) => {
@@ -479,10 +512,18 @@ impl Matcher {
         reference: &Reference,
     ) -> (Matrix3<f64>, Matrix3<f64>) {
         let odometry = self.odometry_model().step_covariance(&reference.step);
+        // Directions taken from the odometry carry its error along them (independent of the
+        // scan's part, which lies in the other directions of the whitened information).
+        let from_odometry = r
+            .remapped
+            .filter(|m| m.free > 0)
+            .map_or(Matrix3::zeros(), |m| {
+                m.free_covariance(&odometry.diagonal().map(f64::sqrt))
+            });
         let own = match r.covariance {
             Some(scan) => {
                 let k = inflation(&self.params.covariance, r.residual, self.rays_per_degree);
-                let scan = scan * k;
+                let scan = scan * k + from_odometry;
                 if self.params.odometry_prior.is_some() && self.has_odometry {
                     // The odometry's is isotropic in x, y: the same in every frame.
                     fuse(&scan, &odometry).unwrap_or(scan)
@@ -530,6 +571,7 @@ impl Matcher {
             residual: None,
             coarse: false,
             covariance,
+            remapped: None,
         }
     }
 }

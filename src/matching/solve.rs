@@ -9,9 +9,17 @@
 //! Here the translation is eliminated first (it is unconstrained), which leaves a quadratic in
 //! `r = (cos θ, sin θ)` on the unit circle; its global minimum is the root of the trust-region
 //! secular equation on the interval where `S + λI` is positive semidefinite.
+//!
+//! Where the scan does not pin the motion (a corridor leaves its length free), the solve keeps
+//! the directions it observes and takes the others from an anchor, the odometry: solution
+//! remapping (Zhang, Kaess and Singh 2016, "On degeneracy of optimization-based state
+//! estimation problems", sect. IV), with the directions found as the eigenvectors of the
+//! scan's information whitened by the anchor's (their eigenvalues are how many times more the
+//! scan knows along them than the odometry does).
 
-use crate::geometry::Pose2;
-use nalgebra::{Matrix2, Matrix4, Point2, Vector2, Vector4};
+use super::icp::PosePrior;
+use crate::geometry::{Pose2, wrap_angle};
+use nalgebra::{Matrix2, Matrix3, Matrix4, Point2, Vector2, Vector3, Vector4};
 
 /// Accumulates weighted residual rows `n · (R p + t - q)` and solves for `(R, t)`.
 #[derive(Clone, Debug, Default)]
@@ -92,6 +100,199 @@ impl RigidSolver {
         let t = a_inv * (gt - b * r);
         Ok(Pose2::new(t.x, t.y, r.y.atan2(r.x)))
     }
+}
+
+/// The anchor of a remapped solve: the odometry's pose and information, and how much more than
+/// the odometry the scan must know along a direction to be trusted along it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Remap {
+    /// The odometry's guess and its information, in the solve's (residual) units.
+    pub anchor: PosePrior,
+    /// Smallest ratio of the scan's information to the odometry's along a direction for the
+    /// scan to set it [-] (`CheckParams::min_information_ratio`).
+    pub min_ratio: f64,
+    /// Below this `λ_min / λ_max` of the pairs' normal scatter, the scatter's minor axis is
+    /// free whatever the information says [-] (`CheckParams::min_constraint_ratio`). Along a
+    /// long wall the fitted normals' own noise (a few degrees at grazing rays, weighted up
+    /// to 5 by incidence) looks like 10-40 times the odometry's information along it
+    /// (measured on simulated 1.5 m steps through a hall), which re-association would not
+    /// bear out: sliding along the wall finds the same wall.
+    pub min_constraint_ratio: f64,
+}
+
+/// Which directions of (x, y, yaw) a remapped solve took from the anchor.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Remapped {
+    /// Orthonormal eigenvectors of the whitened information (columns, coordinates `u` with
+    /// pose `= anchor + scale ⊙ u`), the `free` ones first, then by rising eigenvalue.
+    pub basis: Matrix3<f64>,
+    /// How many leading columns of `basis` came from the anchor (0 to 3).
+    pub free: usize,
+    /// The whitening: the anchor's standard deviations in residual units, per (x, y, yaw).
+    pub scale: Vector3<f64>,
+    /// The eigenvalues of the whitened information, in `basis` order [-].
+    pub ratios: Vector3<f64>,
+}
+
+impl Remapped {
+    /// The free directions as unit vectors over (x [m], y [m], yaw [rad]).
+    pub fn free_directions(&self) -> impl Iterator<Item = Vector3<f64>> + '_ {
+        (0..self.free).map(|k| self.scale.component_mul(&self.basis.column(k)).normalize())
+    }
+
+    /// The observed directions in pose coordinates (not unit length): the scan's subspace.
+    pub fn observed_basis(&self) -> impl Iterator<Item = Vector3<f64>> + '_ {
+        (self.free..3).map(|k| self.scale.component_mul(&self.basis.column(k)))
+    }
+
+    /// The same directions seen from a frame turned by `theta` (x, y rotated by `R(θ)ᵀ`);
+    /// the whitening is the same along x and y, so the basis stays orthonormal.
+    pub fn rotated_into(&self, theta: f64) -> Remapped {
+        let (s, c) = theta.sin_cos();
+        let r = Matrix3::new(c, s, 0.0, -s, c, 0.0, 0.0, 0.0, 1.0);
+        let same_xy = (self.scale.x - self.scale.y).abs() <= 1e-12 * self.scale.x.abs();
+        debug_assert!(same_xy, "anisotropic whitening does not rotate");
+        Remapped {
+            basis: r * self.basis,
+            ..*self
+        }
+    }
+
+    /// `Σ_f s f fᵀ s` over the free whitened directions `f`, `s` the given standard deviations
+    /// per (x, y, yaw): the covariance an anchor with those deviations gives the free part.
+    pub fn free_covariance(&self, sigma: &Vector3<f64>) -> Matrix3<f64> {
+        (0..self.free)
+            .map(|k| {
+                let v = sigma.component_mul(&self.basis.column(k));
+                v * v.transpose()
+            })
+            .sum()
+    }
+}
+
+impl RigidSolver {
+    /// The Gauss-Newton information over (t_x, t_y, θ) at heading `theta`: `Jᵀ M J` with
+    /// `J = ∂(t_x, t_y, cos θ, sin θ) / ∂(t_x, t_y, θ)`, the same `H` as the sandwich's.
+    pub fn information_at(&self, theta: f64) -> Matrix3<f64> {
+        let j = lift_jacobian(theta);
+        j.transpose() * self.m * j
+    }
+
+    /// Half the cost's gradient over (t_x, t_y, θ) at `pose`: `Jᵀ (M x - g)`.
+    fn half_gradient(&self, pose: &Pose2) -> Vector3<f64> {
+        let (s, c) = pose.theta.sin_cos();
+        let x = Vector4::new(pose.x, pose.y, c, s);
+        lift_jacobian(pose.theta).transpose() * (self.m * x - self.g)
+    }
+
+    /// The motion over the directions the scan observes, the rest held at the anchor
+    /// (solution remapping). With nothing free this is [`solve`](Self::solve) exactly; with
+    /// something free, Gauss-Newton steps from `at` (projected onto the anchor's subspace)
+    /// within the observed subspace, to convergence on these rows (the ICP loop re-associates
+    /// and calls again). All three free is [`SolveError::Degenerate`]. `sliding`, a unit
+    /// translation direction, is free in any case (the normal scatter's minor axis in a
+    /// corridor).
+    pub fn solve_remapped(
+        &self,
+        remap: &Remap,
+        at: &Pose2,
+        sliding: Option<Vector2<f64>>,
+    ) -> Result<(Pose2, Remapped), SolveError> {
+        let a = &remap.anchor;
+        let inv_sqrt = |w: f64| 1.0 / w.max(f64::MIN_POSITIVE).sqrt();
+        let scale = Vector3::new(
+            inv_sqrt(a.weight_xy),
+            inv_sqrt(a.weight_xy),
+            inv_sqrt(a.weight_theta),
+        );
+        let d = Matrix3::from_diagonal(&scale);
+        let info = d * self.information_at(at.theta) * d;
+        let (basis, forced) = match sliding {
+            None => (eigen_sorted(&info, Matrix3::identity(), 3), 0),
+            // The sliding axis (whitened: x and y share one scale), then the eigenvectors of
+            // the information on the plane orthogonal to it.
+            Some(v) => {
+                let e = Vector3::new(v.x, v.y, 0.0).normalize();
+                let b1 = Vector3::new(-e.y, e.x, 0.0);
+                let frame = Matrix3::from_columns(&[e, b1, Vector3::z()]);
+                (eigen_sorted(&info, frame, 2), 1)
+            }
+        };
+        let ratios = (basis.transpose() * info * basis).diagonal();
+        let free = forced
+            + (forced..3)
+                .filter(|&k| ratios[k] < remap.min_ratio || ratios[k].is_nan())
+                .count();
+        let remapped = Remapped {
+            basis,
+            free,
+            scale,
+            ratios,
+        };
+        match free {
+            0 => return self.solve().map(|p| (p, remapped)),
+            3 => return Err(SolveError::Degenerate),
+            _ => {}
+        }
+        // u: whitened offset from the anchor; its free components are zeroed (set to the
+        // anchor's), the observed ones move by Gauss-Newton.
+        let offset = |p: &Pose2| {
+            let dx = Vector3::new(
+                p.x - a.pose.x,
+                p.y - a.pose.y,
+                wrap_angle(p.theta - a.pose.theta),
+            );
+            dx.component_div(&scale)
+        };
+        let pose_of = |u: &Vector3<f64>| {
+            let dx = scale.component_mul(u);
+            Pose2::new(a.pose.x + dx.x, a.pose.y + dx.y, a.pose.theta + dx.z)
+        };
+        let u0 = basis.transpose() * offset(at);
+        let mut z: Vector3<f64> = Vector3::from_fn(|k, _| if k < free { 0.0 } else { u0[k] });
+        let mut pose = pose_of(&(basis * z));
+        for _ in 0..20 {
+            let h = basis.transpose() * d * self.information_at(pose.theta) * d * basis;
+            let grad = basis.transpose() * d * self.half_gradient(&pose);
+            let obs = 3 - free;
+            let h_obs = h.view((free, free), (obs, obs)).into_owned();
+            let g_obs = grad.rows(free, obs).into_owned();
+            let step = h_obs
+                .cholesky()
+                .ok_or(SolveError::Degenerate)?
+                .solve(&g_obs);
+            for k in 0..obs {
+                z[free + k] -= step[k];
+            }
+            pose = pose_of(&(basis * z));
+            if step.norm() < 1e-12 * (1.0 + z.norm()) {
+                break;
+            }
+        }
+        Ok((pose, remapped))
+    }
+}
+
+/// An orthonormal basis from `frame` (orthonormal columns): its first `3 - n` columns as they
+/// are, then the eigenvectors of `info` restricted to its last `n` columns, by rising
+/// eigenvalue.
+fn eigen_sorted(info: &Matrix3<f64>, frame: Matrix3<f64>, n: usize) -> Matrix3<f64> {
+    let keep = 3 - n;
+    let sub = frame.columns(keep, n).into_owned();
+    let eig = (sub.transpose() * info * &sub).symmetric_eigen();
+    let mut order: Vec<usize> = (0..n).collect();
+    order.sort_by(|&i, &j| eig.eigenvalues[i].total_cmp(&eig.eigenvalues[j]));
+    let mut basis = frame;
+    for (slot, &k) in order.iter().enumerate() {
+        basis.set_column(keep + slot, &(&sub * eig.eigenvectors.column(k)));
+    }
+    basis
+}
+
+/// `∂(t_x, t_y, cos θ, sin θ) / ∂(t_x, t_y, θ)`.
+fn lift_jacobian(theta: f64) -> nalgebra::Matrix4x3<f64> {
+    let (s, c) = theta.sin_cos();
+    nalgebra::Matrix4x3::new(1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, -s, 0.0, 0.0, c)
 }
 
 /// Minimises `r' S r - 2 h' r` over unit vectors `r` (S symmetric 2x2).
