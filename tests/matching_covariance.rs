@@ -207,6 +207,68 @@ fn along_a_corridor_without_an_end_the_length_carries_the_odometry_variance() {
     assert!(c.determinant() > 0.0);
 }
 
+#[test]
+fn along_a_corridor_the_covariance_is_honest_over_monte_carlo_draws() {
+    // 400 steps down an endless corridor (1 cm range noise), each with its own odometry
+    // error drawn from the odometry model: the length comes from the odometry, so its error
+    // has exactly the model's variance, and the width and heading come from the scan.
+    use rand::SeedableRng;
+    use rand_distr::{Distribution, Normal};
+    let walls = corridor();
+    let mut rng = rand::rngs::ChaCha8Rng::seed_from_u64(7);
+    let unit = Normal::new(0.0, 1.0).unwrap();
+    let mut steps = Vec::new();
+    let (mut err2_x, mut var_x) = (0.0, 0.0);
+    let trials = 400;
+    for k in 0..trials {
+        let truth = Pose2::new(
+            0.4 + 0.2 * unit.sample(&mut rng),
+            0.05 * unit.sample(&mut rng),
+            0.03 * unit.sample(&mut rng),
+        );
+        let s_xy = 0.02 * truth.translation().norm() + 0.005;
+        let s_th = 0.02 * truth.theta.abs() + 0.5f64.to_radians();
+        let odometry = Pose2::new(
+            truth.x + s_xy * unit.sample(&mut rng),
+            truth.y + s_xy * unit.sample(&mut rng),
+            truth.theta + s_th * unit.sample(&mut rng),
+        );
+        let a = Pose2::identity();
+        let scans = vec![
+            (scan_at(&a, &walls, 181, 0.01, 2 * k), Some(a)),
+            (
+                scan_at(&truth, &walls, 181, 0.01, 2 * k + 1),
+                Some(odometry),
+            ),
+        ];
+        let reports = match_run(&scans, &MatcherParams::default());
+        assert_eq!(reports[1].status, MatchStatus::Ok, "trial {k}");
+        assert_eq!(reports[1].degenerate_directions().len(), 1, "trial {k}");
+        let est = reports[1].estimate;
+        let error = Vector3::new(
+            est.x - truth.x,
+            est.y - truth.y,
+            wrap_angle(est.theta - truth.theta),
+        );
+        err2_x += error.x * error.x;
+        var_x += reports[1].covariance[(0, 0)];
+        steps.push(Step {
+            error,
+            covariance: reports[1].covariance,
+        });
+    }
+    let (within, nees) = honesty(&steps);
+    assert!(within >= 0.99, "{within} within 3 sigma");
+    assert!(nees > 0.1, "mean NEES / 3 = {nees}");
+    // Along the corridor the reported variance is the odometry's, and so is the error's.
+    let ratio = err2_x / var_x;
+    println!("corridor: {within} within 3 sigma, mean NEES / 3 {nees}, x error^2 / var {ratio}");
+    assert!(
+        (0.75..1.25).contains(&ratio),
+        "x: error^2 / variance = {ratio}"
+    );
+}
+
 /// The configurations the covariance must be honest at: rays, range noise sigma.
 const CASES: [(usize, f64); 3] = [(181, 0.01), (361, 0.01), (181, 0.03)];
 

@@ -14,10 +14,10 @@ pub use super::params::{
 };
 use super::reference::{Line, ScanReference, Target, estimate_lines};
 pub use super::report::{FallbackReason, MatchReport, MatchStatus};
-use super::solve::Remap;
+use super::solve::{Remap, symmetric_eigen_2x2};
 use crate::geometry::Pose2;
 use crate::scan::Scan;
-use nalgebra::{Matrix3, Point2, Vector2};
+use nalgebra::{Matrix2, Matrix3, Point2, Vector2};
 
 /// A scan's usable rays as robot-frame 2D points, in ray order.
 pub fn scan_points(scan: &Scan, ranges: &RangeParams) -> Vec<Point2<f64>> {
@@ -304,6 +304,7 @@ impl Matcher {
         };
         let result = result
             .ok_or(FallbackReason::TooFewCorrespondences)
+            .and_then(|r| self.free_as_the_scan_is(points, r))
             .and_then(|r| self.check(r))
             .and_then(|r| self.gate(r, &guess));
         // The map may only fine-tune the pairwise stage's answer: a big jump means the map
@@ -389,6 +390,7 @@ impl Matcher {
                 None => icp_with_prior(points, target, g, prior, &p.icp),
             }
             .ok_or(FallbackReason::TooFewCorrespondences)
+            .and_then(|r| self.free_as_the_scan_is(points, r))
         };
         match p.coarse {
             Coarse::Never => (run(guess).and_then(|r| self.check(r)), false),
@@ -436,6 +438,40 @@ impl Matcher {
             min_ratio: self.params.checks.min_information_ratio?,
             min_constraint_ratio: self.params.checks.min_constraint_ratio,
         })
+    }
+
+    /// A match may slide only where the scan's own geometry lets it. From a poor start,
+    /// trimming can keep just the pairs on one family of walls, and the solve then takes the
+    /// rest from a wrong odometry guess and settles there; a corridor's own lines are all
+    /// parallel. So the pairs' sliding axis must be the scan's own weak axis: its lines'
+    /// normal scatter along it at most `max_free_scatter` of the largest (in the scan's
+    /// frame; `target_from_scan` turns it). Otherwise the step is `degenerate`. (Directions
+    /// freed by the information test alone are ones the odometry knows better.)
+    fn free_as_the_scan_is(
+        &self,
+        points: &[Point2<f64>],
+        r: IcpResult,
+    ) -> Result<IcpResult, FallbackReason> {
+        let Some(m) = r.remapped.filter(|m| m.sliding) else {
+            return Ok(r);
+        };
+        let mut scatter = Matrix2::zeros();
+        for line in estimate_lines(points, &Point2::origin(), &self.params.normals)
+            .iter()
+            .flatten()
+        {
+            scatter += line.normal * line.normal.transpose();
+        }
+        let (_, largest, _) = symmetric_eigen_2x2(&scatter);
+        let (s, c) = r.pose.theta.sin_cos();
+        let axis = m.basis.column(0);
+        let t = Vector2::new(c * axis.x + s * axis.y, -s * axis.x + c * axis.y);
+        let own = (t.transpose() * scatter * t)[0] <= self.params.checks.max_free_scatter * largest;
+        if own && largest > 0.0 {
+            Ok(r)
+        } else {
+            Err(FallbackReason::Degenerate)
+        }
     }
 
     fn check(&self, r: IcpResult) -> Result<IcpResult, FallbackReason> {

@@ -128,6 +128,8 @@ pub struct Remapped {
     pub basis: Matrix3<f64>,
     /// How many leading columns of `basis` came from the anchor (0 to 3).
     pub free: usize,
+    /// Whether the first column is the pairs' sliding axis (free whatever the information).
+    pub sliding: bool,
     /// The whitening: the anchor's standard deviations in residual units, per (x, y, yaw).
     pub scale: Vector3<f64>,
     /// The eigenvalues of the whitened information, in `basis` order [-].
@@ -226,6 +228,7 @@ impl RigidSolver {
         let remapped = Remapped {
             basis,
             free,
+            sliding: forced == 1,
             scale,
             ratios,
         };
