@@ -149,6 +149,36 @@ mod tests {
     }
 
     #[test]
+    fn the_sandwich_along_a_basis_is_the_full_one_over_all_three_and_pins_only_its_span() {
+        let mut s = Sandwich::default();
+        for k in 0..10 {
+            let t = k as f64;
+            s.add(
+                Vector3::new(t.cos(), t.sin(), 0.3 * t),
+                0.01 * (1.0 + t),
+                1.0,
+            );
+        }
+        let axes = [Vector3::x(), Vector3::y(), Vector3::z()];
+        let full = s.covariance().unwrap();
+        assert!((s.covariance_along(&axes).unwrap() - full).norm() < 1e-12 * full.norm());
+        // Over y and yaw only: nothing along x, and the 2x2 sandwich of those rows.
+        let part = s.covariance_along(&axes[1..]).unwrap();
+        assert!(part.row(0).norm() == 0.0 && part.column(0).norm() == 0.0);
+        let mut sub = Sandwich::default();
+        for k in 0..10 {
+            let t = k as f64;
+            sub.add(Vector3::new(0.0, t.sin(), 0.3 * t), 0.01 * (1.0 + t), 1.0);
+        }
+        let h = sub.h.fixed_view::<2, 2>(1, 1).into_owned();
+        let b = sub.b.fixed_view::<2, 2>(1, 1).into_owned();
+        let h_inv = h.try_inverse().unwrap();
+        let expected = h_inv * b * h_inv;
+        let got = part.fixed_view::<2, 2>(1, 1).into_owned();
+        assert!((got - expected).norm() < 1e-9 * expected.norm());
+    }
+
+    #[test]
     fn parallel_rows_pin_nothing_across_them() {
         let mut s = Sandwich::default();
         for k in 0..10 {

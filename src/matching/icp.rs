@@ -111,6 +111,24 @@ pub struct IcpResult {
     pub remapped: Option<Remapped>,
 }
 
+impl IcpResult {
+    fn before_any_iteration(pose: Pose2) -> Self {
+        Self {
+            pose,
+            iterations: 0,
+            converged: false,
+            correspondences: 0,
+            associated: 0,
+            inliers: 0,
+            residual: f64::INFINITY,
+            constraint_ratio: None,
+            degenerate: false,
+            covariance: None,
+            remapped: None,
+        }
+    }
+}
+
 struct Pair {
     p: Point2<f64>,
     q: Point2<f64>,
@@ -180,19 +198,7 @@ fn icp_solving(
     }
     let mut pose = guess;
     let mut pairs: Vec<Pair> = Vec::with_capacity(source.len());
-    let mut result = IcpResult {
-        pose,
-        iterations: 0,
-        converged: false,
-        correspondences: 0,
-        associated: 0,
-        inliers: 0,
-        residual: f64::INFINITY,
-        constraint_ratio: None,
-        degenerate: false,
-        covariance: None,
-        remapped: None,
-    };
+    let mut result = IcpResult::before_any_iteration(pose);
     // The pose the last kept pairs were associated at: their residuals and Jacobians are there.
     let mut associated_at = pose;
     for iteration in 1..=params.max_iterations {
@@ -225,20 +231,10 @@ fn icp_solving(
             (kept_pairs.iter().map(|p| p.residual.powi(2)).sum::<f64>() / kept as f64).sqrt();
         let scatter = normal_scatter(kept_pairs);
         result.constraint_ratio = scatter.map(|(ratio, _)| ratio);
-        let solved = match &remap {
-            Some(remap) => {
-                let sliding = scatter
-                    .filter(|(ratio, _)| *ratio < remap.min_constraint_ratio)
-                    .map(|(_, minor)| minor);
-                solver
-                    .solve_remapped(remap, &pose, sliding)
-                    .map(|(next, how)| {
-                        result.remapped = Some(how);
-                        next
-                    })
-            }
-            None => solver.solve(),
-        };
+        let solved = solve(&solver, remap.as_ref(), scatter, &pose).map(|(next, how)| {
+            result.remapped = how.or(result.remapped);
+            next
+        });
         let next = match solved {
             Ok(next) => next,
             Err(_) => {
@@ -263,6 +259,24 @@ fn icp_solving(
         observed,
     );
     Some(result)
+}
+
+/// One solve: exact, or remapped (with the pairs' normal scatter's minor axis as the sliding
+/// axis when their scatter ratio is below the remap's `min_constraint_ratio`).
+fn solve(
+    solver: &RigidSolver,
+    remap: Option<&Remap>,
+    scatter: Option<(f64, Vector2<f64>)>,
+    pose: &Pose2,
+) -> Result<(Pose2, Option<Remapped>), super::solve::SolveError> {
+    let Some(remap) = remap else {
+        return solver.solve().map(|next| (next, None));
+    };
+    let sliding = scatter
+        .filter(|(ratio, _)| *ratio < remap.min_constraint_ratio)
+        .map(|(_, minor)| minor);
+    let (next, how) = solver.solve_remapped(remap, pose, sliding)?;
+    Ok((next, Some(how)))
 }
 
 /// The sandwich covariance over the kept pairs, each residual with the weight it had in the

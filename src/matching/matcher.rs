@@ -7,6 +7,7 @@
 
 use super::correlative::correlative_search;
 use super::covariance::{fuse, inflation, rays_per_degree, rotate_into};
+use super::degeneracy::{remap_around, slides_as_the_scan_does};
 use super::icp::{IcpParams, IcpResult, icp, icp_remapped, icp_with_prior};
 use super::map::VoxelMap;
 pub use super::params::{
@@ -14,10 +15,9 @@ pub use super::params::{
 };
 use super::reference::{Line, ScanReference, Target, estimate_lines};
 pub use super::report::{FallbackReason, MatchReport, MatchStatus};
-use super::solve::{Remap, symmetric_eigen_2x2};
 use crate::geometry::Pose2;
 use crate::scan::Scan;
-use nalgebra::{Matrix2, Matrix3, Point2, Vector2};
+use nalgebra::{Matrix3, Point2, Vector2};
 
 /// A scan's usable rays as robot-frame 2D points, in ray order.
 pub fn scan_points(scan: &Scan, ranges: &RangeParams) -> Vec<Point2<f64>> {
@@ -283,28 +283,14 @@ impl Matcher {
                 });
             }
         }
-        // The start is already within millimetres; in a map whose walls are a few voxels
-        // thick, associations keep flipping between neighbouring voxels below 0.1 mm, and
-        // chasing that costs iterations that grow with the map's age (measured: 6.9 -> 11.0
-        // iterations from the first to the last 100 scans of a 5000-scan run; 5.0 -> 4.8
-        // with the looser threshold, same accuracy).
-        let refine = IcpParams {
-            epsilon_xy: self.params.icp.epsilon_xy * 10.0,
-            epsilon_theta: self.params.icp.epsilon_theta * 10.0,
-            ..self.params.icp
-        };
-        let prior = self
-            .params
-            .odometry_prior
-            .filter(|_| self.has_odometry)
-            .map(|o| o.around(guess, &step));
-        let result = match self.remap_around(guess, &step) {
-            Some(remap) => icp_remapped(points, &self.map, start, remap, &refine),
-            None => icp_with_prior(points, &self.map, start, prior, &refine),
-        };
-        let result = result
-            .ok_or(FallbackReason::TooFewCorrespondences)
-            .and_then(|r| self.free_as_the_scan_is(points, r))
+        let result = self
+            .icp_anchored(
+                points,
+                &self.map,
+                start,
+                (guess, &step),
+                &self.refine_params(),
+            )
             .and_then(|r| self.check(r))
             .and_then(|r| self.gate(r, &guess));
         // The map may only fine-tune the pairwise stage's answer: a big jump means the map
@@ -378,20 +364,7 @@ impl Matcher {
         coarse_search: impl Fn(Pose2) -> Option<Pose2>,
     ) -> (Result<IcpResult, FallbackReason>, bool) {
         let p = &self.params;
-        // Only a real odometry step makes a prior (identity means "no odometry").
-        let prior = p
-            .odometry_prior
-            .filter(|_| self.has_odometry)
-            .map(|o| o.around(guess, &guess));
-        let remap = self.remap_around(guess, &guess);
-        let run = |g: Pose2| {
-            match remap {
-                Some(remap) => icp_remapped(points, target, g, remap, &p.icp),
-                None => icp_with_prior(points, target, g, prior, &p.icp),
-            }
-            .ok_or(FallbackReason::TooFewCorrespondences)
-            .and_then(|r| self.free_as_the_scan_is(points, r))
-        };
+        let run = |g: Pose2| self.icp_anchored(points, target, g, (guess, &guess), &p.icp);
         match p.coarse {
             Coarse::Never => (run(guess).and_then(|r| self.check(r)), false),
             Coarse::Always => {
@@ -425,53 +398,42 @@ impl Matcher {
         }
     }
 
-    /// The anchor of a degeneracy-aware solve: the odometry's answer `at` for the odometry step
-    /// `step`, with the odometry model's information. `None` when switched off, or when the
-    /// odometry prior takes part in the solve (the MAP estimate already leans on the odometry
-    /// where the scan is weak).
-    fn remap_around(&self, at: Pose2, step: &Pose2) -> Option<Remap> {
-        if self.params.odometry_prior.is_some() && self.has_odometry {
-            return None;
+    /// The map stage's ICP settings. Its start is already within millimetres; in a map whose
+    /// walls are a few voxels thick, associations keep flipping between neighbouring voxels
+    /// below 0.1 mm, and chasing that costs iterations that grow with the map's age
+    /// (measured: 6.9 -> 11.0 iterations from the first to the last 100 scans of a 5000-scan
+    /// run; 5.0 -> 4.8 with the looser threshold, same accuracy).
+    fn refine_params(&self) -> IcpParams {
+        IcpParams {
+            epsilon_xy: self.params.icp.epsilon_xy * 10.0,
+            epsilon_theta: self.params.icp.epsilon_theta * 10.0,
+            ..self.params.icp
         }
-        Some(Remap {
-            anchor: self.odometry_model().around(at, step),
-            min_ratio: self.params.checks.min_information_ratio?,
-            min_constraint_ratio: self.params.checks.min_constraint_ratio,
-        })
     }
 
-    /// A match may slide only where the scan's own geometry lets it. From a poor start,
-    /// trimming can keep just the pairs on one family of walls, and the solve then takes the
-    /// rest from a wrong odometry guess and settles there; a corridor's own lines are all
-    /// parallel. So the pairs' sliding axis must be the scan's own weak axis: its lines'
-    /// normal scatter along it at most `max_free_scatter` of the largest (in the scan's
-    /// frame; `target_from_scan` turns it). Otherwise the step is `degenerate`. (Directions
-    /// freed by the information test alone are ones the odometry knows better.)
-    fn free_as_the_scan_is(
+    /// ICP from `start` with the odometry's answer `odometry = (guess, step)` as a prior
+    /// (`odometry_prior`; only a real odometry step makes one: identity means "no odometry")
+    /// or as the anchor of the directions the scan leaves free.
+    fn icp_anchored(
         &self,
         points: &[Point2<f64>],
-        r: IcpResult,
+        target: &dyn Target,
+        start: Pose2,
+        (guess, step): (Pose2, &Pose2),
+        icp_params: &IcpParams,
     ) -> Result<IcpResult, FallbackReason> {
-        let Some(m) = r.remapped.filter(|m| m.sliding) else {
-            return Ok(r);
+        let result = match remap_around(&self.params, self.has_odometry, guess, step) {
+            Some(remap) => icp_remapped(points, target, start, remap, icp_params),
+            None => {
+                let prior = (self.params.odometry_prior)
+                    .filter(|_| self.has_odometry)
+                    .map(|o| o.around(guess, step));
+                icp_with_prior(points, target, start, prior, icp_params)
+            }
         };
-        let mut scatter = Matrix2::zeros();
-        for line in estimate_lines(points, &Point2::origin(), &self.params.normals)
-            .iter()
-            .flatten()
-        {
-            scatter += line.normal * line.normal.transpose();
-        }
-        let (_, largest, _) = symmetric_eigen_2x2(&scatter);
-        let (s, c) = r.pose.theta.sin_cos();
-        let axis = m.basis.column(0);
-        let t = Vector2::new(c * axis.x + s * axis.y, -s * axis.x + c * axis.y);
-        let own = (t.transpose() * scatter * t)[0] <= self.params.checks.max_free_scatter * largest;
-        if own && largest > 0.0 {
-            Ok(r)
-        } else {
-            Err(FallbackReason::Degenerate)
-        }
+        result
+            .ok_or(FallbackReason::TooFewCorrespondences)
+            .and_then(|r| slides_as_the_scan_does(&self.params, points, r))
     }
 
     fn check(&self, r: IcpResult) -> Result<IcpResult, FallbackReason> {

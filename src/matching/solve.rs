@@ -355,6 +355,7 @@ pub fn symmetric_eigen_2x2(m: &Matrix2<f64>) -> (f64, f64, Vector2<f64>) {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use nalgebra::Matrix3;
     use proptest::prelude::*;
 
     fn apply(t: &Pose2, p: &Point2<f64>) -> Point2<f64> {
@@ -400,6 +401,80 @@ mod tests {
             (est.x - 0.7).abs() < 1e-6 && (est.y - 0.5).abs() < 1e-3,
             "{est:?}"
         );
+    }
+
+    fn remap(anchor: Pose2) -> Remap {
+        Remap {
+            anchor: PosePrior {
+                pose: anchor,
+                weight_xy: 0.1,
+                weight_theta: 1.0,
+            },
+            min_ratio: 10.0,
+            min_constraint_ratio: 0.02,
+        }
+    }
+
+    /// Rows of a noise-free corridor along x (walls at y = +-1) seen after motion `truth`.
+    fn corridor(truth: &Pose2) -> RigidSolver {
+        let inv = truth.inverse();
+        let mut s = RigidSolver::new();
+        for i in 0..20 {
+            for y in [-1.0, 1.0] {
+                let q = Point2::new(-3.0 + 0.4 * i as f64, y);
+                s.add_line(Vector2::y(), &apply(&inv, &q), &Point2::new(0.0, y), 1.0);
+            }
+        }
+        s
+    }
+
+    #[test]
+    fn remapping_a_corridor_takes_its_length_from_the_anchor_exactly() {
+        let truth = Pose2::new(0.5, 0.1, 0.05);
+        let anchor = Pose2::new(0.57, 0.06, 0.03);
+        let s = corridor(&truth);
+        assert_eq!(s.solve(), Err(SolveError::Degenerate));
+        // Found by the information alone, or named as the sliding axis: the same answer.
+        for sliding in [None, Some(Vector2::x())] {
+            let (est, how) = s.solve_remapped(&remap(anchor), &truth, sliding).unwrap();
+            assert_eq!(how.free, 1);
+            assert_eq!(how.sliding, sliding.is_some());
+            let f: Vec<_> = how.free_directions().collect();
+            assert!((f[0].x.abs() - 1.0).abs() < 1e-12, "{f:?}");
+            assert!((est.x - anchor.x).abs() < 1e-12, "{est:?}");
+            assert!((est.y - truth.y).abs() < 1e-9 && (est.theta - truth.theta).abs() < 1e-9);
+            // The free part's covariance is the anchor's along x alone.
+            let c = how.free_covariance(&Vector3::new(0.03, 0.03, 0.01));
+            assert!((c - Matrix3::from_diagonal(&Vector3::new(9e-4, 0.0, 0.0))).norm() < 1e-12);
+        }
+    }
+
+    #[test]
+    fn remapping_with_nothing_free_is_the_exact_solve() {
+        let truth = Pose2::new(0.3, -0.2, 0.7);
+        let mut s = RigidSolver::new();
+        for k in 0..12 {
+            let p = Point2::new((k as f64).cos() * 3.0, (k as f64 * 1.7).sin() * 2.0);
+            s.add_point(&p, &apply(&truth, &p), 1.0);
+        }
+        let (est, how) = s
+            .solve_remapped(&remap(Pose2::identity()), &truth, None)
+            .unwrap();
+        assert_eq!(how.free, 0);
+        assert_eq!(Ok(est), s.solve());
+        // Its information is the sandwich's H: Jᵀ M J against the rows' own Jacobians.
+        let h = s.information_at(0.7);
+        let mut brute = Matrix3::zeros();
+        let (sn, c) = 0.7f64.sin_cos();
+        for k in 0..12 {
+            let p = Point2::new((k as f64).cos() * 3.0, (k as f64 * 1.7).sin() * 2.0);
+            let lever = Vector2::new(-sn * p.x - c * p.y, c * p.x - sn * p.y);
+            for n in [Vector2::x(), Vector2::y()] {
+                let j = Vector3::new(n.x, n.y, n.dot(&lever));
+                brute += j * j.transpose();
+            }
+        }
+        assert!((h - brute).norm() < 1e-9 * brute.norm());
     }
 
     #[test]
