@@ -330,7 +330,7 @@ fn help_shows_every_default() {
         "--format",
     ];
     // Switches (flags without a value) have no default to show.
-    let switches = ["--odometry-prior", "--one-way"];
+    let switches = ["--odometry-prior", "--one-way", "--whole-fallback"];
     let mut checked = 0;
     for b in &blocks {
         let flag_line = b.lines().next().unwrap().trim();
@@ -445,4 +445,71 @@ fn eval_real_scores_a_log_against_its_poses() {
     let one_metre: f64 = drift[2].split('/').next().unwrap().trim().parse().unwrap();
     assert!(one_metre < 0.5, "{table}");
     assert_eq!(&drift[3..7], &["-", "-", "-", "-"], "{table}");
+}
+
+#[test]
+fn match_defaults_to_metascan_and_says_so() {
+    let scans = simulated_level_scans(40);
+    let default = run_match(&[], &scans);
+    let metascan = run_match(&["--mode", "metascan"], &scans);
+    let pairwise = run_match(&["--mode", "pairwise"], &scans);
+    assert!(default.status.success() && pairwise.status.success());
+    assert_eq!(default.stdout, metascan.stdout);
+    assert_ne!(default.stdout, pairwise.stdout);
+    let help = bin().args(["match", "--help"]).output().unwrap();
+    let help = String::from_utf8(help.stdout).unwrap();
+    assert!(help.contains("[default: metascan]"), "{help}");
+}
+
+#[test]
+fn a_step_down_a_hall_keeps_what_the_scan_pins_and_says_what_came_from_odometry() {
+    // simulate | level | match on the long hall: steps between pillars take the hall's
+    // length from odometry; they stay `ok` and list that direction.
+    let sim = bin()
+        .args([
+            "simulate",
+            plan("long_hall").to_str().unwrap(),
+            "--seed",
+            "1",
+        ])
+        .output()
+        .unwrap();
+    assert!(sim.status.success());
+    let level = run_with_stdin(&["level"], &sim.stdout);
+    assert!(level.status.success());
+    for mode in ["pairwise", "metascan"] {
+        let out = run_with_stdin(&["match", "--mode", mode], &level.stdout);
+        assert!(out.status.success());
+        let recs = records(&out);
+        let mut partial = 0;
+        for r in &recs {
+            let m = &r["match"];
+            let free = m["degenerate_directions"].as_array().unwrap();
+            match m["status"].as_str().unwrap() {
+                "ok" if !free.is_empty() => {
+                    partial += 1;
+                    // The hall runs along x: the free direction is (nearly) its length.
+                    let d: Vec<f64> = free[0]
+                        .as_array()
+                        .unwrap()
+                        .iter()
+                        .map(|v| v.as_f64().unwrap())
+                        .collect();
+                    assert!((d.iter().map(|v| v * v).sum::<f64>() - 1.0).abs() < 1e-9);
+                    assert!(d[0].abs() > 0.9, "{mode}: {d:?}");
+                }
+                "ok" => {}
+                _ => {
+                    // Never thrown away for what the hall leaves free.
+                    let reason = m["reason"].as_str().unwrap();
+                    assert!(
+                        ["no_valid_rays", "high_residual"].contains(&reason),
+                        "{mode}: {m}"
+                    );
+                    assert_eq!(free.len(), 3);
+                }
+            }
+        }
+        assert!(partial >= 3, "{mode}: {partial} partial steps");
+    }
 }

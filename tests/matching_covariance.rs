@@ -153,6 +153,14 @@ fn along_a_corridor_the_variance_is_much_larger() {
     assert!((t - s).norm() < 0.05 * s.norm(), "{t:?} vs {s:?}");
 }
 
+/// The odometry model's covariance of a step of 0.51 m and 0.02 rad: 2% of the step + 5 mm;
+/// 2% of 0.02 rad + 0.5 degree.
+fn odometry_covariance_of_corridor_step() -> Matrix3<f64> {
+    let s_xy = 0.02 * 0.5f64.hypot(0.1) + 0.005;
+    let s_th = 0.02 * 0.02 + 0.5f64.to_radians();
+    Matrix3::from_diagonal(&Vector3::new(s_xy * s_xy, s_xy * s_xy, s_th * s_th))
+}
+
 #[test]
 fn a_fallback_reports_the_odometry_model() {
     let walls = corridor();
@@ -162,13 +170,103 @@ fn a_fallback_reports_the_odometry_model() {
         (scan_at(&a, &walls, 181, 0.005, 1), Some(a)),
         (scan_at(&b, &walls, 181, 0.005, 2), Some(b)),
     ];
-    let reports = match_run(&scans, &MatcherParams::default());
+    // All-or-nothing matching throws the corridor's step away whole.
+    let mut whole = MatcherParams::default();
+    whole.checks.min_information_ratio = None;
+    let reports = match_run(&scans, &whole);
     assert!(matches!(reports[1].status, MatchStatus::Fallback(_)));
-    // 2% of the 0.51 m step + 5 mm; 2% of 0.02 rad + 0.5 degree.
-    let s_xy = 0.02 * 0.5f64.hypot(0.1) + 0.005;
-    let s_th = 0.02 * 0.02 + 0.5f64.to_radians();
-    let expected = Matrix3::from_diagonal(&Vector3::new(s_xy * s_xy, s_xy * s_xy, s_th * s_th));
+    let expected = odometry_covariance_of_corridor_step();
     assert!((reports[1].covariance - expected).norm() < 1e-15);
+    assert_eq!(reports[1].degenerate_directions().len(), 3);
+}
+
+#[test]
+fn along_a_corridor_without_an_end_the_length_carries_the_odometry_variance() {
+    let walls = corridor();
+    let a = Pose2::new(0.0, 0.0, 0.0);
+    let b = Pose2::new(0.5, 0.1, 0.02);
+    let scans = vec![
+        (scan_at(&a, &walls, 181, 0.005, 1), Some(a)),
+        (scan_at(&b, &walls, 181, 0.005, 2), Some(b)),
+    ];
+    let reports = match_run(&scans, &MatcherParams::default());
+    assert_eq!(reports[1].status, MatchStatus::Ok);
+    let odometry = odometry_covariance_of_corridor_step();
+    let c = &reports[1].covariance;
+    // x is the odometry's (the noisy normals tilt the free axis by a fraction of a degree);
+    // y and the heading the scan's, far below the odometry's and nearly uncorrelated with x.
+    assert!(
+        (c[(0, 0)] - odometry[(0, 0)]).abs() < 0.01 * odometry[(0, 0)],
+        "{c}"
+    );
+    for k in [1, 2] {
+        let rho = c[(0, k)] / (c[(0, 0)] * c[(k, k)]).sqrt();
+        assert!(rho.abs() < 0.1, "{c}");
+    }
+    assert!(c[(1, 1)] < 0.01 * odometry[(1, 1)] && c[(2, 2)] < 0.01 * odometry[(2, 2)]);
+    assert!(c.determinant() > 0.0);
+}
+
+#[test]
+fn along_a_corridor_the_covariance_is_honest_over_monte_carlo_draws() {
+    // 400 steps down an endless corridor (1 cm range noise), each with its own odometry
+    // error drawn from the odometry model: the length comes from the odometry, so its error
+    // has exactly the model's variance, and the width and heading come from the scan.
+    use rand::SeedableRng;
+    use rand_distr::{Distribution, Normal};
+    let walls = corridor();
+    let mut rng = rand::rngs::ChaCha8Rng::seed_from_u64(7);
+    let unit = Normal::new(0.0, 1.0).unwrap();
+    let mut steps = Vec::new();
+    let (mut err2_x, mut var_x) = (0.0, 0.0);
+    let trials = 400;
+    for k in 0..trials {
+        let truth = Pose2::new(
+            0.4 + 0.2 * unit.sample(&mut rng),
+            0.05 * unit.sample(&mut rng),
+            0.03 * unit.sample(&mut rng),
+        );
+        let s_xy = 0.02 * truth.translation().norm() + 0.005;
+        let s_th = 0.02 * truth.theta.abs() + 0.5f64.to_radians();
+        let odometry = Pose2::new(
+            truth.x + s_xy * unit.sample(&mut rng),
+            truth.y + s_xy * unit.sample(&mut rng),
+            truth.theta + s_th * unit.sample(&mut rng),
+        );
+        let a = Pose2::identity();
+        let scans = vec![
+            (scan_at(&a, &walls, 181, 0.01, 2 * k), Some(a)),
+            (
+                scan_at(&truth, &walls, 181, 0.01, 2 * k + 1),
+                Some(odometry),
+            ),
+        ];
+        let reports = match_run(&scans, &MatcherParams::default());
+        assert_eq!(reports[1].status, MatchStatus::Ok, "trial {k}");
+        assert_eq!(reports[1].degenerate_directions().len(), 1, "trial {k}");
+        let est = reports[1].estimate;
+        let error = Vector3::new(
+            est.x - truth.x,
+            est.y - truth.y,
+            wrap_angle(est.theta - truth.theta),
+        );
+        err2_x += error.x * error.x;
+        var_x += reports[1].covariance[(0, 0)];
+        steps.push(Step {
+            error,
+            covariance: reports[1].covariance,
+        });
+    }
+    let (within, nees) = honesty(&steps);
+    assert!(within >= 0.99, "{within} within 3 sigma");
+    assert!(nees > 0.1, "mean NEES / 3 = {nees}");
+    // Along the corridor the reported variance is the odometry's, and so is the error's.
+    let ratio = err2_x / var_x;
+    println!("corridor: {within} within 3 sigma, mean NEES / 3 {nees}, x error^2 / var {ratio}");
+    assert!(
+        (0.75..1.25).contains(&ratio),
+        "x: error^2 / variance = {ratio}"
+    );
 }
 
 /// The configurations the covariance must be honest at: rays, range noise sigma.

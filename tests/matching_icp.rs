@@ -72,7 +72,7 @@ fn point_to_point_recovers_a_known_motion_exactly_with_exact_partners() {
 }
 
 #[test]
-fn a_corridor_is_flagged_degenerate() {
+fn a_corridor_is_flagged_degenerate_when_matching_all_or_nothing() {
     let walls = corridor();
     let truth = [Pose2::new(0.0, 0.0, 0.0), Pose2::new(0.5, 0.1, 0.02)];
     let scans: Vec<_> = truth
@@ -83,6 +83,7 @@ fn a_corridor_is_flagged_degenerate() {
     for metric in [Metric::PointToLine, Metric::PointToPoint] {
         let mut params = MatcherParams::default();
         params.icp.metric = metric;
+        params.checks.min_information_ratio = None;
         let reports = match_run(&scans, &params);
         assert_eq!(
             reports[1].status,
@@ -91,6 +92,106 @@ fn a_corridor_is_flagged_degenerate() {
         );
         // The fallback is the odometry.
         assert!(close(&reports[1].estimate, &truth[1], 1e-12, 1e-12));
+    }
+}
+
+/// Two scans in a corridor turned by `heading` (noise-free), the second with odometry off
+/// by `odometry_error` (in the first scan's frame), matched with `params`.
+fn corridor_step(
+    heading: f64,
+    odometry_error: Pose2,
+    params: &MatcherParams,
+) -> (levelscan::matching::MatchReport, Pose2, Pose2) {
+    let turn = Pose2::new(0.0, 0.0, heading);
+    let walls: Vec<Segment> = corridor()
+        .iter()
+        .map(|(u, v)| (turn.transform_point(u), turn.transform_point(v)))
+        .collect();
+    let a = turn;
+    let step = Pose2::new(0.6, 0.08, 0.03);
+    let b = a.compose(&step);
+    let odometry_step = Pose2::new(
+        step.x + odometry_error.x,
+        step.y + odometry_error.y,
+        step.theta + odometry_error.theta,
+    );
+    let scans = vec![
+        (scan_at(&a, &walls, 181, 0.0, 1), Some(a)),
+        (
+            scan_at(&b, &walls, 181, 0.0, 2),
+            Some(a.compose(&odometry_step)),
+        ),
+    ];
+    let reports = match_run(&scans, params);
+    (reports[1], step, odometry_step)
+}
+
+#[test]
+fn a_corridor_takes_its_length_from_the_odometry_and_the_rest_from_the_scan() {
+    // Odometry 7 cm long, 4 cm to the side and 1.1 degrees off: the corridor's walls fix the
+    // side and the heading exactly, its length is the odometry's, whatever way it points.
+    let error = Pose2::new(0.07, -0.04, 0.02);
+    for heading in [0.0, 30f64.to_radians(), -2.0] {
+        let (report, truth, odometry) = corridor_step(heading, error, &MatcherParams::default());
+        assert_eq!(report.status, MatchStatus::Ok, "{heading}");
+        let start = Pose2::new(0.0, 0.0, heading);
+        let step = start.between(&report.estimate);
+        // In the first scan's frame the corridor runs along x.
+        assert!((step.x - odometry.x).abs() < 1e-9, "{heading}: {step:?}");
+        assert!((step.y - truth.y).abs() < 1e-9, "{heading}: {step:?}");
+        assert!(
+            wrap_angle(step.theta - truth.theta).abs() < 1e-9,
+            "{heading}: {step:?}"
+        );
+        let free = report.degenerate_directions();
+        assert_eq!(free.len(), 1, "{heading}: {free:?}");
+        let f = free[0];
+        assert!(
+            f[0].abs() > 1.0 - 1e-9 && f[1].abs() < 1e-6 && f[2].abs() < 1e-6,
+            "{f:?}"
+        );
+    }
+    // Point-to-point pairs slide too; its free direction is the same, its fit only close.
+    let mut params = MatcherParams::default();
+    params.icp.metric = Metric::PointToPoint;
+    let (report, truth, odometry) = corridor_step(0.3, error, &params);
+    assert_eq!(report.status, MatchStatus::Ok);
+    let step = Pose2::new(0.0, 0.0, 0.3).between(&report.estimate);
+    assert!((step.x - odometry.x).abs() < 1e-9, "{step:?}");
+    assert!((step.y - truth.y).abs() < 0.01 && (step.theta - truth.theta).abs() < 0.01);
+    assert_eq!(report.degenerate_directions().len(), 1);
+}
+
+#[test]
+fn in_a_room_nothing_is_free_and_the_match_is_the_all_or_nothing_one() {
+    let walls = office();
+    let truth = [Pose2::new(2.0, 1.5, 0.3), Pose2::new(2.15, 1.58, 0.36)];
+    let odometry = [truth[0], Pose2::new(2.2, 1.55, 0.34)];
+    let scans: Vec<_> = (0..2)
+        .map(|i| {
+            (
+                scan_at(&truth[i], &walls, 181, 0.01, i as u64),
+                Some(odometry[i]),
+            )
+        })
+        .collect();
+    for mode in [Mode::Pairwise, Mode::Metascan] {
+        let params = MatcherParams {
+            mode,
+            ..MatcherParams::default()
+        };
+        let mut whole = params;
+        whole.checks.min_information_ratio = None;
+        let (aware, all_or_nothing) = (match_run(&scans, &params), match_run(&scans, &whole));
+        assert_eq!(aware[1].status, MatchStatus::Ok, "{mode:?}");
+        assert!(aware[1].degenerate_directions().is_empty(), "{mode:?}");
+        assert_eq!(aware[1].remapped.map(|m| m.free), Some(0), "{mode:?}");
+        assert_eq!(aware[1].estimate, all_or_nothing[1].estimate, "{mode:?}");
+        assert_eq!(
+            aware[1].covariance, all_or_nothing[1].covariance,
+            "{mode:?}"
+        );
+        assert!(close(&aware[1].estimate, &truth[1], 0.01, 0.01), "{mode:?}");
     }
 }
 
@@ -252,6 +353,69 @@ fn the_correction_gate_applies_only_to_a_guess_from_odometry() {
                 "{:?}",
                 reports[1].status
             ),
+        }
+    }
+}
+
+/// The halls of examples/plans (tilted 30-pose runs, 1.5 m steps, long parallel walls and a
+/// few pillars), leveled and matched as `eval matching` does: where a pose leveled, its scan
+/// pins some direction (the hall's width and the heading at least), so no step may be thrown
+/// away whole for degeneracy; the rest comes from odometry.
+#[test]
+fn tilted_runs_through_large_halls_keep_what_the_scans_pin() {
+    use levelscan::eval::matching::{ExperimentParams, RunKind, matching_experiment};
+    // All-or-nothing matching throws many of these steps away whole.
+    let path =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/plans/long_hall.wall");
+    let plan = levelscan::formats::read_plan(&path).unwrap();
+    let mut whole = ExperimentParams::default();
+    whole.matcher.checks.min_information_ratio = None;
+    let (_, runs) = matching_experiment(&plan, &whole);
+    let thrown = runs
+        .iter()
+        .filter(|r| r.kind == RunKind::Leveled && r.mode == Mode::Pairwise)
+        .flat_map(|r| &r.reports)
+        .filter(|r| r.status == MatchStatus::Fallback(FallbackReason::Degenerate))
+        .count();
+    assert!(thrown >= 5, "{thrown} degenerate steps");
+    // Seeds 1-3 (the odometry draws): on seed 4 one step of 3.3 sigma odometry error falls
+    // where nothing in view pins the hall's length, and metascan reaches 5.7 cm.
+    for plan in ["long_hall", "wide_hall"] {
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("examples/plans")
+            .join(format!("{plan}.wall"));
+        let plan = levelscan::formats::read_plan(&path).unwrap();
+        for seed in 1..=3 {
+            let params = ExperimentParams {
+                seed,
+                ..ExperimentParams::default()
+            };
+            let (_, runs) = matching_experiment(&plan, &params);
+            for run in runs.iter().filter(|r| r.kind == RunKind::Leveled) {
+                let ate = run.ate.as_ref().unwrap().rmse;
+                let limit = match run.mode {
+                    Mode::Pairwise => 0.10,
+                    Mode::Metascan => 0.05,
+                };
+                assert!(
+                    ate <= limit,
+                    "{path:?} seed {seed} {:?}: ATE {ate}",
+                    run.mode
+                );
+                for (i, r) in run.reports.iter().enumerate() {
+                    assert!(
+                        !matches!(
+                            r.status,
+                            MatchStatus::Fallback(
+                                FallbackReason::Degenerate | FallbackReason::TooFewCorrespondences
+                            )
+                        ),
+                        "{path:?} seed {seed} {:?} step {i}: {:?}",
+                        run.mode,
+                        r.status
+                    );
+                }
+            }
         }
     }
 }

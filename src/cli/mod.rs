@@ -46,7 +46,8 @@ pub enum Command {
     Simulate(Box<simulate::Args>),
     /// Estimate each pose's attitude and write one pseudo-level scan per pose.
     Level(level::Args),
-    /// Match 2D scans pairwise or against a growing map; fills in `estimate`.
+    /// Match 2D scans against a growing map (metascan, the default) or pairwise; fills in
+    /// `estimate`.
     Match(matching::Args),
     /// Parse a scan file and summarise it as one JSON object.
     Info(info::Args),

@@ -13,7 +13,7 @@
 use super::metrics::{Ate, Rpe, ate, rpe};
 use crate::geometry::{Pose, Pose2};
 use crate::level::{LevelParams, level_pose};
-use crate::matching::{MatchStatus, MatcherParams, Mode, match_run, scan_points};
+use crate::matching::{MatchReport, MatchStatus, MatcherParams, Mode, match_run, scan_points};
 use crate::plan::Plan;
 use crate::pseudo_level::{PseudoLevelParams, pseudo_level_scan};
 use crate::scan::Scan;
@@ -95,6 +95,9 @@ pub struct RunResult {
     /// Each scan's points in its own frame (for maps).
     #[serde(skip)]
     pub points: Vec<Vec<Point2<f64>>>,
+    /// Each scan's match report.
+    #[serde(skip)]
+    pub reports: Vec<MatchReport>,
 }
 
 fn mode_name<S: serde::Serializer>(mode: &Mode, s: S) -> Result<S::Ok, S::Error> {
@@ -223,6 +226,7 @@ pub fn match_scans(
         scans: scans.len(),
         aligned: estimates.iter().map(|e| alignment.compose(e)).collect(),
         points: inputs.into_iter().map(|(p, _)| p).collect(),
+        reports,
     }
 }
 

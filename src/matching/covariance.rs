@@ -41,6 +41,23 @@ impl Sandwich {
         let c = h_inv * self.b * h_inv;
         Some((c + c.transpose()) * 0.5)
     }
+
+    /// The sandwich of the estimate's part along `basis` (pose-space vectors, the directions a
+    /// remapped solve took from the scan): with `x = x₀ + G z`, the rows' Jacobians over `z`
+    /// are `Gᵀ J`, so `H_z = Gᵀ H G`, `B_z = Gᵀ B G` and the covariance is
+    /// `G H_z⁻¹ B_z H_z⁻¹ Gᵀ` (rank `basis.len()`). `None` when `H_z` is singular.
+    pub fn covariance_along(&self, basis: &[Vector3<f64>]) -> Option<Matrix3<f64>> {
+        let g = nalgebra::Matrix3xX::from_columns(basis);
+        let h = g.transpose() * self.h * &g;
+        let scale = h.trace().abs();
+        if scale.is_nan() || scale <= 0.0 {
+            return None;
+        }
+        let h_inv = h.clone().cholesky()?.inverse();
+        let c = &g * (&h_inv * (g.transpose() * self.b * &g) * &h_inv) * g.transpose();
+        let c = Matrix3::from_iterator(c.iter().copied());
+        Some((c + c.transpose()) * 0.5)
+    }
 }
 
 /// The variance factor for what the sandwich cannot see:
@@ -129,6 +146,36 @@ mod tests {
         }
         let (ca, cb) = (a.covariance().unwrap(), b.covariance().unwrap());
         assert!((ca - cb).norm() <= 1e-12 * ca.norm());
+    }
+
+    #[test]
+    fn the_sandwich_along_a_basis_is_the_full_one_over_all_three_and_pins_only_its_span() {
+        let mut s = Sandwich::default();
+        for k in 0..10 {
+            let t = k as f64;
+            s.add(
+                Vector3::new(t.cos(), t.sin(), 0.3 * t),
+                0.01 * (1.0 + t),
+                1.0,
+            );
+        }
+        let axes = [Vector3::x(), Vector3::y(), Vector3::z()];
+        let full = s.covariance().unwrap();
+        assert!((s.covariance_along(&axes).unwrap() - full).norm() < 1e-12 * full.norm());
+        // Over y and yaw only: nothing along x, and the 2x2 sandwich of those rows.
+        let part = s.covariance_along(&axes[1..]).unwrap();
+        assert!(part.row(0).norm() == 0.0 && part.column(0).norm() == 0.0);
+        let mut sub = Sandwich::default();
+        for k in 0..10 {
+            let t = k as f64;
+            sub.add(Vector3::new(0.0, t.sin(), 0.3 * t), 0.01 * (1.0 + t), 1.0);
+        }
+        let h = sub.h.fixed_view::<2, 2>(1, 1).into_owned();
+        let b = sub.b.fixed_view::<2, 2>(1, 1).into_owned();
+        let h_inv = h.try_inverse().unwrap();
+        let expected = h_inv * b * h_inv;
+        let got = part.fixed_view::<2, 2>(1, 1).into_owned();
+        assert!((got - expected).norm() < 1e-9 * expected.norm());
     }
 
     #[test]

@@ -8,7 +8,7 @@
 
 use super::covariance::Sandwich;
 use super::reference::Target;
-use super::solve::{RigidSolver, symmetric_eigen_2x2};
+use super::solve::{Remap, Remapped, RigidSolver, symmetric_eigen_2x2};
 use crate::geometry::{Pose2, wrap_angle};
 use nalgebra::{Matrix2, Matrix3, Point2, Vector2, Vector3};
 
@@ -104,8 +104,29 @@ pub struct IcpResult {
     pub degenerate: bool,
     /// Covariance of `pose` over (x, y, θ) in the target's frame from the kept pairs alone
     /// (no prior, not inflated): the sandwich `H⁻¹ B H⁻¹` of `covariance.rs`; `None` when the
-    /// pairs leave a direction free.
+    /// pairs leave a direction free. After a remapped solve with free directions, the
+    /// scan's part only: the sandwich over the observed directions (rank 3 - free).
     pub covariance: Option<Matrix3<f64>>,
+    /// With [`icp_remapped`]: which directions the last solve took from the anchor.
+    pub remapped: Option<Remapped>,
+}
+
+impl IcpResult {
+    fn before_any_iteration(pose: Pose2) -> Self {
+        Self {
+            pose,
+            iterations: 0,
+            converged: false,
+            correspondences: 0,
+            associated: 0,
+            inliers: 0,
+            residual: f64::INFINITY,
+            constraint_ratio: None,
+            degenerate: false,
+            covariance: None,
+            remapped: None,
+        }
+    }
 }
 
 struct Pair {
@@ -149,23 +170,35 @@ pub fn icp_with_prior(
     prior: Option<PosePrior>,
     params: &IcpParams,
 ) -> Option<IcpResult> {
+    icp_solving(source, target, guess, prior, None, params)
+}
+
+/// [`icp`] whose every solve keeps the directions the pairs observe and takes the others
+/// from `remap`'s anchor (solution remapping, `solve.rs`), instead of failing as degenerate.
+pub fn icp_remapped(
+    source: &[Point2<f64>],
+    target: &dyn Target,
+    guess: Pose2,
+    remap: Remap,
+    params: &IcpParams,
+) -> Option<IcpResult> {
+    icp_solving(source, target, guess, None, Some(remap), params)
+}
+
+fn icp_solving(
+    source: &[Point2<f64>],
+    target: &dyn Target,
+    guess: Pose2,
+    prior: Option<PosePrior>,
+    remap: Option<Remap>,
+    params: &IcpParams,
+) -> Option<IcpResult> {
     if target.is_empty() || source.is_empty() {
         return None;
     }
     let mut pose = guess;
     let mut pairs: Vec<Pair> = Vec::with_capacity(source.len());
-    let mut result = IcpResult {
-        pose,
-        iterations: 0,
-        converged: false,
-        correspondences: 0,
-        associated: 0,
-        inliers: 0,
-        residual: f64::INFINITY,
-        constraint_ratio: None,
-        degenerate: false,
-        covariance: None,
-    };
+    let mut result = IcpResult::before_any_iteration(pose);
     // The pose the last kept pairs were associated at: their residuals and Jacobians are there.
     let mut associated_at = pose;
     for iteration in 1..=params.max_iterations {
@@ -196,8 +229,13 @@ pub fn icp_with_prior(
         result.correspondences = kept;
         result.residual =
             (kept_pairs.iter().map(|p| p.residual.powi(2)).sum::<f64>() / kept as f64).sqrt();
-        result.constraint_ratio = constraint_ratio(kept_pairs);
-        let next = match solver.solve() {
+        let scatter = normal_scatter(kept_pairs);
+        result.constraint_ratio = scatter.map(|(ratio, _)| ratio);
+        let solved = solve(&solver, remap.as_ref(), scatter, &pose).map(|(next, how)| {
+            result.remapped = how.or(result.remapped);
+            next
+        });
+        let next = match solved {
             Ok(next) => next,
             Err(_) => {
                 result.degenerate = true;
@@ -213,14 +251,44 @@ pub fn icp_with_prior(
             break;
         }
     }
-    result.covariance = sandwich(&pairs[..result.correspondences], &associated_at, params);
+    let observed = result.remapped.filter(|r| r.free > 0);
+    result.covariance = sandwich(
+        &pairs[..result.correspondences],
+        &associated_at,
+        params,
+        observed,
+    );
     Some(result)
+}
+
+/// One solve: exact, or remapped (with the pairs' normal scatter's minor axis as the sliding
+/// axis when their scatter ratio is below the remap's `min_constraint_ratio`).
+fn solve(
+    solver: &RigidSolver,
+    remap: Option<&Remap>,
+    scatter: Option<(f64, Vector2<f64>)>,
+    pose: &Pose2,
+) -> Result<(Pose2, Option<Remapped>), super::solve::SolveError> {
+    let Some(remap) = remap else {
+        return solver.solve().map(|next| (next, None));
+    };
+    let sliding = scatter
+        .filter(|(ratio, _)| *ratio < remap.min_constraint_ratio)
+        .map(|(_, minor)| minor);
+    let (next, how) = solver.solve_remapped(remap, pose, sliding)?;
+    Ok((next, Some(how)))
 }
 
 /// The sandwich covariance over the kept pairs, each residual with the weight it had in the
 /// last solve and its Jacobian w.r.t. (t_x, t_y, θ) at `pose`: for `r = n · (R p + t - q)`,
 /// `∂r/∂t = n` and `∂r/∂θ = n · R' p`, `R' p = (-sin θ p_x - cos θ p_y, cos θ p_x - sin θ p_y)`.
-fn sandwich(kept: &[Pair], pose: &Pose2, params: &IcpParams) -> Option<Matrix3<f64>> {
+/// With free directions, over the observed ones only.
+fn sandwich(
+    kept: &[Pair],
+    pose: &Pose2,
+    params: &IcpParams,
+    remapped: Option<Remapped>,
+) -> Option<Matrix3<f64>> {
     let (s, c) = pose.theta.sin_cos();
     let mut acc = Sandwich::default();
     for pair in kept {
@@ -238,7 +306,10 @@ fn sandwich(kept: &[Pair], pose: &Pose2, params: &IcpParams) -> Option<Matrix3<f
             }
         }
     }
-    acc.covariance()
+    match remapped {
+        Some(r) => acc.covariance_along(&r.observed_basis().collect::<Vec<_>>()),
+        None => acc.covariance(),
+    }
 }
 
 /// Nearest target point for every source point under `pose`, within the association distance.
@@ -338,7 +409,8 @@ fn weight(residual: f64, params: &IcpParams) -> f64 {
     }
 }
 
-fn constraint_ratio(pairs: &[Pair]) -> Option<f64> {
+/// `λ_min / λ_max` of the kept pairs' normal scatter `Σ n nᵀ` and its minor axis (unit).
+fn normal_scatter(pairs: &[Pair]) -> Option<(f64, Vector2<f64>)> {
     let mut scatter = Matrix2::zeros();
     let mut any = false;
     for (n, _) in pairs.iter().filter_map(|p| p.line) {
@@ -348,8 +420,8 @@ fn constraint_ratio(pairs: &[Pair]) -> Option<f64> {
     if !any {
         return None;
     }
-    let (lo, hi, _) = symmetric_eigen_2x2(&scatter);
-    Some(if hi > 0.0 { lo.max(0.0) / hi } else { 0.0 })
+    let (lo, hi, minor) = symmetric_eigen_2x2(&scatter);
+    Some((if hi > 0.0 { lo.max(0.0) / hi } else { 0.0 }, minor))
 }
 
 #[cfg(test)]

@@ -7,7 +7,8 @@
 
 use super::correlative::correlative_search;
 use super::covariance::{fuse, inflation, rays_per_degree, rotate_into};
-use super::icp::{IcpParams, IcpResult, icp, icp_with_prior};
+use super::degeneracy::{remap_around, slides_as_the_scan_does};
+use super::icp::{IcpParams, IcpResult, icp, icp_remapped, icp_with_prior};
 use super::map::VoxelMap;
 pub use super::params::{
     CheckParams, Coarse, CovarianceParams, MatcherParams, Mode, OdometryPrior, RangeParams,
@@ -116,6 +117,7 @@ impl Matcher {
             residual: None,
             coarse: false,
             covariance: Matrix3::zeros(),
+            remapped: None,
         }
     }
 
@@ -210,7 +212,9 @@ impl Matcher {
         reference: &ScanReference,
         r: IcpResult,
     ) -> IcpResult {
-        if !self.params.symmetric {
+        // A match that took directions from the odometry keeps them exactly: the way back
+        // would move them by half its own (unpinned) answer.
+        if !self.params.symmetric || r.remapped.is_some_and(|m| m.free > 0) {
             return r;
         }
         let current = ScanReference::new(points.to_vec(), &Point2::origin(), &self.params.normals);
@@ -270,30 +274,23 @@ impl Matcher {
                 start = kf.estimate.compose(&r.pose);
                 // In the world frame, as the map's result is.
                 let covariance = r.covariance.map(|c| rotate_into(&c, -kf.estimate.theta));
+                let remapped = r.remapped.map(|m| m.rotated_into(-kf.estimate.theta));
                 local_ok = Some(IcpResult {
                     pose: start,
                     covariance,
+                    remapped,
                     ..r
                 });
             }
         }
-        // The start is already within millimetres; in a map whose walls are a few voxels
-        // thick, associations keep flipping between neighbouring voxels below 0.1 mm, and
-        // chasing that costs iterations that grow with the map's age (measured: 6.9 -> 11.0
-        // iterations from the first to the last 100 scans of a 5000-scan run; 5.0 -> 4.8
-        // with the looser threshold, same accuracy).
-        let refine = IcpParams {
-            epsilon_xy: self.params.icp.epsilon_xy * 10.0,
-            epsilon_theta: self.params.icp.epsilon_theta * 10.0,
-            ..self.params.icp
-        };
-        let prior = self
-            .params
-            .odometry_prior
-            .filter(|_| self.has_odometry)
-            .map(|o| o.around(guess, &step));
-        let result = icp_with_prior(points, &self.map, start, prior, &refine)
-            .ok_or(FallbackReason::TooFewCorrespondences)
+        let result = self
+            .icp_anchored(
+                points,
+                &self.map,
+                start,
+                (guess, &step),
+                &self.refine_params(),
+            )
             .and_then(|r| self.check(r))
             .and_then(|r| self.gate(r, &guess));
         // The map may only fine-tune the pairwise stage's answer: a big jump means the map
@@ -367,15 +364,7 @@ impl Matcher {
         coarse_search: impl Fn(Pose2) -> Option<Pose2>,
     ) -> (Result<IcpResult, FallbackReason>, bool) {
         let p = &self.params;
-        // Only a real odometry step makes a prior (identity means "no odometry").
-        let prior = p
-            .odometry_prior
-            .filter(|_| self.has_odometry)
-            .map(|o| o.around(guess, &guess));
-        let run = |g: Pose2| {
-            icp_with_prior(points, target, g, prior, &p.icp)
-                .ok_or(FallbackReason::TooFewCorrespondences)
-        };
+        let run = |g: Pose2| self.icp_anchored(points, target, g, (guess, &guess), &p.icp);
         match p.coarse {
             Coarse::Never => (run(guess).and_then(|r| self.check(r)), false),
             Coarse::Always => {
@@ -409,6 +398,44 @@ impl Matcher {
         }
     }
 
+    /// The map stage's ICP settings. Its start is already within millimetres; in a map whose
+    /// walls are a few voxels thick, associations keep flipping between neighbouring voxels
+    /// below 0.1 mm, and chasing that costs iterations that grow with the map's age
+    /// (measured: 6.9 -> 11.0 iterations from the first to the last 100 scans of a 5000-scan
+    /// run; 5.0 -> 4.8 with the looser threshold, same accuracy).
+    fn refine_params(&self) -> IcpParams {
+        IcpParams {
+            epsilon_xy: self.params.icp.epsilon_xy * 10.0,
+            epsilon_theta: self.params.icp.epsilon_theta * 10.0,
+            ..self.params.icp
+        }
+    }
+
+    /// ICP from `start` with the odometry's answer `odometry = (guess, step)` as a prior
+    /// (`odometry_prior`; only a real odometry step makes one: identity means "no odometry")
+    /// or as the anchor of the directions the scan leaves free.
+    fn icp_anchored(
+        &self,
+        points: &[Point2<f64>],
+        target: &dyn Target,
+        start: Pose2,
+        (guess, step): (Pose2, &Pose2),
+        icp_params: &IcpParams,
+    ) -> Result<IcpResult, FallbackReason> {
+        let result = match remap_around(&self.params, self.has_odometry, guess, step) {
+            Some(remap) => icp_remapped(points, target, start, remap, icp_params),
+            None => {
+                let prior = (self.params.odometry_prior)
+                    .filter(|_| self.has_odometry)
+                    .map(|o| o.around(guess, step));
+                icp_with_prior(points, target, start, prior, icp_params)
+            }
+        };
+        result
+            .ok_or(FallbackReason::TooFewCorrespondences)
+            .and_then(|r| slides_as_the_scan_does(&self.params, points, r))
+    }
+
     fn check(&self, r: IcpResult) -> Result<IcpResult, FallbackReason> {
         let c = &self.params.checks;
         if r.degenerate {
@@ -420,8 +447,11 @@ impl Matcher {
         if r.residual > c.max_residual {
             return Err(FallbackReason::HighResidual);
         }
-        if r.constraint_ratio
-            .is_some_and(|ratio| ratio < c.min_constraint_ratio)
+        // A remapped solve has tested each direction itself (and taken the weak ones from the
+        // odometry); the ratio is the all-or-nothing test.
+        if r.remapped.is_none()
+            && r.constraint_ratio
+                .is_some_and(|ratio| ratio < c.min_constraint_ratio)
         {
             return Err(FallbackReason::Degenerate);
         }
@@ -450,6 +480,7 @@ impl Matcher {
                     residual: Some(r.residual),
                     coarse,
                     covariance,
+                    remapped: r.remapped.map(|m| m.rotated_into(reference.theta)),
                 }
             }
             Err(reason) => {
@@ -479,10 +510,18 @@ impl Matcher {
         reference: &Reference,
     ) -> (Matrix3<f64>, Matrix3<f64>) {
         let odometry = self.odometry_model().step_covariance(&reference.step);
+        // Directions taken from the odometry carry its error along them (independent of the
+        // scan's part, which lies in the other directions of the whitened information).
+        let from_odometry = r
+            .remapped
+            .filter(|m| m.free > 0)
+            .map_or(Matrix3::zeros(), |m| {
+                m.free_covariance(&odometry.diagonal().map(f64::sqrt))
+            });
         let own = match r.covariance {
             Some(scan) => {
                 let k = inflation(&self.params.covariance, r.residual, self.rays_per_degree);
-                let scan = scan * k;
+                let scan = scan * k + from_odometry;
                 if self.params.odometry_prior.is_some() && self.has_odometry {
                     // The odometry's is isotropic in x, y: the same in every frame.
                     fuse(&scan, &odometry).unwrap_or(scan)
@@ -530,6 +569,7 @@ impl Matcher {
             residual: None,
             coarse: false,
             covariance,
+            remapped: None,
         }
     }
 }

@@ -7,6 +7,8 @@
 //! - [`correlative`]: the coarse correlative search (Olson 2009) that widens the basin.
 //! - [`map`]: the bounded voxel map for metascan matching.
 //! - [`covariance`]: the match's covariance (sandwich estimator, Censi 2007).
+//! - `degeneracy`: where the odometry anchors a degeneracy-aware solve (solution remapping,
+//!   Zhang, Kaess and Singh 2016, in [`solve`]) and whether a match slid where the scan lets it.
 //! - [`params`]: the matcher's settings.
 //! - [`report`]: what each scan's match reports.
 //! - [`matcher`]: a run of scans, one at a time, with fallback to odometry.
@@ -15,6 +17,7 @@
 
 pub mod correlative;
 pub mod covariance;
+pub(crate) mod degeneracy;
 pub mod icp;
 pub mod map;
 pub mod matcher;

@@ -146,8 +146,26 @@ pub struct CheckParams {
     /// Largest RMS residual of the kept pairs \[m\]. Default 0.08.
     pub max_residual: f64,
     /// Smallest λ_min/λ_max of the kept pairs' normal scatter; below it the geometry is a
-    /// corridor [-]. Default 0.02.
+    /// corridor [-]. Default 0.02. Only for all-or-nothing matching
+    /// (`min_information_ratio: None`): degeneracy-aware matching tests each direction instead.
     pub min_constraint_ratio: f64,
+    /// Degeneracy-aware matching: along each eigenvector of the scan's information whitened
+    /// by the odometry's (the scan's information over the odometry's, per direction; Zhang,
+    /// Kaess and Singh 2016), the pose comes from the scan when the ratio is at least this
+    /// and from the odometry otherwise, so that a corridor still pins its width and heading
+    /// [-]. Default 10: the information is in units of `OdometryPrior::residual_sigma`
+    /// (1 cm) while the match's real variance is `CovarianceParams`' 3.5 or more times the
+    /// sandwich's, so 10 asks for a scan a few times surer than the odometry; a pillar's
+    /// face of four rays passes it. `None`: a match that does not pin all three falls back
+    /// to odometry whole.
+    pub min_information_ratio: Option<f64>,
+    /// Degeneracy-aware matching: the pairs' sliding axis (see `min_constraint_ratio`) may
+    /// come from the odometry only where the scan's own lines leave it weak, their normal
+    /// scatter along it at most this fraction of the largest [-]. Default 0.3: a corridor's
+    /// is about 0.001; up to 0.4 it refuses the wrong slide of a match started 25 cm off in
+    /// a room (tests/matching_icp.rs, the correction gate); 0.1 also refuses partial
+    /// matches that help on the CARMEN Intel log (drift at 10 m 1.06% against 0.96%).
+    pub max_free_scatter: f64,
     /// With `Coarse::Auto`, the coarse search runs when fewer than this fraction of the
     /// source points are inliers (residual within the kernel scale) [-]. Default 0.8.
     pub coarse_trigger_fraction: f64,
@@ -167,6 +185,8 @@ impl Default for CheckParams {
             min_correspondences: 20,
             max_residual: 0.08,
             min_constraint_ratio: 0.02,
+            min_information_ratio: Some(10.0),
+            max_free_scatter: 0.3,
             coarse_trigger_fraction: 0.8,
             max_correction_xy: 0.6,
             max_correction_theta: 30f64.to_radians(),

@@ -1,5 +1,6 @@
 //! What the matcher reports for each scan: the contract's `match` object.
 
+use super::solve::Remapped;
 use crate::geometry::Pose2;
 use nalgebra::Matrix3;
 
@@ -62,6 +63,9 @@ pub struct MatchReport {
     /// from the match (`covariance.rs`, inflated by `CovarianceParams`), from the odometry
     /// model for a fallback, zero for the first scan.
     pub covariance: Matrix3<f64>,
+    /// A degeneracy-aware match: which directions came from the odometry (the free ones) and
+    /// which from the scan, in the covariance's frame; `None` when no such match ran.
+    pub remapped: Option<Remapped>,
 }
 
 impl MatchReport {
@@ -69,5 +73,21 @@ impl MatchReport {
     pub fn covariance_row_major(&self) -> [f64; 9] {
         let c = &self.covariance;
         std::array::from_fn(|k| c[(k / 3, k % 3)])
+    }
+
+    /// The directions of (x, y, yaw) whose estimate came from the odometry, as unit vectors in
+    /// the covariance's frame (the contract's `match.degenerate_directions`): none for a
+    /// first scan or a match that pinned all three, all three axes for a fallback.
+    pub fn degenerate_directions(&self) -> Vec<[f64; 3]> {
+        match self.status {
+            MatchStatus::First => Vec::new(),
+            MatchStatus::Fallback(_) => vec![[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
+            MatchStatus::Ok => self
+                .remapped
+                .iter()
+                .flat_map(|r| r.free_directions())
+                .map(|v| [v.x, v.y, v.z])
+                .collect(),
+        }
     }
 }
