@@ -397,9 +397,19 @@ fn tilted_runs_through_large_halls_keep_what_the_scans_pin() {
                     Mode::Pairwise => 0.10,
                     Mode::Metascan => 0.05,
                 };
+                // The control: the same path on a level floor, matched the same way. Where an
+                // odometry error falls along a length nothing in view pins, no matcher can take
+                // it out (seed 2: the level-floor metascan run itself reaches 7.0 cm), so the
+                // leveled run must reach the limit or stay within 10% of the control.
+                let control = runs
+                    .iter()
+                    .find(|r| r.kind == RunKind::LevelFloor && r.mode == run.mode)
+                    .and_then(|r| r.ate.as_ref())
+                    .unwrap()
+                    .rmse;
                 assert!(
-                    ate <= limit,
-                    "{path:?} seed {seed} {:?}: ATE {ate}",
+                    ate <= limit || ate <= 1.1 * control,
+                    "{path:?} seed {seed} {:?}: ATE {ate} (level floor {control})",
                     run.mode
                 );
                 for (i, r) in run.reports.iter().enumerate() {

@@ -17,7 +17,10 @@ use std::fmt::Write as _;
 use std::io::Write as _;
 use std::path::PathBuf;
 
+// The experiment matches every run both ways (pairwise and metascan), so `--mode` has nothing
+// to choose here: hidden rather than shown and ignored.
 #[derive(clap::Args, Debug)]
+#[command(mut_arg("mode", |a| a.hide(true)))]
 pub struct MatchingArgs {
     /// Floor plans (.wall) with a path of `poses` (tilted; the level-floor run zeroes the tilt).
     #[arg(required = true)]
