@@ -32,6 +32,7 @@ mod resegment;
 pub(crate) mod up;
 
 pub use first_pass::level_fits;
+pub use ml::MlParams;
 pub use params::LevelParams;
 pub use resegment::{Resegmented, refine_estimate};
 
@@ -272,14 +273,8 @@ pub fn level_pose_with(
     // The wall points and base scan of the pseudo-level scan (sect. 6), then the attitude.
     est.wall_mask = wall_mask(&est);
     est.base_scan = est.grid.as_ref().map(|g| base_scan(g, &est.wall_mask));
-    match result {
-        Ok(sol) => {
-            est.attitude = Some(sol.attitude());
-            est.sigmas = Some(failure::attitude_sigmas(&sol, params));
-            est.up = Some(sol.up);
-        }
-        Err(reason) => est.failure = Some(reason),
-    }
+    // The attitude, refined by maximum likelihood on that segmentation.
+    ml::from_segmentation::finish(&mut est, scans, result, params);
     est
 }
 

@@ -212,6 +212,9 @@ pub struct LevelParams {
     /// A refined solution that uses floor or ceiling lines passes the gate only with both
     /// attitude sigmas below this \[deg\] (and `max_sigma_deg`). Default 1.0.
     pub level_line_max_sigma_deg: f64,
+    // ---- The last stage: maximum likelihood on the chosen segmentation (`ml`) ----
+    /// Up by maximum likelihood on the segmentation chosen ([`super::ml`]).
+    pub ml: super::MlParams,
 }
 
 impl LevelParams {
@@ -292,6 +295,7 @@ impl Default for LevelParams {
             level_line_misfit: 1.5,
             level_line_inflation: 4.0,
             level_line_max_sigma_deg: 1.0,
+            ml: super::MlParams::default(),
         }
     }
 }

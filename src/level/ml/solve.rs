@@ -73,7 +73,11 @@ pub(crate) fn refine(
     if observable_schur(&state.arrow(f64::INFINITY)).is_none() {
         return Err(MlError::Unobservable);
     }
-    let (approach, _) = state.minimise(params, f64::INFINITY, APPROACH_TOLERANCE);
+    let approach = if params.approach {
+        state.minimise(params, f64::INFINITY, APPROACH_TOLERANCE).0
+    } else {
+        0
+    };
     state.frozen = None;
     state.activate(params.min_incidence);
     let (iterations, converged) = state.minimise(params, params.huber_k, params.step_tolerance);
@@ -234,9 +238,15 @@ impl<'a> State<'a> {
     /// `tolerance`: `(iterations, converged)`.
     fn minimise(&mut self, params: &MlParams, k: f64, tolerance: f64) -> (usize, bool) {
         let mut lambda = 1e-6;
+        // The range residual's cost carries over from the step accepted; the plane
+        // residual's changes with every freeze.
+        let mut kept_cost: Option<f64> = None;
         for iteration in 1..=params.max_iterations {
             self.freeze(params.min_incidence);
-            let mut cost = self.cost(&self.theta, &self.placements, k);
+            let mut cost = match kept_cost.filter(|_| self.frozen.is_none()) {
+                Some(c) => c,
+                None => self.cost(&self.theta, &self.placements, k),
+            };
             let arrow = self.arrow(k);
             let mut accepted = false;
             let mut step_norm = f64::INFINITY;
@@ -263,6 +273,7 @@ impl<'a> State<'a> {
                     self.placements = placements;
                     let settled = cost - trial <= 1e-14 * cost.max(1e-300);
                     cost = trial;
+                    kept_cost = Some(cost);
                     lambda = (lambda / 10.0).max(1e-12);
                     accepted = true;
                     if settled {

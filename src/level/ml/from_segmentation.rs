@@ -1,0 +1,261 @@
+//! The leveler's last stage: the maximum-likelihood core fed the segmentation the leveler chose
+//! (docs/ESTIMATOR.md, "Design note: feeding it the leveler's segmentation").
+//!
+//! The surfaces are the estimate's patches: the re-segmented models when the kept solution is
+//! re-segmentation's ([`crate::level::adopt`]), else the patches of region growing; wall
+//! patches whose lines coincide in the level frame are merged as one wall (`refine_merge_deg`, as re-segmentation merges its lines), every floor
+//! patch one `Floor` and every ceiling patch one `Ceiling` (the world has one floor height).
+//! Each grid point becomes a [`LabelledPoint`] with the leveler's range sigma (the ray's own
+//! `readings_sigma` when given). The core starts from the leveler's up; its answer, with the
+//! covariance of its information matrix (inflated only by its own chi-square test), replaces
+//! the leveler's up and sigmas when it passes the same gate. Where the core refuses, the
+//! leveler's answer stands, or the pose fails as before.
+
+use super::relabel::relabel;
+use super::{LabelledPoint, MlParams, MlSolution, Surface, refine};
+use crate::geometry::Attitude;
+use crate::level::failure::{attitude_sigmas, within_wall_angle};
+use crate::level::grid::PoseGrid;
+use crate::level::patches::Patch;
+use crate::level::up::UpSolution;
+use crate::level::{FailReason, LevelEstimate, LevelParams, SurfaceKind};
+use crate::scan::Scan;
+use nalgebra::Vector2;
+
+/// Grid indices of one surface's points.
+type Group<'a> = (Surface, &'a [usize]);
+
+/// Sets the estimate's attitude, sigmas and up (or its failure) from the leveler's
+/// `result`, refined by the core when `params.ml.enabled` and the range noise is at most
+/// `ml.max_range_sigma`. `est`'s patches are the segmentation behind `result` (the refined
+/// models when re-segmentation's solution was kept, [`crate::level::adopt`]).
+pub(crate) fn finish(
+    est: &mut LevelEstimate,
+    scans: &[Scan],
+    result: Result<UpSolution, FailReason>,
+    params: &LevelParams,
+) {
+    let ml = match &result {
+        Ok(sol) if params.ml.enabled && est.range_sigma <= params.ml.max_range_sigma => {
+            final_estimate(est, scans, sol, params)
+        }
+        _ => None,
+    };
+    match (ml, result) {
+        (Some(sol), _) => {
+            est.attitude = Some(Attitude::new(sol.attitude[0], sol.attitude[1]));
+            est.sigmas = Some(sol.sigmas());
+            est.up = Some(sol.up);
+            est.failure = None;
+        }
+        (None, Ok(sol)) => {
+            est.attitude = Some(sol.attitude());
+            est.sigmas = Some(attitude_sigmas(&sol, params));
+            est.up = Some(sol.up);
+        }
+        (None, Err(reason)) => est.failure = Some(reason),
+    }
+}
+
+/// The core's answer on the segmentation behind the leveler's result, when it gives one that
+/// passes the gate; `None` to keep the leveler's result.
+fn final_estimate(
+    est: &LevelEstimate,
+    scans: &[Scan],
+    start: &UpSolution,
+    params: &LevelParams,
+) -> Option<MlSolution> {
+    let grid = est.grid.as_ref()?;
+    let groups = patch_groups(&est.patches, start, params, est.range_sigma);
+    let all = grid_points(grid, scans, est.range_sigma, params.min_sigma);
+    let mut labels = initial_labels(grid, &all, &groups);
+    let neighbours = vertical_neighbours(grid, &all.0);
+    let mut sol = fit(&all, &labels, &start.up, params)?;
+    let first = sol.attitude;
+    for _ in 0..params.ml.relabel_passes {
+        let next = relabel(
+            &all.1,
+            &neighbours,
+            &labels,
+            &sol,
+            params.ml.huber_k,
+            params.ml.relabel_margin,
+            params.ml.min_incidence,
+        );
+        if next == labels {
+            break;
+        }
+        let Some(refitted) = fit(&all, &next, &sol.up, params) else {
+            break;
+        };
+        (sol, labels) = (refitted, next);
+    }
+    widen_by(&mut sol, first);
+    gate(&sol, start, params).then_some(sol)
+}
+
+/// `sol`'s covariance with `d d^T` added, for `d` its distance from `rival` (the attitude the
+/// same data gave under the other segmentation) \[rad\].
+fn widen_by(sol: &mut MlSolution, rival: [f64; 2]) {
+    let d = [sol.attitude[0] - rival[0], sol.attitude[1] - rival[1]];
+    for (i, row) in sol.covariance.iter_mut().enumerate() {
+        for (j, c) in row.iter_mut().enumerate() {
+            *c += d[i] * d[j];
+        }
+    }
+}
+
+/// The core's fit of the points labelled, from `up`; `None` when it refuses.
+fn fit(
+    all: &(Vec<usize>, Vec<LabelledPoint>),
+    labels: &[Option<Surface>],
+    up: &nalgebra::Vector3<f64>,
+    params: &LevelParams,
+) -> Option<MlSolution> {
+    let points: Vec<LabelledPoint> = all
+        .1
+        .iter()
+        .zip(labels)
+        .filter_map(|(p, l)| l.map(|surface| LabelledPoint { surface, ..*p }))
+        .collect();
+    let ml = MlParams {
+        approach: false,
+        ..params.ml.clone()
+    };
+    refine(&points, up, &ml).ok()
+}
+
+/// Per valid point (grid indices `index`, ascending), the points at its bearing in the scans
+/// below and above it.
+fn vertical_neighbours(grid: &PoseGrid, index: &[usize]) -> Vec<[Option<usize>; 2]> {
+    let mut at = vec![None; grid.points.len()];
+    for (k, &i) in index.iter().enumerate() {
+        at[i] = Some(k);
+    }
+    let n = grid.points.len();
+    index
+        .iter()
+        .map(|&i| {
+            let below = i.checked_sub(grid.cols).and_then(|j| at[j]);
+            let above = (i + grid.cols < n).then(|| at[i + grid.cols]).flatten();
+            [below, above]
+        })
+        .collect()
+}
+
+/// Per valid point of `all` (grid indices ascending), the surface of the group holding it.
+fn initial_labels(
+    grid: &PoseGrid,
+    all: &(Vec<usize>, Vec<LabelledPoint>),
+    groups: &[Group<'_>],
+) -> Vec<Option<Surface>> {
+    let mut by_grid = vec![None; grid.points.len()];
+    for &(surface, members) in groups {
+        for &i in members {
+            if let Some(l) = by_grid.get_mut(i) {
+                *l = Some(surface);
+            }
+        }
+    }
+    all.0.iter().map(|&i| by_grid[i]).collect()
+}
+
+/// Whether the core's answer `sol`, started from `start`, passes the leveler's gate: both
+/// sigmas within `max_sigma_deg`, up within `wall_min_angle_deg` of the robot's z axis, and
+/// no farther from the start than `ml.max_shift_sigmas` of the start's own uncertainty (a
+/// refinement that runs that far left the basin of the segmentation it was given).
+fn gate(sol: &MlSolution, start: &UpSolution, params: &LevelParams) -> bool {
+    let max_sigma = params.max_sigma_deg.to_radians();
+    let tight = sol.sigmas().iter().all(|&s| s <= max_sigma);
+    let d = Vector2::new(sol.up.dot(&start.basis[0]), sol.up.dot(&start.basis[1]));
+    let near = start
+        .cov
+        .try_inverse()
+        .map(|inv| (d.transpose() * inv * d)[(0, 0)])
+        .is_some_and(|z2| z2 <= params.ml.max_shift_sigmas.powi(2));
+    tight && near && within_wall_angle(&sol.up, params)
+}
+
+fn surface_of(kind: SurfaceKind, k: usize) -> Surface {
+    match kind {
+        SurfaceKind::Wall => Surface::Wall(k),
+        SurfaceKind::Floor => Surface::Floor,
+        SurfaceKind::Ceiling => Surface::Ceiling,
+    }
+}
+
+/// The patches as surfaces, leveled with `sol`: wall patches whose level-frame normals lie
+/// within `refine_merge_deg` and whose lines lie within `refine_k` sigmas (of range noise
+/// `sigma`) plus `flat_margin` of each other share one wall index (the first such patch's),
+/// as re-segmentation merges its lines.
+fn patch_groups<'a>(
+    patches: &'a [Patch],
+    sol: &UpSolution,
+    params: &LevelParams,
+    sigma: f64,
+) -> Vec<Group<'a>> {
+    let level_from_robot = Attitude::from_up(&sol.up).level_from_robot();
+    let cos_max = params.refine_merge_deg.to_radians().cos();
+    let tol = params.refine_k * sigma.max(params.min_sigma) + params.flat_margin;
+    // Per wall patch seen so far: its index and its level-frame line.
+    let mut lines: Vec<(usize, Vector2<f64>, f64)> = Vec::new();
+    let mut groups = Vec::with_capacity(patches.len());
+    for (k, p) in patches.iter().enumerate() {
+        if p.kind != SurfaceKind::Wall {
+            groups.push((surface_of(p.kind, k), p.members.as_slice()));
+            continue;
+        }
+        let n = level_from_robot * p.fit.normal;
+        let c = level_from_robot * p.fit.centroid;
+        let Some(normal) = Vector2::new(n.x, n.y).try_normalize(1e-9) else {
+            continue;
+        };
+        let offset = normal.dot(&Vector2::new(c.x, c.y));
+        let same = lines.iter().find(|(_, m, o)| {
+            let cos = normal.dot(m);
+            cos.abs() >= cos_max && (offset - o * cos.signum()).abs() <= tol
+        });
+        let wall = match same {
+            Some(&(j, _, _)) => j,
+            None => {
+                lines.push((k, normal, offset));
+                k
+            }
+        };
+        groups.push((Surface::Wall(wall), p.members.as_slice()));
+    }
+    groups
+}
+
+/// Every valid grid point as a labelled point (its surface a placeholder), with its grid
+/// index: the ray's origin and direction, its range, and its sigma (the ray's
+/// `readings_sigma` when its scan gives one, else `sigma`; at least `min_sigma`).
+fn grid_points(
+    grid: &PoseGrid,
+    scans: &[Scan],
+    sigma: f64,
+    min_sigma: f64,
+) -> (Vec<usize>, Vec<LabelledPoint>) {
+    let mut index = Vec::with_capacity(grid.points.len());
+    let mut points = Vec::with_capacity(grid.points.len());
+    for (i, g) in grid.points.iter().enumerate() {
+        let Some(g) = g else {
+            continue;
+        };
+        let (row, col) = (i / grid.cols, i % grid.cols);
+        let given = scans
+            .get(grid.scan_index[row])
+            .and_then(|s| s.readings_sigma.as_ref())
+            .and_then(|v| v.get(col).copied().flatten())
+            .filter(|s| s.is_finite() && *s > 0.0);
+        index.push(i);
+        points.push(LabelledPoint {
+            origin: g.p - g.dir * g.range,
+            dir: g.dir,
+            range: g.range,
+            sigma: given.unwrap_or(sigma).max(min_sigma),
+            surface: Surface::Floor,
+        });
+    }
+    (index, points)
+}

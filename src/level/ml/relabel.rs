@@ -1,0 +1,180 @@
+//! The E-step of an EM over the segmentation, with the maximum-likelihood fit as its M-step:
+//! every point is given to the one surface of the fitted model that predicts its range within
+//! `k` of its sigmas, and to none when two do (Thrun et al. 2004's assignment, with the
+//! ambiguous points left out as re-segmentation leaves them, [`crate::level::refine`]).
+//!
+//! A segmentation grown under noise takes in points of the neighbouring surface within its
+//! tolerance (at 10 cm noise, floor points up to 30 cm in front of a wall's foot), and since
+//! they lie within the robust kernel's threshold they pull at full weight: the fit is then
+//! self-consistent and biased (traced: 10-20% of poses beyond three sigmas at 10 cm noise).
+//! Against the fitted planes such a point is within reach of both its wall and the floor, and
+//! is left out.
+//!
+//! A wall of the model is a whole vertical plane; its points are only taken along the stretch
+//! its members already cover, widened by `margin`, so that a wall's line does not take in the
+//! points of another wall it crosses beyond a corner.
+
+use super::model::{Placement, Rotations, incidence};
+use super::{LabelledPoint, MlSolution, Surface};
+use nalgebra::Vector2;
+
+/// A surface of the fitted model and, for a wall, the stretch of its line it may take points
+/// from (the tangent coordinate `(-sin a, cos a) . (x, y)` in the level frame).
+struct Fitted {
+    surface: Surface,
+    placement: Placement,
+    stretch: (f64, f64),
+}
+
+/// New labels for `points` (their `surface` is ignored) under `sol`, given the current labels
+/// (`None`: unlabelled), which set each wall's stretch. Points whose ray meets their surface
+/// below `min_incidence` stay out, as the fit leaves them out.
+pub(crate) fn relabel(
+    points: &[LabelledPoint],
+    neighbours: &[[Option<usize>; 2]],
+    labels: &[Option<Surface>],
+    sol: &MlSolution,
+    k: f64,
+    margin: f64,
+    min_incidence: f64,
+) -> Vec<Option<Surface>> {
+    let rot = Rotations::at(&Vector2::new(sol.attitude[0], sol.attitude[1]));
+    let fitted = fitted_surfaces(points, labels, sol, &rot, margin);
+    let mut next = assign(points, &fitted, &rot, k, min_incidence);
+    for (i, l) in next.iter_mut().enumerate() {
+        if matches!(l, Some(Surface::Floor | Surface::Ceiling))
+            && neighbours[i]
+                .iter()
+                .flatten()
+                .any(|&j| stacked(&points[i], &points[j], &rot, k))
+        {
+            *l = None;
+        }
+    }
+    next
+}
+
+/// Whether `q` (a point of an adjacent scan at the same bearing) stands above or below `p`
+/// as on a vertical surface: horizontally within `k` sigmas of the pair's horizontal noise,
+/// vertically apart by more than `k` of its vertical noise. Such a `p` is a wall's foot (or
+/// top), or a floor point within the noise of one, whether or not the model has that wall:
+/// traced at 10 cm noise, 5-20% of the floor's points were hits on a wall the model lacked
+/// within 9 cm of the floor, and their pull put the pose 3-7 sigmas off.
+fn stacked(p: &LabelledPoint, q: &LabelledPoint, rot: &Rotations, k: f64) -> bool {
+    let level = |p: &LabelledPoint| {
+        (
+            rot.level_from_robot * (p.origin.coords + p.dir * p.range),
+            rot.level_from_robot * p.dir,
+        )
+    };
+    let ((a, da), (b, db)) = (level(p), level(q));
+    let h2 = |d: &nalgebra::Vector3<f64>, s: f64| (d.x * d.x + d.y * d.y) * s * s;
+    let (var_h, var_v) = (
+        h2(&da, p.sigma) + h2(&db, q.sigma),
+        (da.z * p.sigma).powi(2) + (db.z * q.sigma).powi(2),
+    );
+    let (dh2, dz2) = (
+        (a.x - b.x).powi(2) + (a.y - b.y).powi(2),
+        (a.z - b.z).powi(2),
+    );
+    dh2 <= k * k * var_h && dz2 > k * k * var_v
+}
+
+/// Each point to the one fitted surface that predicts its range within `k` sigmas, `None`
+/// when none or several do.
+fn assign(
+    points: &[LabelledPoint],
+    fitted: &[Fitted],
+    rot: &Rotations,
+    k: f64,
+    min_incidence: f64,
+) -> Vec<Option<Surface>> {
+    points
+        .iter()
+        .map(|p| {
+            let mut found = None;
+            for f in fitted {
+                let candidate = LabelledPoint {
+                    surface: f.surface,
+                    ..*p
+                };
+                if incidence(&candidate, &f.placement, rot) < min_incidence {
+                    continue;
+                }
+                if let Surface::Wall(_) = f.surface {
+                    let t = tangent(&f.placement, &level_point(p, rot));
+                    if t < f.stretch.0 || t > f.stretch.1 {
+                        continue;
+                    }
+                }
+                let rho = super::model::linearize(&candidate, &f.placement, rot).rho;
+                if rho.abs() <= k {
+                    if found.is_some() {
+                        return None;
+                    }
+                    found = Some(f.surface);
+                }
+            }
+            found
+        })
+        .collect()
+}
+
+/// The model's surfaces with the stretch of each wall: its labelled points' tangent
+/// coordinates, widened by `margin` at both ends.
+fn fitted_surfaces(
+    points: &[LabelledPoint],
+    labels: &[Option<Surface>],
+    sol: &MlSolution,
+    rot: &Rotations,
+    margin: f64,
+) -> Vec<Fitted> {
+    let mut fitted: Vec<Fitted> = sol
+        .walls
+        .iter()
+        .map(|w| Fitted {
+            surface: w.surface,
+            placement: Placement {
+                offset: w.offset,
+                azimuth: w.azimuth,
+            },
+            stretch: (f64::INFINITY, f64::NEG_INFINITY),
+        })
+        .collect();
+    for f in &mut fitted {
+        for (p, _) in points
+            .iter()
+            .zip(labels)
+            .filter(|(_, l)| **l == Some(f.surface))
+        {
+            let t = tangent(&f.placement, &level_point(p, rot));
+            f.stretch = (f.stretch.0.min(t), f.stretch.1.max(t));
+        }
+        f.stretch = (f.stretch.0 - margin, f.stretch.1 + margin);
+    }
+    for (surface, height) in [(Surface::Floor, sol.floor), (Surface::Ceiling, sol.ceiling)] {
+        if let Some(offset) = height {
+            fitted.push(Fitted {
+                surface,
+                placement: Placement {
+                    offset,
+                    azimuth: 0.0,
+                },
+                stretch: (f64::NEG_INFINITY, f64::INFINITY),
+            });
+        }
+    }
+    fitted
+}
+
+/// The measured point in the level frame, `(x, y)`.
+fn level_point(p: &LabelledPoint, rot: &Rotations) -> Vector2<f64> {
+    let q = rot.level_from_robot * (p.origin.coords + p.dir * p.range);
+    Vector2::new(q.x, q.y)
+}
+
+/// The coordinate along a wall's line of a level-frame `(x, y)`.
+fn tangent(placement: &Placement, q: &Vector2<f64>) -> f64 {
+    let (s, c) = placement.azimuth.sin_cos();
+    -s * q.x + c * q.y
+}
