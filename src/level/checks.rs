@@ -120,7 +120,7 @@ checks! {
     MinPolygons: Gate, "quads", |p| p.min_polygons as f64, Fails(F::TooFewPolygons),
         "wall quads when no level plane is seen; facing_* when Facing holds (first_pass::solve)";
     Facing: Gate, "quads", |_| 0.0, Fails(F::FacingFloor),
-        "floor (ceiling: facing_ceiling) quads outnumber wall quads, for a pose that fails (LevelEstimate::facing)";
+        "floor (ceiling: facing_ceiling) quads outnumber wall quads, for a pose any gate refuses (failure::reported)";
     ParallelRatio: Gate, "1", |p| p.parallel_ratio, Fails(F::ParallelWalls),
         "smaller over larger eigenvalue of up's information, walls only (failure::acceptable_within)";
     WallAngle: Gate, "deg", |p| p.wall_min_angle_deg, Fails(F::ParallelWalls),

@@ -1,11 +1,11 @@
 //! Failure detection (sect. 5.5): the gate every solution passes, first or refined. A pose
 //! fails as `parallel_walls` when up is not pinned down in both directions, when its sigmas
 //! exceed `max_sigma_deg`, or when up lies beyond `wall_min_angle_deg` of the robot's z axis;
-//! the facing test is [`LevelEstimate::facing`](super::LevelEstimate::facing).
+//! the facing test ([`reported`]) names the reason of every refusal, first or refined.
 
 use super::checks::Check;
 use super::up::UpSolution;
-use super::{FailReason, LevelParams};
+use super::{FailReason, LevelEstimate, LevelParams};
 use nalgebra::Vector3;
 
 /// The reported 1-sigma of theta_x and theta_y \[rad\]: the propagated covariance, scaled by
@@ -56,4 +56,14 @@ pub(crate) fn acceptable_within(
 /// top as one "wall" and leveled a pose 55 degrees off (361 rays, 10 cm noise).
 pub(crate) fn within_wall_angle(up: &Vector3<f64>, params: &LevelParams) -> bool {
     up.z >= params.wall_cos()
+}
+
+/// The reason a pose refused by any gate is reported with: facing_floor / facing_ceiling when
+/// floor or ceiling quads outnumber wall quads ([`LevelEstimate::facing`], sect. 5.5), else
+/// `reason`. The scanner looks at the wrong surface and a robot can retake its scans tilted the
+/// other way (sect. 7.2.2), whichever solution was refused: applied once to the pipeline's
+/// result, so a solution refused after re-segmentation is named as a first one is (it was
+/// reported as parallel_walls).
+pub(crate) fn reported(est: &LevelEstimate, reason: FailReason) -> FailReason {
+    est.facing().unwrap_or(reason)
 }

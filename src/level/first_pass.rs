@@ -11,21 +11,19 @@ use super::{Estimator, FailReason, LevelEstimate, LevelParams, SurfaceKind, refi
 use crate::level::params::first_pass::*;
 use nalgebra::Vector3;
 
-/// Failure detection (sect. 5.5) and the up vector. When the walls seen cannot fix up (too
-/// few, or all parallel) while floor or ceiling quads outnumber wall quads, the reason is
-/// facing_floor / facing_ceiling: the scanner looks at the wrong surface, and a robot can
-/// retake its scans tilted the other way (sect. 5.5, 7.2.2).
+/// Failure detection (sect. 5.5) and the up vector: too few wall quads and no level plane, or
+/// a solution the gate refuses. The facing test names the reason of the pipeline's result
+/// ([`reported`](super::failure::reported)), this one's or re-segmentation's.
 pub(crate) fn solve(
     est: &LevelEstimate,
     levels: &[PlaneFit],
     params: &LevelParams,
     sigma: f64,
 ) -> Result<UpSolution, FailReason> {
-    let facing = |otherwise: FailReason| est.facing().unwrap_or(otherwise);
     if est.wall_polygons() < params.min_polygons && levels.is_empty() {
-        return Err(facing(FailReason::TooFewPolygons));
+        return Err(FailReason::TooFewPolygons);
     }
-    solve_up(est, levels, params, sigma).map_err(facing)
+    solve_up(est, levels, params, sigma)
 }
 
 pub(crate) fn solve_up(

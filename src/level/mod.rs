@@ -272,7 +272,7 @@ pub fn level_pose_with(
             est.sigmas = Some(failure::attitude_sigmas(&sol, params));
             est.up = Some(sol.up);
         }
-        Err(reason) => est.failure = Some(reason),
+        Err(reason) => est.failure = Some(failure::reported(&est, reason)),
     }
     est
 }
