@@ -5,7 +5,7 @@ mod common;
 
 use common::{Room, elevations, scans_at};
 use levelscan::geometry::Pose;
-use levelscan::level::{FailReason, LevelParams, level_pose};
+use levelscan::level::{FailCause, FailReason, LevelParams, level_pose};
 
 fn deg(a: f64) -> f64 {
     a.to_radians()
@@ -64,10 +64,10 @@ fn corridor_is_parallel_walls_on_walls_alone_and_leveled_with_the_floor() {
     let room = Room::corridor();
     let pose = Pose::new(0.0, 1.0, 0.45, deg(0.0), deg(9.0), deg(4.0));
     let scans = scans_at(&room, &pose, &elevations(5, 5.0), 0.01, 2, 0);
-    assert_eq!(
-        level_pose(&scans, &walls_only()).failure,
-        Some(FailReason::ParallelWalls)
-    );
+    let walls = level_pose(&scans, &walls_only());
+    assert_eq!(walls.failure, Some(FailReason::ParallelWalls));
+    // The cause within the reason: the normals of two parallel walls fix no up at all.
+    assert_eq!(walls.cause, Some(FailCause::NoUp));
     let e = level_pose(&scans, &LevelParams::default());
     assert!(e.is_ok(), "{:?}", e.failure);
     let err = e
@@ -203,6 +203,7 @@ fn a_pose_refused_after_resegmentation_facing_the_floor_is_facing_floor() {
     let est = level_pose(&scans, &LevelParams::default());
     assert_eq!(est.facing(), Some(FailReason::FacingFloor));
     assert_eq!(est.failure, Some(FailReason::FacingFloor));
+    assert_eq!(est.cause, Some(FailCause::FacingFloor));
     // Without re-segmentation the first gate refuses it, with the same reason.
     let first_only = LevelParams {
         refine_passes: 0,
