@@ -65,6 +65,11 @@ fn efficiency_figures_agree_with_the_pose_records() {
             .filter(|p| p["scans"] == c["scans"] && p["estimator"] == c["estimator"])
             .collect();
         let leveled: Vec<&&Value> = of_cell.iter().filter(|p| p["status"] == "ok").collect();
+        // A failed pose names its cause as well as its reason; a leveled one neither.
+        for p in &of_cell {
+            assert_eq!(p["status"] == "ok", p["cause"].is_null(), "{p}");
+            assert_eq!(p["reason"].is_null(), p["cause"].is_null(), "{p}");
+        }
         let ratios: Vec<f64> = leveled
             .iter()
             .map(|p| {

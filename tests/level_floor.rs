@@ -5,7 +5,7 @@ mod common;
 
 use common::{Room, elevations, scans_at};
 use levelscan::geometry::Pose;
-use levelscan::level::{FailReason, LevelParams, level_pose};
+use levelscan::level::{FailCause, FailReason, LevelParams, level_pose};
 
 fn deg(a: f64) -> f64 {
     a.to_radians()
@@ -64,10 +64,10 @@ fn corridor_is_parallel_walls_on_walls_alone_and_leveled_with_the_floor() {
     let room = Room::corridor();
     let pose = Pose::new(0.0, 1.0, 0.45, deg(0.0), deg(9.0), deg(4.0));
     let scans = scans_at(&room, &pose, &elevations(5, 5.0), 0.01, 2, 0);
-    assert_eq!(
-        level_pose(&scans, &walls_only()).failure,
-        Some(FailReason::ParallelWalls)
-    );
+    let walls = level_pose(&scans, &walls_only());
+    assert_eq!(walls.failure, Some(FailReason::ParallelWalls));
+    // The cause within the reason: the normals of two parallel walls fix no up at all.
+    assert_eq!(walls.cause, Some(FailCause::NoUp));
     let e = level_pose(&scans, &LevelParams::default());
     assert!(e.is_ok(), "{:?}", e.failure);
     let err = e
@@ -173,4 +173,43 @@ fn floor_hits_at_a_walls_foot_are_not_kept_when_two_scans_see_the_floor() {
         assert!(floor_kept <= 2, "seed {seed}: {floor_kept} floor hits kept");
         assert!(out.valid_count() > 100, "only {} kept", out.valid_count());
     }
+}
+
+/// A pose refused after re-segmentation is named by the same facing test as a first solution:
+/// `eval accuracy`'s pose 26 of ceiling.wall (seed 1, 3 scans, 10 cm), whose floor quads
+/// outnumber its wall quads, was reported as parallel_walls by the second gate.
+#[test]
+fn a_pose_refused_after_resegmentation_facing_the_floor_is_facing_floor() {
+    use levelscan::simulate::{
+        RandomPoseParams, ScannerParams, Stream, World, elevations_centred, random_poses,
+        simulate_pose, stream_rng,
+    };
+    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/examples/plans/ceiling.wall");
+    let world = World::from_plan(&levelscan::formats::read_plan(path.as_ref()).unwrap());
+    // As `eval accuracy` draws them: the third plan given (seed 1 + 2), clearance 0.6 m.
+    let pose_params = RandomPoseParams {
+        clearance: 0.6,
+        ..RandomPoseParams::default()
+    };
+    let poses = random_poses(&world, 100, &pose_params, 3).unwrap();
+    let (k, nscans) = (26usize, 3usize);
+    let stream = 1u64 + (2u64 << 32) + ((nscans as u64) << 48);
+    let mut rng = stream_rng(stream, Stream::Scans, k as u64);
+    let scanner = ScannerParams {
+        noise_sigma: 0.1,
+        ..ScannerParams::default()
+    };
+    let elevations = elevations_centred(nscans, deg(5.0));
+    let scans = simulate_pose(&world, k as u64, &poses[k], &elevations, &scanner, &mut rng);
+    let est = level_pose(&scans, &LevelParams::default());
+    assert_eq!(est.facing(), Some(FailReason::FacingFloor));
+    assert_eq!(est.failure, Some(FailReason::FacingFloor));
+    assert_eq!(est.cause, Some(FailCause::FacingFloor));
+    // Without re-segmentation the first gate refuses it, with the same reason.
+    let first_only = LevelParams {
+        refine_passes: 0,
+        ..LevelParams::default()
+    };
+    let first = level_pose(&scans, &first_only);
+    assert_eq!(first.failure, Some(FailReason::FacingFloor));
 }

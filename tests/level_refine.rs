@@ -6,7 +6,7 @@ mod common;
 use common::{Room, elevations, scans_at};
 use levelscan::geometry::Pose;
 use levelscan::level::{
-    FailReason, LevelEstimate, LevelParams, SurfaceKind, level_fits, level_pose, refine_estimate,
+    FailCause, LevelEstimate, LevelParams, SurfaceKind, level_fits, level_pose, refine_estimate,
 };
 use levelscan::scan::{Hit, Scan};
 use rand::{RngExt, SeedableRng};
@@ -30,7 +30,7 @@ fn refined(
 ) -> (LevelEstimate, levelscan::level::refine::Refined) {
     let est = level_pose(scans, &without_refine());
     let levels = level_fits(&est, params);
-    let r = refine_estimate(&est, &levels, &Err(FailReason::ParallelWalls), params)
+    let r = refine_estimate(&est, &levels, &Err(FailCause::SigmaAboveGate), params)
         .expect("a refined model");
     (est, r.refined)
 }

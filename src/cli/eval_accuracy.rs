@@ -197,6 +197,7 @@ fn pose_lines(stats: &[CellStats], plans: &[PathBuf]) -> String {
                 "pose": o.pose,
                 "status": if o.failure.is_none() { "ok" } else { "failed" },
                 "reason": o.failure.map(|r| r.as_str()),
+                "cause": o.cause.map(|c| c.as_str()),
                 "truth_deg": o.truth_deg,
                 "estimate_deg": o.estimate_deg,
                 "sigma_deg": o.sigma_deg,

@@ -7,7 +7,7 @@
 
 use super::grid::PlaneFit;
 use super::params::{first_pass, patches, quads, refine, resegment, up};
-use super::{FailReason, LevelParams};
+use super::{FailCause, LevelParams};
 use nalgebra::{Point3, Vector3};
 
 /// The stage that applies a check, in pipeline order.
@@ -32,8 +32,8 @@ pub enum Stage {
 /// What failing a check does.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Outcome {
-    /// The pose fails with this reason (the contract's).
-    Fails(FailReason),
+    /// The pose fails with this cause (reported as its contract reason).
+    Fails(FailCause),
     /// The named candidate is dropped (or, for a gate on a candidate solution, not used).
     Drops(&'static str),
     /// The kept solution's covariance takes in its distance from another.
@@ -75,7 +75,7 @@ macro_rules! checks {
     };
 }
 
-use FailReason as F;
+use FailCause as F;
 use Outcome::{Drops, Fails, Widens};
 
 checks! {
@@ -120,12 +120,12 @@ checks! {
     MinPolygons: Gate, "quads", |p| p.min_polygons as f64, Fails(F::TooFewPolygons),
         "wall quads when no level plane is seen; facing_* when Facing holds (first_pass::solve)";
     Facing: Gate, "quads", |_| 0.0, Fails(F::FacingFloor),
-        "floor (ceiling: facing_ceiling) quads outnumber wall quads, for a pose that fails (LevelEstimate::facing)";
-    ParallelRatio: Gate, "1", |p| p.parallel_ratio, Fails(F::ParallelWalls),
+        "floor (ceiling: facing_ceiling) quads outnumber wall quads, for a pose any gate refuses (failure::reported)";
+    ParallelRatio: Gate, "1", |p| p.parallel_ratio, Fails(F::WallsParallel),
         "smaller over larger eigenvalue of up's information, walls only (failure::acceptable_within)";
-    WallAngle: Gate, "deg", |p| p.wall_min_angle_deg, Fails(F::ParallelWalls),
+    WallAngle: Gate, "deg", |p| p.wall_min_angle_deg, Fails(F::BeyondWallAngle),
         "up within this angle of the robot's z axis (failure::within_wall_angle)";
-    MaxSigma: Gate, "deg", |p| p.max_sigma_deg, Fails(F::ParallelWalls),
+    MaxSigma: Gate, "deg", |p| p.max_sigma_deg, Fails(F::SigmaAboveGate),
         "both reported attitude sigmas (failure::acceptable_within)";
     RefineAboveSigma: Resegment, "deg", |p| p.refine_above_sigma_deg, Drops("re-segmentation"),
         "a first solution this tight stands without re-segmentation (resegment::resegmented)";

@@ -2,30 +2,28 @@
 //! level surfaces cleaned of wall points (robust), and the failure reasons of a pose that
 //! cannot be leveled.
 
-use super::failure::acceptable;
+use super::failure::{FailCause, acceptable};
 use super::grid::{self, PlaneFit, PoseGrid};
 use super::patches::Patch;
 use super::polygons::Polygon;
 use super::up::{self, PlaneObs, UpSolution};
-use super::{Estimator, FailReason, LevelEstimate, LevelParams, SurfaceKind, refine};
+use super::{Estimator, LevelEstimate, LevelParams, SurfaceKind, refine};
 use crate::level::params::first_pass::*;
 use nalgebra::Vector3;
 
-/// Failure detection (sect. 5.5) and the up vector. When the walls seen cannot fix up (too
-/// few, or all parallel) while floor or ceiling quads outnumber wall quads, the reason is
-/// facing_floor / facing_ceiling: the scanner looks at the wrong surface, and a robot can
-/// retake its scans tilted the other way (sect. 5.5, 7.2.2).
+/// Failure detection (sect. 5.5) and the up vector: too few wall quads and no level plane, or
+/// a solution the gate refuses. The facing test names the reason of the pipeline's result
+/// ([`reported`](super::failure::reported)), this one's or re-segmentation's.
 pub(crate) fn solve(
     est: &LevelEstimate,
     levels: &[PlaneFit],
     params: &LevelParams,
     sigma: f64,
-) -> Result<UpSolution, FailReason> {
-    let facing = |otherwise: FailReason| est.facing().unwrap_or(otherwise);
+) -> Result<UpSolution, FailCause> {
     if est.wall_polygons() < params.min_polygons && levels.is_empty() {
-        return Err(facing(FailReason::TooFewPolygons));
+        return Err(FailCause::TooFewPolygons);
     }
-    solve_up(est, levels, params, sigma).map_err(facing)
+    solve_up(est, levels, params, sigma)
 }
 
 pub(crate) fn solve_up(
@@ -33,7 +31,7 @@ pub(crate) fn solve_up(
     levels: &[PlaneFit],
     params: &LevelParams,
     sigma: f64,
-) -> Result<UpSolution, FailReason> {
+) -> Result<UpSolution, FailCause> {
     let misfit = |f: &grid::PlaneFit| f.misfit_ratio(sigma.max(params.min_sigma)).max(1.0);
     let sigma_eff = sigma.max(params.min_sigma);
     let sol = match params.estimator {
@@ -45,7 +43,7 @@ pub(crate) fn solve_up(
                 .collect();
             let normals: Vec<(Vector3<f64>, f64)> =
                 wall_quads.iter().map(|q| (q.fit.normal, q.area)).collect();
-            let up = up::up_paper(&normals).ok_or(FailReason::ParallelWalls)?;
+            let up = up::up_paper(&normals).ok_or(FailCause::NoUp)?;
             let obs: Vec<PlaneObs> = wall_quads
                 .iter()
                 .map(|q| PlaneObs::wall(&q.fit, misfit(&q.fit)))
@@ -56,9 +54,9 @@ pub(crate) fn solve_up(
             // Wall patches over three or more scans, and the level planes.
             let obs = robust_obs(est, levels, params, sigma);
             if obs.is_empty() {
-                return Err(FailReason::TooFewPolygons);
+                return Err(FailCause::NoWallPatches);
             }
-            up::up_robust(&obs, sigma_eff, params.iterations).ok_or(FailReason::ParallelWalls)?
+            up::up_robust(&obs, sigma_eff, params.iterations).ok_or(FailCause::NoUp)?
         }
     };
     acceptable(&sol, params, !levels.is_empty())?;

@@ -31,6 +31,7 @@ pub mod refine;
 mod resegment;
 pub(crate) mod up;
 
+pub use failure::FailCause;
 pub use first_pass::level_fits;
 pub use ml::MlParams;
 pub use params::LevelParams;
@@ -73,7 +74,8 @@ pub enum SurfaceKind {
     Ceiling,
 }
 
-/// Why a pose could not be leveled (the contract's reasons).
+/// Why a pose could not be leveled (the contract's reasons; [`FailCause`] tells the causes
+/// apart).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum FailReason {
     TooFewScans,
@@ -107,8 +109,10 @@ impl fmt::Display for FailReason {
 /// The result of leveling one pose.
 #[derive(Clone, Debug)]
 pub struct LevelEstimate {
-    /// `None` when leveled, else why not.
+    /// `None` when leveled, else why not (the contract's reason, `cause`'s).
     pub failure: Option<FailReason>,
+    /// `None` when leveled, else the cause within the reason ([`FailCause::reason`]).
+    pub cause: Option<FailCause>,
     /// The attitude (theta_x, theta_y) \[rad\]; `None` on failure.
     pub attitude: Option<Attitude>,
     /// 1-sigma of theta_x and theta_y \[rad\]; `None` on failure.
@@ -171,6 +175,7 @@ impl LevelEstimate {
     fn empty(range_sigma: f64) -> Self {
         LevelEstimate {
             failure: None,
+            cause: None,
             attitude: None,
             sigmas: None,
             up: None,
@@ -185,11 +190,16 @@ impl LevelEstimate {
         }
     }
 
-    fn failed(reason: FailReason, range_sigma: f64) -> Self {
-        LevelEstimate {
-            failure: Some(reason),
-            ..Self::empty(range_sigma)
-        }
+    fn failed(cause: FailCause, range_sigma: f64) -> Self {
+        let mut est = Self::empty(range_sigma);
+        est.fail(cause);
+        est
+    }
+
+    /// Marks the estimate failed by `cause`, with its contract reason.
+    fn fail(&mut self, cause: FailCause) {
+        self.cause = Some(cause);
+        self.failure = Some(cause.reason());
     }
 }
 
@@ -253,10 +263,10 @@ pub fn level_pose_with(
     let grid = match PoseGrid::from_scans_with(scans, trig.as_deref()) {
         Ok(g) => g,
         Err(GridError::TooFewScans) => {
-            return LevelEstimate::failed(FailReason::TooFewScans, sigma);
+            return LevelEstimate::failed(FailCause::TooFewScans, sigma);
         }
         Err(GridError::InconsistentScans) => {
-            return LevelEstimate::failed(FailReason::InconsistentScans, sigma);
+            return LevelEstimate::failed(FailCause::InconsistentScans, sigma);
         }
     };
     // The paper's quads (sect. 5.2), grown into whole-wall patches (robust estimator).
@@ -388,7 +398,7 @@ mod tests {
         let params = LevelParams::default();
         assert_eq!(
             acceptable(&solution(46.0, 0.1), &params, true),
-            Err(FailReason::ParallelWalls)
+            Err(FailCause::BeyondWallAngle)
         );
         assert_eq!(acceptable(&solution(44.0, 0.1), &params, true), Ok(()));
     }

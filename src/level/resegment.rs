@@ -3,12 +3,12 @@
 //! readings of the same ranges disagree. The engine is [`refine`](super::refine).
 
 use super::checks::Check;
-use super::failure::{acceptable, acceptable_within, attitude_sigmas};
+use super::failure::{FailCause, acceptable, acceptable_within, attitude_sigmas};
 use super::first_pass::robust_obs;
 use super::grid::{PlaneFit, PoseGrid};
 use super::patches::Patch;
 use super::up::{self, UpSolution};
-use super::{Estimator, FailReason, LevelEstimate, LevelParams, SurfaceKind, refine};
+use super::{Estimator, LevelEstimate, LevelParams, SurfaceKind, refine};
 use crate::level::params::resegment::*;
 
 /// The solution of a pose after re-segmentation (robust estimator, `refine_passes` > 0): a
@@ -19,9 +19,9 @@ use crate::level::params::resegment::*;
 pub(crate) fn resegmented(
     est: &LevelEstimate,
     levels: &[PlaneFit],
-    first: Result<UpSolution, FailReason>,
+    first: Result<UpSolution, FailCause>,
     params: &LevelParams,
-) -> (Result<UpSolution, FailReason>, Option<Vec<refine::Model>>) {
+) -> (Result<UpSolution, FailCause>, Option<Vec<refine::Model>>) {
     let needs_refine = match &first {
         Ok(sol) => attitude_sigmas(sol, params)
             .iter()
@@ -54,7 +54,9 @@ pub(crate) fn resegmented(
     };
     let result = match widened {
         // Only its sigma changed: the walls' spread was judged already.
-        Some(widened) => acceptable(&widened, params, true).map(|()| widened),
+        Some(widened) => acceptable(&widened, params, true)
+            .map(|()| widened)
+            .map_err(|_| FailCause::ResegmentationDisagrees),
         None => result,
     };
     (result, models)
@@ -81,7 +83,7 @@ pub struct Resegmented {
 pub fn refine_estimate(
     est: &LevelEstimate,
     levels: &[PlaneFit],
-    first: &Result<UpSolution, FailReason>,
+    first: &Result<UpSolution, FailCause>,
     params: &LevelParams,
 ) -> Option<Resegmented> {
     let grid = est.grid.as_ref()?;
@@ -163,7 +165,7 @@ pub(crate) fn blind_starts(
 pub(crate) fn refined_solution(
     est: &LevelEstimate,
     levels: &[PlaneFit],
-    first: &Result<UpSolution, FailReason>,
+    first: &Result<UpSolution, FailCause>,
     params: &LevelParams,
 ) -> Refinement {
     let Some(Resegmented {

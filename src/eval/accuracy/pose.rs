@@ -4,7 +4,7 @@
 use super::AccuracyParams;
 use crate::eval::true_segments::TrueSegmentsFit;
 use crate::geometry::Pose;
-use crate::level::{FailReason, LevelParams, level_pose};
+use crate::level::{FailCause, FailReason, LevelParams, level_pose};
 use crate::plan::Segment;
 use crate::pseudo_level::pseudo_level_scan_and_base;
 use crate::scan::{Hit, Scan};
@@ -22,6 +22,8 @@ pub struct PoseOutcome {
     /// Estimated theta_x and theta_y \[deg\], when leveled.
     pub estimate_deg: Option<[f64; 2]>,
     pub failure: Option<FailReason>,
+    /// The cause within `failure`'s reason ([`FailCause`]), for finding the poses behind it.
+    pub cause: Option<FailCause>,
     /// The paper's error `max(|dtheta_x|, |dtheta_y|)` \[deg\], when leveled.
     pub error_deg: Option<f64>,
     /// True when leveled and both angle errors lie within 3 reported sigmas.
@@ -128,6 +130,7 @@ pub fn evaluate_pose(
         return PoseOutcome {
             truth_deg,
             failure: est.failure,
+            cause: est.cause,
             best_wall_hits,
             ..PoseOutcome::default()
         };

@@ -18,7 +18,7 @@ use crate::level::failure::{attitude_sigmas, within_wall_angle};
 use crate::level::grid::PoseGrid;
 use crate::level::patches::Patch;
 use crate::level::up::UpSolution;
-use crate::level::{FailReason, LevelEstimate, LevelParams, SurfaceKind};
+use crate::level::{FailCause, LevelEstimate, LevelParams, SurfaceKind, failure};
 use crate::scan::Scan;
 use nalgebra::Vector2;
 
@@ -32,7 +32,7 @@ type Group<'a> = (Surface, &'a [usize]);
 pub(crate) fn finish(
     est: &mut LevelEstimate,
     scans: &[Scan],
-    result: Result<UpSolution, FailReason>,
+    result: Result<UpSolution, FailCause>,
     params: &LevelParams,
 ) {
     let ml = match &result {
@@ -47,13 +47,14 @@ pub(crate) fn finish(
             est.sigmas = Some(sol.sigmas());
             est.up = Some(sol.up);
             est.failure = None;
+            est.cause = None;
         }
         (None, Ok(sol)) => {
             est.attitude = Some(sol.attitude());
             est.sigmas = Some(attitude_sigmas(&sol, params));
             est.up = Some(sol.up);
         }
-        (None, Err(reason)) => est.failure = Some(reason),
+        (None, Err(cause)) => est.fail(failure::reported(est, cause)),
     }
 }
 
