@@ -17,6 +17,8 @@
 //! and every accept/reject rule in one table, [`checks`].
 
 mod adopt;
+#[cfg(test)]
+mod check_tests;
 pub mod checks;
 pub(crate) mod eigen3;
 mod failure;
