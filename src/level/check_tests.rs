@@ -4,7 +4,7 @@
 
 use super::checks::{CHECKS, Check, refined_level};
 use super::failure::{acceptable, reported, within_wall_angle};
-use super::grid::{GridError, GridPoint, PlaneFit, PoseGrid};
+use super::grid::{GridPoint, PlaneFit, PoseGrid};
 use super::params::{refine as refine_consts, resegment as reseg};
 use super::polygons::Polygon;
 use super::resegment::{
@@ -110,7 +110,7 @@ fn too_few_scans() {
     assert!(PoseGrid::from_scans(&scans).is_ok());
     assert!(matches!(
         PoseGrid::from_scans(&scans[..t - 1]),
-        Err(GridError::TooFewScans)
+        Err(FailCause::TooFewScans)
     ));
 }
 
@@ -121,7 +121,7 @@ fn inconsistent_scans() {
     scans[2] = scan(4, 0.2);
     assert!(matches!(
         PoseGrid::from_scans(&scans),
-        Err(GridError::InconsistentScans)
+        Err(FailCause::InconsistentScans)
     ));
 }
 
