@@ -82,7 +82,7 @@ checks! {
     TooFewScans: Grid, "scans", |_| 3.0, Fails(F::TooFewScans),
         "at least three distinct scan elevations (grid::PoseGrid::from_scans_with)";
     InconsistentScans: Grid, "rays", |_| 0.0, Fails(F::InconsistentScans),
-        "every scan has the same bearings (grid::PoseGrid::from_scans_with)";
+        "every scan has as many rays (grid::PoseGrid::from_scans_with)";
     QuadCoplanar: Quads, "sigma", |p| p.coplanar_k, Drops("quad"),
         "every point of a quad within coplanar_k sigmas of its plane (polygons::quad_at)";
     QuadNearTriangle: Quads, "1", |p| p.min_edge_ratio, Drops("quad"),

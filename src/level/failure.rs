@@ -8,7 +8,6 @@ use super::checks::Check;
 use super::up::UpSolution;
 use super::{FailReason, LevelEstimate, LevelParams};
 use nalgebra::Vector3;
-use std::fmt;
 
 /// Why a pose could not be leveled, each cause on its own. The output speaks only the
 /// contract's reasons ([`FailCause::reason`], the one place they are mapped); the cause is kept
@@ -74,12 +73,6 @@ impl FailCause {
             FailCause::SigmaAboveGate => "sigma_above_gate",
             FailCause::ResegmentationDisagrees => "resegmentation_disagrees",
         }
-    }
-}
-
-impl fmt::Display for FailCause {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(self.as_str())
     }
 }
 
@@ -198,7 +191,7 @@ mod tests {
             FailCause::SigmaAboveGate,
             FailCause::ResegmentationDisagrees,
         ] {
-            assert_eq!(c.reason(), FailReason::ParallelWalls, "{c}");
+            assert_eq!(c.reason(), FailReason::ParallelWalls, "{c:?}");
         }
     }
 

@@ -168,8 +168,7 @@ fn level_stepping_members(grid: &PoseGrid, p: &Patch) -> Option<Vec<usize>> {
     if steps.len() < MIN_LEVEL_STEPS {
         return None;
     }
-    let mid = steps.len() / 2;
-    let sign = steps.select_nth_unstable_by(mid, f64::total_cmp).1.signum();
+    let sign = super::median_of(&mut steps).signum();
     let levelish = |i: usize| step_at[i].is_some_and(|x| x * sign > 1.0);
     let kept = |i: usize| {
         let from_below = i >= cols && member(i - cols) && levelish(i - cols);

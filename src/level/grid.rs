@@ -1,6 +1,7 @@
 //! Data collection (paper sect. 5.1): the scans of one pose as a grid of robot-frame points,
 //! rows sorted by elevation (the paper's "scans as rows, equal bearings as columns").
 
+use super::FailCause;
 use crate::geometry::{beam_origin, rot_y};
 use crate::scan::Scan;
 use nalgebra::{Point3, Vector3};
@@ -65,15 +66,6 @@ fn same_bits(a: &[f64], b: &[f64]) -> bool {
             .fold(true, |same, (x, y)| same & (x.to_bits() == y.to_bits()))
 }
 
-/// Why a pose's scans cannot form a grid (the contract's failure reasons).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum GridError {
-    /// Fewer than three distinct elevations.
-    TooFewScans,
-    /// Scans with different numbers of rays.
-    InconsistentScans,
-}
-
 /// Appends scan `s`'s rays as one row of points. Same geometry as `Scan::point_in_robot`
 /// (contract: `Ry(e) (o + r (cos phi, sin phi, 0))`): at the scan's elevation `e`, with the
 /// rotation built once per scan rather than once per ray; or, for a hinge that moved while it
@@ -107,8 +99,10 @@ fn push_row(
 impl PoseGrid {
     /// Builds the grid. Scans without an elevation are skipped (the reader rejects them for
     /// `level`); of several scans at the same elevation only the first is used, since two rows in
-    /// one plane add nothing to a plane's tilt and would make quads degenerate.
-    pub fn from_scans(scans: &[Scan]) -> Result<PoseGrid, GridError> {
+    /// one plane add nothing to a plane's tilt and would make quads degenerate. Fails with
+    /// [`FailCause::TooFewScans`] below three distinct elevations, and with
+    /// [`FailCause::InconsistentScans`] when the scans differ in their numbers of rays.
+    pub fn from_scans(scans: &[Scan]) -> Result<PoseGrid, FailCause> {
         Self::from_scans_with(scans, None)
     }
 
@@ -117,7 +111,7 @@ impl PoseGrid {
     pub(crate) fn from_scans_with(
         scans: &[Scan],
         shared_trig: Option<&[(f64, f64)]>,
-    ) -> Result<PoseGrid, GridError> {
+    ) -> Result<PoseGrid, FailCause> {
         let mut order: Vec<(usize, f64)> = scans
             .iter()
             .enumerate()
@@ -126,13 +120,13 @@ impl PoseGrid {
         order.sort_by(|a, b| a.1.total_cmp(&b.1).then(a.0.cmp(&b.0)));
         order.dedup_by(|b, a| (b.1 - a.1).abs() < 1e-9);
         if order.len() < 3 {
-            return Err(GridError::TooFewScans);
+            return Err(FailCause::TooFewScans);
         }
         let cols = scans[order[0].0].nrays();
         if order.iter().any(|&(i, _)| scans[i].nrays() != cols)
             || scans.iter().any(|s| s.nrays() != cols)
         {
-            return Err(GridError::InconsistentScans);
+            return Err(FailCause::InconsistentScans);
         }
         let mut points = Vec::with_capacity(order.len() * cols);
         // Scans of one pose nearly always share their bearings: one sincos per bearing.

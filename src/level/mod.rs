@@ -17,6 +17,8 @@
 //! and every accept/reject rule in one table, [`checks`].
 
 mod adopt;
+#[cfg(test)]
+mod check_tests;
 pub mod checks;
 pub(crate) mod eigen3;
 mod failure;
@@ -40,7 +42,7 @@ pub use resegment::{Resegmented, refine_estimate};
 use crate::geometry::Attitude;
 use crate::scan::Scan;
 pub use grid::BearingTrigCache;
-use grid::{GridError, PoseGrid};
+use grid::PoseGrid;
 use nalgebra::Vector3;
 use patches::{Patch, UNLABELLED};
 use polygons::Polygon;
@@ -233,13 +235,9 @@ fn range_sigma_with(scans: &[Scan], params: &LevelParams, trig: Option<&[(f64, f
         }
     }
     if !given.is_empty() {
-        let median = |v: &mut [f64]| {
-            let mid = v.len() / 2;
-            *v.select_nth_unstable_by(mid, f64::total_cmp).1
-        };
         let halves = noise::split_at_median_range(&ranged, &ranges)
-            .map(|(mut near, mut far)| (median(&mut near), median(&mut far)));
-        return noise::far_if_noisier(median(&mut given), halves);
+            .map(|(mut near, mut far)| (median_of(&mut near), median_of(&mut far)));
+        return noise::far_if_noisier(median_of(&mut given), halves);
     }
     noise::estimate_range_sigma_with(scans, trig).unwrap_or(params.min_sigma)
 }
@@ -262,12 +260,7 @@ pub fn level_pose_with(
     let sigma = range_sigma_with(scans, params, trig.as_deref());
     let grid = match PoseGrid::from_scans_with(scans, trig.as_deref()) {
         Ok(g) => g,
-        Err(GridError::TooFewScans) => {
-            return LevelEstimate::failed(FailCause::TooFewScans, sigma);
-        }
-        Err(GridError::InconsistentScans) => {
-            return LevelEstimate::failed(FailCause::InconsistentScans, sigma);
-        }
+        Err(cause) => return LevelEstimate::failed(cause, sigma),
     };
     // The paper's quads (sect. 5.2), grown into whole-wall patches (robust estimator).
     let mut est = segmented(grid, params, sigma, trig);
@@ -351,6 +344,13 @@ fn base_scan(grid: &PoseGrid, wall_mask: &[bool]) -> usize {
         })
         .unwrap_or(0);
     grid.scan_index[base_row]
+}
+
+/// The upper median of `v` (element `len / 2` in `f64::total_cmp` order), reordering `v`.
+/// `v` must not be empty.
+pub(crate) fn median_of(v: &mut [f64]) -> f64 {
+    let mid = v.len() / 2;
+    *v.select_nth_unstable_by(mid, f64::total_cmp).1
 }
 
 /// The key `f64::total_cmp` orders by: the bits as a signed integer, with the magnitude bits

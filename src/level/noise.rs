@@ -103,9 +103,7 @@ pub(crate) fn split_at_median_range<T: Copy>(
     if ranges.len() < 40 || ranges.len() != values.len() {
         return None;
     }
-    let mut sorted = ranges.to_vec();
-    let mid = sorted.len() / 2;
-    let median = *sorted.select_nth_unstable_by(mid, f64::total_cmp).1;
+    let median = super::median_of(&mut ranges.to_vec());
     let (mut near, mut far) = (Vec::new(), Vec::new());
     for (&x, &r) in values.iter().zip(ranges) {
         if r < median {

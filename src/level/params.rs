@@ -42,11 +42,8 @@ pub struct LevelParams {
     pub ray_tolerance: bool,
     /// Smallest share of sigma used for that tolerance, `|d . n|` floor \[1\]. Default 0.1.
     pub min_ray_share: f64,
-    /// Fit each patch's plane with its points weighted by their noise along the normal,
-    /// `1 / (d . n)^2`. Default true: oblique points (on a floor, the grazing ones) are the
-    /// precise ones.
-    pub ray_weights: bool,
-    /// Floor on `|d . n|` in those weights \[1\]. Default 0.2.
+    /// Floor on `|d . n|` in the ray weights of each patch's plane, `1 / (d . n)^2` \[1\].
+    /// Default 0.2.
     pub ray_weight_floor: f64,
     /// Region-growing seeds span about this many range-noise sigmas sideways \[1\]. Default 6.
     pub seed_span_sigmas: f64,
@@ -62,9 +59,7 @@ pub struct LevelParams {
     pub split_f: f64,
     /// Nested splits allowed per patch. Default 3.
     pub split_depth: usize,
-    /// Robust reweighting passes of each patch's plane. Default 1.
-    pub plane_iterations: usize,
-    /// Cauchy scale of those passes, in sigmas of each point's noise along the normal \[1\].
+    /// Cauchy scale of the robust refit of each patch's plane, in sigmas of each point's noise along the normal \[1\].
     /// Default 2.5.
     pub plane_cauchy: f64,
     /// Height band around the floor and ceiling left out of walls in that pass, on top of
@@ -188,9 +183,6 @@ pub struct LevelParams {
     /// multiple of the residual the noise explains \[1\]. Default 1.5 (2 or 3 leveled a few more
     /// poses at 10 cm, but 3-sigma coverage fell to 92-94%: the extra floors were biased).
     pub refine_level_misfit: f64,
-    /// Also look for walls the region growing missed, as lines in each leveled scan.
-    /// Default true (a small gain: 3 scans at 1 cm mean 0.180 vs 0.185 degrees).
-    pub refine_discover: bool,
     // ---- Floor and ceiling lines (re-segmentation, `refine::lines`) ----
     /// Where re-segmentation finds no floor (or ceiling) plane, use each scan's floor points
     /// as a line that must be level ([`refine`], [`up::LevelLine`]): a scan's plane meets the
@@ -198,9 +190,6 @@ pub struct LevelParams {
     /// Default true: it levels poses that see the floor in one scan only (on the example
     /// plans, seeds 1-3, 1-3% more poses at 5 and 10 cm).
     pub level_lines: bool,
-    /// Fit the floor lines of two or more scans as one plane when their points fit one
-    /// (lever arm: the distance between the lines). Default true.
-    pub level_line_plane: bool,
     /// Fewest points of a scan's floor or ceiling line. Default 10.
     pub level_line_min_points: usize,
     /// A floor or ceiling line's points must fit it within this multiple of the residual the
@@ -246,7 +235,6 @@ impl Default for LevelParams {
             grow_k: 3.0,
             ray_tolerance: true,
             min_ray_share: 0.1,
-            ray_weights: true,
             ray_weight_floor: 0.2,
             seed_span_sigmas: 6.0,
             max_seed_cols: 25,
@@ -254,7 +242,6 @@ impl Default for LevelParams {
             split_misfit: 1.1,
             split_f: 20.0,
             split_depth: 3,
-            plane_iterations: 1,
             plane_cauchy: 2.5,
             flat_margin: 0.02,
             min_patch_points: 20,
@@ -287,10 +274,8 @@ impl Default for LevelParams {
             refine_level_max_deg: 10.0,
             refine_step_k: 1.0,
             refine_level_misfit: 1.5,
-            refine_discover: true,
             // Floor and ceiling lines
             level_lines: true,
-            level_line_plane: true,
             level_line_min_points: 10,
             level_line_misfit: 1.5,
             level_line_inflation: 4.0,

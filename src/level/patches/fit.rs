@@ -3,31 +3,19 @@
 
 use super::*;
 
-/// The patch's plane refitted with Cauchy weights on each point's residual over its own noise
-/// along the normal (`sigma |d . n|`), so that the few floor points caught at a wall's foot,
-/// all on one side of it, stop tilting the wall.
+/// The patch's plane refitted with ray weights and, when it misfits, Cauchy weights on each
+/// point's residual over its own noise along the normal (`sigma |d . n|`), so that the few
+/// floor points caught at a wall's foot, all on one side of it, stop tilting the wall
+/// ([`ray_weighted_fit`]).
 pub(super) fn robust_fit(
     grid: &PoseGrid,
     members: &[usize],
-    mut fit: PlaneFit,
+    fit: PlaneFit,
     params: &LevelParams,
     sigma: f64,
 ) -> Option<PlaneFit> {
-    let points = || members.iter().filter_map(|&i| grid.points[i].as_ref());
-    let s = sigma.max(params.min_sigma);
-    if params.ray_weights {
-        fit = ray_weighted_fit(points(), params, sigma, fit)?;
-    } else if fit.misfit_ratio(s) > params.split_misfit {
-        // A plane its noise already explains has no outliers worth reweighting.
-        for _ in 0..params.plane_iterations {
-            let mut acc = PlaneAccumulator::default();
-            for g in points() {
-                acc.add_weighted(g, cauchy_weight(&fit, g, s, params));
-            }
-            fit = acc.fit(sigma)?;
-        }
-    }
-    Some(fit)
+    let points = members.iter().filter_map(|&i| grid.points[i].as_ref());
+    ray_weighted_fit(points, params, sigma, fit)
 }
 
 /// Cauchy weight of a point's residual over its own noise along the normal.

@@ -5,7 +5,7 @@
 
 use super::grid::{GridPoint, PlaneAccumulator, PlaneFit, PoseGrid};
 use super::polygons::{Polygon, classify, extract_quads_sized};
-use super::{LevelParams, SurfaceKind, total_order_key};
+use super::{LevelParams, SurfaceKind, median_of, total_order_key};
 use nalgebra::{Matrix3, Point3, Vector3};
 
 mod fit;
@@ -48,9 +48,7 @@ pub(crate) fn level_height(
     if z.len() < min_points.max(1) {
         return None;
     }
-    let mid = z.len() / 2;
-    let (_, m, _) = z.select_nth_unstable_by(mid, f64::total_cmp);
-    Some(*m)
+    Some(median_of(&mut z))
 }
 
 /// Seed width \[columns\]: the paper's quad width, or wider where the range noise would leave a
@@ -86,8 +84,7 @@ pub fn seed_cols(grid: &PoseGrid, params: &LevelParams, sigma: f64) -> usize {
         }
     }
     let mut ranges: Vec<f64> = grid.points.iter().flatten().map(|g| g.range).collect();
-    let (_, r, _) = ranges.select_nth_unstable_by(mid, f64::total_cmp);
-    clamp(want(*r))
+    clamp(want(median_of(&mut ranges)))
 }
 
 /// No patch.

@@ -296,3 +296,61 @@ fn ray_weighted_fit_is_exact_without_noise() {
     let fit = ray_weighted_fit(grid.points.iter().flatten(), &params, 0.0, plain).unwrap();
     assert!(1.0 - fit.normal.dot(&n).abs() < 1e-12, "{:?}", fit.normal);
 }
+
+/// [`Check::PatchStacked`](crate::level::checks::Check::PatchStacked): three columns held by
+/// two adjacent rows and single points beside them stack while the stacked points hold
+/// `min_stacked_share` of the members (6 of 8 at 0.75), and not once they fall below it (6 of 9).
+#[test]
+fn check_patch_stacked() {
+    let params = LevelParams::default();
+    assert_eq!(params.min_stacked_share, 0.75);
+    let cols = 20;
+    let grid = PoseGrid {
+        scan_index: vec![0, 1],
+        elevation: vec![0.0, 0.087],
+        cols,
+        points: vec![None; 2 * cols],
+    };
+    let members = |singles: usize| {
+        let mut m: Vec<usize> = (0..3).chain(3..3 + singles).collect();
+        m.extend((0..3).map(|c| cols + c));
+        m
+    };
+    assert!(stacked(&members(2), &grid, &params));
+    assert!(!stacked(&members(3), &grid, &params));
+}
+
+/// [`Check::PatchTooBent`](crate::level::checks::Check::PatchTooBent): a small patch whose
+/// misfit ratio is just below `1 + k sqrt(2 / dof)` stands, just above it is too bent; from
+/// twice `min_patch_points` members on, it is left to the split test.
+#[test]
+fn check_patch_too_bent() {
+    let params = LevelParams::default();
+    let (sigma, weight) = (0.01, 23.0_f64);
+    let dof = weight - 3.0;
+    let limit = 1.0 + params.max_misfit_sigmas * (2.0 / dof).sqrt();
+    let fit = |ratio: f64| PlaneFit {
+        centroid: Point3::new(2.0, 0.0, 0.0),
+        normal: Vector3::x(),
+        in_plane: [(1.0, Vector3::y()), (1.0, Vector3::z())],
+        n: weight as usize,
+        weight,
+        dn2: 1.0,
+        residual_ss: ratio * sigma * sigma * dof,
+    };
+    let small = weight as usize;
+    assert!(!too_bent_to_split(
+        &fit(limit * (1.0 - 1e-6)),
+        small,
+        &params,
+        sigma
+    ));
+    assert!(too_bent_to_split(
+        &fit(limit * (1.0 + 1e-6)),
+        small,
+        &params,
+        sigma
+    ));
+    let large = 2 * params.min_patch_points;
+    assert!(!too_bent_to_split(&fit(limit * 2.0), large, &params, sigma));
+}

@@ -37,7 +37,7 @@ pub(crate) enum LevelEvidence {
 /// that height, and each candidate within its own vertical tolerance of it (range noise along
 /// the vertical, and an error of up `sigma_up` at its horizontal distance) joins its scan's
 /// line. Each scan's line is fitted with outliers removed and must fit within
-/// `level_line_misfit` of its noise. With `level_line_plane` and two or more scans, the lines
+/// `level_line_misfit` of its noise. With two or more scans, the lines
 /// are one plane (its lever arm is the distance between the lines) when their points fit one
 /// within `refine_level_misfit`; in a plane with a full line, a line of as few as
 /// [`PLANE_LINE_MIN_POINTS`] counts.
@@ -181,7 +181,7 @@ pub(crate) fn lines_plane(
 }
 
 /// The plane `fit` through level lines' points `members` ([`lines_plane`]) as the floor or
-/// ceiling, when it fits them (`level_line_plane`): within `refine_level_misfit` of the noise,
+/// ceiling, when it fits them: within `refine_level_misfit` of the noise,
 /// near up, clear of the scanner, and with nothing seen through it.
 pub(crate) fn level_plane(
     ctx: &LineContext,
@@ -190,10 +190,8 @@ pub(crate) fn level_plane(
     params: &LevelParams,
 ) -> Option<LevelEvidence> {
     let s = ctx.s;
-    (params.level_line_plane
-        && checks::refined_level(&fit, ctx.up, s, params)
-        && opaque(ctx.grid, &fit, s, params))
-    .then_some(LevelEvidence::Plane(fit, members))
+    (checks::refined_level(&fit, ctx.up, s, params) && opaque(ctx.grid, &fit, s, params))
+        .then_some(LevelEvidence::Plane(fit, members))
 }
 
 /// Whether level lines (each with its points) can all lie in one plane: with three or more,

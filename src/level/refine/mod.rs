@@ -182,11 +182,9 @@ pub(crate) fn refine(
     let mut wall_fits: Vec<PlaneFit> = walls.iter().map(|p| p.fit).collect();
     let mut level_fits: Vec<PlaneFit> = Vec::new();
     let mut result: Option<Refined> = None;
-    let seed_width = if params.refine_discover {
-        super::patches::seed_cols(grid, params, s).max(3)
-    } else {
-        0
-    };
+    // Walls the region growing missed are looked for as lines in each leveled scan (a small
+    // gain: 3 scans at 1 cm mean 0.180 vs 0.185 degrees).
+    let seed_width = super::patches::seed_cols(grid, params, s).max(3);
     for pass in 0..params.refine_passes {
         // 1. Every point leveled with the current up.
         let level_from_robot = Attitude::from_up(&up).level_from_robot();
@@ -209,8 +207,7 @@ pub(crate) fn refine(
         // 2. Points assigned to the floor and ceiling, then to walls; 3. the models refitted.
         let (level_members, near_level) = assign_levels(&f, &level_fits, &level_ok);
         // New walls are looked for once; later passes carry them as models.
-        let discover = params.refine_discover && pass == 0;
-        let mut walls = assign_walls(&f, &wall_fits, &near_level, discover, seed_width);
+        let mut walls = assign_walls(&f, &wall_fits, &near_level, pass == 0, seed_width);
         let (mut models, walls_found) = models_of(
             &f,
             std::mem::take(&mut walls.members),
