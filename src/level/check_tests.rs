@@ -3,6 +3,7 @@
 //! table's checks are the ones tested here.
 
 use super::checks::{CHECKS, Check, refined_level};
+use super::failure::tests::solution;
 use super::failure::{acceptable, reported, within_wall_angle};
 use super::grid::{GridPoint, PlaneFit, PoseGrid};
 use super::params::{refine as refine_consts, resegment as reseg};
@@ -13,7 +14,7 @@ use super::resegment::{
 use super::up::UpSolution;
 use super::{FailCause, LevelEstimate, LevelParams, SurfaceKind, first_pass, refine};
 use crate::scan::Scan;
-use nalgebra::{Matrix2, Point3, Vector3};
+use nalgebra::{Point3, Vector3};
 
 /// The checks that have a test below, each named once.
 const TESTED: &[Check] = &[
@@ -80,19 +81,6 @@ fn every_check_is_accounted_for() {
 /// Just below and just above `t`, by a relative `1e-6`.
 fn around(t: f64) -> (f64, f64) {
     (t * (1.0 - 1e-6), t * (1.0 + 1e-6))
-}
-
-/// Up tilted by `deg` about the robot's x axis, with a 1-sigma of `sigma` \[rad\] both ways and
-/// information eigenvalues `info`.
-fn solution(deg: f64, sigma: f64, info: (f64, f64)) -> UpSolution {
-    let a = deg.to_radians();
-    let up = Vector3::new(0.0, -a.sin(), a.cos());
-    UpSolution {
-        up,
-        basis: [Vector3::x(), up.cross(&Vector3::x())],
-        cov: Matrix2::identity() * sigma * sigma,
-        info_eigenvalues: info,
-    }
 }
 
 /// A level scan of `nrays` rays, all returning 2 m, at `elevation`.

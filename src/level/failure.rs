@@ -140,19 +140,19 @@ pub(crate) fn reported(est: &LevelEstimate, cause: FailCause) -> FailCause {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use nalgebra::Matrix2;
 
-    /// Up tilted by `deg` about the robot's x axis, with a 1-sigma of `sigma_deg` both ways and
-    /// information eigenvalues `info`.
-    fn solution(deg: f64, sigma_deg: f64, info: (f64, f64)) -> UpSolution {
+    /// Up tilted by `deg` about the robot's x axis, with a 1-sigma of `sigma` \[rad\] both ways
+    /// and information eigenvalues `info` (also the check tests' fixture).
+    pub(crate) fn solution(deg: f64, sigma: f64, info: (f64, f64)) -> UpSolution {
         let a = deg.to_radians();
         let up = Vector3::new(0.0, -a.sin(), a.cos());
         UpSolution {
             up,
             basis: [Vector3::x(), up.cross(&Vector3::x())],
-            cov: Matrix2::identity() * sigma_deg.to_radians().powi(2),
+            cov: Matrix2::identity() * sigma * sigma,
             info_eigenvalues: info,
         }
     }
@@ -162,26 +162,29 @@ mod tests {
     fn the_gate_names_each_cause() {
         let p = LevelParams::default();
         let walls = |sol: &UpSolution| acceptable(sol, &p, false);
-        assert_eq!(walls(&solution(5.0, 0.1, (1.0, 1.0))), Ok(()));
         assert_eq!(
-            walls(&solution(5.0, 0.1, (1e-4, 1.0))),
+            walls(&solution(5.0, 0.1f64.to_radians(), (1.0, 1.0))),
+            Ok(())
+        );
+        assert_eq!(
+            walls(&solution(5.0, 0.1f64.to_radians(), (1e-4, 1.0))),
             Err(FailCause::WallsParallel)
         );
         // With a level plane, unequal directions are no refusal.
         assert_eq!(
-            acceptable(&solution(5.0, 0.1, (1e-4, 1.0)), &p, true),
+            acceptable(&solution(5.0, 0.1f64.to_radians(), (1e-4, 1.0)), &p, true),
             Ok(())
         );
         assert_eq!(
-            walls(&solution(5.0, 0.1, (f64::NAN, f64::NAN))),
+            walls(&solution(5.0, 0.1f64.to_radians(), (f64::NAN, f64::NAN))),
             Err(FailCause::WallsParallel)
         );
         assert_eq!(
-            walls(&solution(50.0, 0.1, (1.0, 1.0))),
+            walls(&solution(50.0, 0.1f64.to_radians(), (1.0, 1.0))),
             Err(FailCause::BeyondWallAngle)
         );
         assert_eq!(
-            walls(&solution(5.0, 2.0, (1.0, 1.0))),
+            walls(&solution(5.0, 2.0f64.to_radians(), (1.0, 1.0))),
             Err(FailCause::SigmaAboveGate)
         );
         for c in [
