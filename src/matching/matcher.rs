@@ -5,7 +5,7 @@
 //! that scan's estimate and match report. Every scan gets a report; when a match is not
 //! trustworthy the step falls back to the odometry and the report says why (CSM issue #17).
 
-use super::correlative::correlative_search;
+use super::correlative::{CorrelativeScratch, correlative_search_with};
 use super::covariance::{fuse, inflation, rays_per_degree, rotate_into};
 use super::degeneracy::{remap_around, slides_as_the_scan_does};
 use super::icp::{IcpParams, IcpResult, icp, icp_remapped, icp_with_prior};
@@ -18,6 +18,7 @@ pub use super::report::{FallbackReason, MatchReport, MatchStatus};
 use crate::geometry::Pose2;
 use crate::scan::Scan;
 use nalgebra::{Matrix3, Point2, Vector2};
+use std::cell::RefCell;
 
 /// A scan's usable rays as robot-frame 2D points, in ray order.
 pub fn scan_points(scan: &Scan, ranges: &RangeParams) -> Vec<Point2<f64>> {
@@ -63,6 +64,8 @@ pub struct Matcher {
     keyframe_covariance: Matrix3<f64>,
     /// The current scan's rays per degree, which widens its covariance.
     rays_per_degree: f64,
+    /// The coarse search's buffers, reused from scan to scan.
+    correlative: RefCell<CorrelativeScratch>,
 }
 
 impl Matcher {
@@ -75,6 +78,7 @@ impl Matcher {
             has_odometry: false,
             keyframe_covariance: Matrix3::zeros(),
             rays_per_degree: 0.0,
+            correlative: RefCell::new(CorrelativeScratch::default()),
         }
     }
 
@@ -329,7 +333,8 @@ impl Matcher {
         guess: Pose2,
     ) -> (Result<IcpResult, FallbackReason>, bool) {
         let coarse_search = |g| {
-            correlative_search(
+            correlative_search_with(
+                &mut self.correlative.borrow_mut(),
                 points,
                 reference.points(),
                 &Point2::origin(),
