@@ -63,6 +63,8 @@ pub struct CorrelativeScratch {
     cells: Vec<(i64, i64)>,
     headings: Vec<f64>,
     candidates: Vec<(f32, usize, i64, i64)>,
+    /// While a candidate is refined: the most its points from each one on can still add.
+    rest: Vec<f32>,
     /// One point's Gaussian over its (2 REACH + 1)² neighbourhood, and its maxima along rows
     /// over the low-resolution blocks.
     stamp: Vec<f32>,
@@ -203,6 +205,38 @@ impl Table {
     }
 
     #[inline]
+    fn value(&self, table: &[f32], (cx, cy): (i64, i64), ox: i64, oy: i64) -> f32 {
+        let (x, y) = (cx + ox, cy + oy);
+        if x >= 0 && y >= 0 && x < self.width && y < self.height {
+            table[(y * self.width + x) as usize]
+        } else {
+            0.0
+        }
+    }
+
+    /// The most a point at `cell` can add at any offset of the block from `(ox, oy)`: the
+    /// low-resolution value there, or 1 (every cell's largest value) where the block starts
+    /// before the table's first row or column but reaches into it.
+    #[inline]
+    fn block_bound(
+        &self,
+        coarse: &[f32],
+        (cx, cy): (i64, i64),
+        ox: i64,
+        oy: i64,
+        factor: i64,
+    ) -> f32 {
+        let (x, y) = (cx + ox, cy + oy);
+        if x >= 0 && y >= 0 && x < self.width && y < self.height {
+            coarse[(y * self.width + x) as usize]
+        } else if x + factor > 0 && y + factor > 0 && x < self.width && y < self.height {
+            1.0
+        } else {
+            0.0
+        }
+    }
+
+    #[inline]
     fn score(&self, table: &[f32], cells: &[(i64, i64)], ox: i64, oy: i64) -> f32 {
         let mut s = 0f32;
         for &(cx, cy) in cells {
@@ -212,6 +246,30 @@ impl Table {
             }
         }
         s
+    }
+
+    /// `score`, or `None` once the partial sum plus what the remaining points can add at most
+    /// (`rest`) shows it cannot exceed `best`. The bound is widened by far more than the
+    /// rounding of either sum, so a score that would beat `best` is never cut short.
+    #[inline]
+    fn score_above(
+        &self,
+        table: &[f32],
+        cells: &[(i64, i64)],
+        ox: i64,
+        oy: i64,
+        rest: &[f32],
+        best: f32,
+    ) -> Option<f32> {
+        const CHECK_EVERY: usize = 16;
+        let mut s = 0f32;
+        for (i, &cell) in cells.iter().enumerate() {
+            s += self.value(table, cell, ox, oy);
+            if (i + 1) % CHECK_EVERY == 0 && (s + rest[i + 1]) * (1.0 + 1e-4) + 1e-6 < best {
+                return None;
+            }
+        }
+        Some(s)
     }
 }
 
@@ -323,9 +381,17 @@ fn search(
             break;
         }
         let (theta, cells) = (s.headings[h], &s.cells[h * n..(h + 1) * n]);
+        // rest[i]: what points i.. can add at most over the block's offsets.
+        s.rest.clear();
+        s.rest.resize(n + 1, 0.0);
+        for i in (0..n).rev() {
+            s.rest[i] = s.rest[i + 1] + table.block_bound(&s.coarse, cells[i], ox0, oy0, factor);
+        }
         for oy in oy0..(oy0 + factor).min(w + 1) {
             for ox in ox0..(ox0 + factor).min(w + 1) {
-                let score = table.score(&s.fine, cells, ox, oy);
+                let Some(score) = table.score_above(&s.fine, cells, ox, oy, &s.rest, best.0) else {
+                    continue;
+                };
                 if score > best.0 {
                     best = (
                         score,
