@@ -409,6 +409,56 @@ mod tests {
     use super::*;
 
     #[test]
+    fn stamped_tables_equal_whole_table_passes_and_clear_to_zero() {
+        // Points near the table's edges and overlapping each other.
+        let reference: Vec<Point2<f64>> = (0..200)
+            .map(|i| {
+                let a = i as f64 * 0.7;
+                Point2::new(2.0 * a.cos() + 0.013 * i as f64, 1.5 * (1.3 * a).sin())
+            })
+            .collect();
+        let (res, factor) = (0.05, 4);
+        let table = Table::around(&reference, res, 2.0 * res).unwrap();
+        let (w, h) = (table.width, table.height);
+        let mut s = CorrelativeScratch {
+            fine: vec![0.0; (w * h) as usize],
+            coarse: vec![0.0; (w * h) as usize],
+            ..CorrelativeScratch::default()
+        };
+        table.fill(&reference, res, factor, &mut s);
+        // The fine table point by point, then its block maxima over the whole table.
+        let mut fine = vec![0f32; (w * h) as usize];
+        for p in &reference {
+            let (cx, cy) = table.cell_of(p, res);
+            for y in (cy - REACH).max(0)..=(cy + REACH).min(h - 1) {
+                for x in (cx - REACH).max(0)..=(cx + REACH).min(w - 1) {
+                    let cell = Point2::new(
+                        table.origin.x + x as f64 * res,
+                        table.origin.y + y as f64 * res,
+                    );
+                    let v = (-0.5 * (cell - p).norm_squared() / (res * res)).exp() as f32;
+                    let slot = &mut fine[(y * w + x) as usize];
+                    *slot = slot.max(v);
+                }
+            }
+        }
+        assert_eq!(s.fine, fine);
+        for y in 0..h {
+            for x in 0..w {
+                let mut m = 0f32;
+                for j in y..(y + factor).min(h) {
+                    for i in x..(x + factor).min(w) {
+                        m = m.max(fine[(j * w + i) as usize]);
+                    }
+                }
+                assert_eq!(s.coarse[(y * w + x) as usize], m, "cell {x}, {y}");
+            }
+        }
+        table.clear(&reference, res, factor, &mut s);
+        assert!(s.fine.iter().chain(&s.coarse).all(|&v| v == 0.0));
+    }
+
+    #[test]
     fn finds_a_far_offset_that_icp_would_miss() {
         // An irregular outline, displaced by 30 cm and 12 degrees.
         let reference: Vec<Point2<f64>> = (0..360)
