@@ -3,6 +3,12 @@
 //! - `plicp_match`: one point-to-line ICP of a 181-ray scan against the previous one (the
 //!   reference already built), from the odometry guess; `pairwise_step` adds building the
 //!   reference (line fits and kd-tree), i.e. the whole per-scan cost of pairwise matching.
+//! - `coarse_search`: the coarse correlative search of a scan against the previous one from a
+//!   guess 20 cm and 5 degrees off, in buffers kept between calls (as the matcher keeps them).
+//! - `run_40_pairwise` / `run_40_metascan`: a whole 40-scan run through the `Matcher`.
+//!
+//! The per-scan benchmarks take the scanner's ray count as their argument (181 or 361 rays
+//! over the same half turn).
 //! - `metascan_first_100` / `metascan_last_100`: the cost of 100 metascan steps at the start of
 //!   a 5000-scan run and at its end (the map built from the 4900 before, outside the timing).
 //!   The run goes 14 times around the two-room plan's closed loop, resampled to 350 poses per
@@ -12,8 +18,8 @@
 use levelscan::formats::read_plan;
 use levelscan::geometry::{Pose, Pose2};
 use levelscan::matching::{
-    IcpParams, Matcher, MatcherParams, Mode, NormalParams, RangeParams, ScanReference, icp,
-    odometry_step, scan_points,
+    CorrelativeParams, CorrelativeScratch, IcpParams, Matcher, MatcherParams, Mode, NormalParams,
+    RangeParams, ScanReference, correlative_search_with, icp, odometry_step, scan_points,
 };
 use levelscan::simulate::{OdometryParams, ScannerParams, World, odometry, simulate_poses};
 use nalgebra::Point2;
@@ -29,9 +35,9 @@ type Run = Vec<(Vec<Point2<f64>>, Option<Pose2>)>;
 /// Poses per lap of the benchmark's loop.
 const LAP: usize = 350;
 
-/// `n` level scans around the two-room loop (`LAP` poses per lap, interpolated between the
-/// plan's poses), with drifting odometry.
-fn simulated_run(n: usize) -> Run {
+/// `n` level scans of `rays` rays around the two-room loop (`LAP` poses per lap, interpolated
+/// between the plan's poses), with drifting odometry.
+fn simulated_run(n: usize, rays: usize) -> Run {
     let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/plans/two_rooms.wall");
     let plan = read_plan(&path).expect("the example plan is valid");
     let world = World::from_plan(&plan);
@@ -59,7 +65,10 @@ fn simulated_run(n: usize) -> Run {
         Some(&odo),
         0,
         &[0.0],
-        &ScannerParams::default(),
+        &ScannerParams {
+            rays,
+            ..ScannerParams::default()
+        },
         None,
         7,
     )
@@ -74,21 +83,33 @@ fn simulated_run(n: usize) -> Run {
     .collect()
 }
 
-static SHORT: LazyLock<Run> = LazyLock::new(|| simulated_run(40));
-static LONG: LazyLock<Run> = LazyLock::new(|| simulated_run(5000));
+static SHORT: LazyLock<Run> = LazyLock::new(|| simulated_run(40, 181));
+static SHORT_361: LazyLock<Run> = LazyLock::new(|| simulated_run(40, 361));
+static LONG: LazyLock<Run> = LazyLock::new(|| simulated_run(5000, 181));
 
-#[divan::bench]
-fn plicp_match(bencher: divan::Bencher) {
-    let (a, b) = (&SHORT[10], &SHORT[11]);
+/// The 40-scan run with `rays` rays per scan.
+fn short(rays: usize) -> &'static Run {
+    match rays {
+        181 => &SHORT,
+        361 => &SHORT_361,
+        _ => unreachable!("benchmarked at 181 and 361 rays"),
+    }
+}
+
+#[divan::bench(args = [181, 361])]
+fn plicp_match(bencher: divan::Bencher, rays: usize) {
+    let run = short(rays);
+    let (a, b) = (&run[10], &run[11]);
     let reference = ScanReference::new(a.0.clone(), &Point2::origin(), &NormalParams::default());
     let guess = odometry_step(a.1, b.1);
     let params = IcpParams::default();
     bencher.bench(|| icp(divan::black_box(&b.0), &reference, guess, &params));
 }
 
-#[divan::bench]
-fn pairwise_step(bencher: divan::Bencher) {
-    let (a, b) = (&SHORT[10], &SHORT[11]);
+#[divan::bench(args = [181, 361])]
+fn pairwise_step(bencher: divan::Bencher, rays: usize) {
+    let run = short(rays);
+    let (a, b) = (&run[10], &run[11]);
     let guess = odometry_step(a.1, b.1);
     let params = IcpParams::default();
     bencher.bench(|| {
@@ -96,6 +117,51 @@ fn pairwise_step(bencher: divan::Bencher) {
             ScanReference::new(a.0.clone(), &Point2::origin(), &NormalParams::default());
         icp(divan::black_box(&b.0), &reference, guess, &params)
     });
+}
+
+#[divan::bench(args = [181, 361])]
+fn coarse_search(bencher: divan::Bencher, rays: usize) {
+    let run = short(rays);
+    let (a, b) = (&run[10], &run[11]);
+    let step = odometry_step(a.1, b.1);
+    let guess = step.compose(&Pose2::new(0.2, -0.2, 5f64.to_radians()));
+    let params = CorrelativeParams::default();
+    let mut scratch = CorrelativeScratch::default();
+    bencher.bench_local(|| {
+        correlative_search_with(
+            &mut scratch,
+            divan::black_box(&b.0),
+            &a.0,
+            &Point2::origin(),
+            guess,
+            &params,
+        )
+    });
+}
+
+/// A whole 40-scan run through the matcher in `mode`.
+fn run_40(bencher: divan::Bencher, mode: Mode, rays: usize) {
+    let run = short(rays);
+    let params = MatcherParams {
+        mode,
+        ..MatcherParams::default()
+    };
+    bencher.bench_local(|| {
+        let mut m = Matcher::new(params);
+        for (points, odo) in run {
+            divan::black_box(m.push(points, *odo));
+        }
+    });
+}
+
+#[divan::bench(args = [181, 361])]
+fn run_40_pairwise(bencher: divan::Bencher, rays: usize) {
+    run_40(bencher, Mode::Pairwise, rays);
+}
+
+#[divan::bench(args = [181, 361])]
+fn run_40_metascan(bencher: divan::Bencher, rays: usize) {
+    run_40(bencher, Mode::Metascan, rays);
 }
 
 fn metascan_params() -> MatcherParams {

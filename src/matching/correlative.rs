@@ -46,17 +46,42 @@ impl Default for CorrelativeParams {
     }
 }
 
-/// The fine likelihood table and its low-resolution bound.
+/// How far (in cells, per axis) a reference point's Gaussian reaches in the fine table.
+const REACH: i64 = 2;
+
+/// Buffers of the coarse search, kept between calls so a search allocates nothing once they
+/// have grown to the largest table seen. Between calls both tables are all zeros: a search
+/// writes only the cells near its reference points and clears those same cells before it
+/// returns, so no pass over the whole table is ever made.
+#[derive(Clone, Debug, Default)]
+pub struct CorrelativeScratch {
+    fine: Vec<f32>,
+    coarse: Vec<f32>,
+    near: Vec<Point2<f64>>,
+    used: Vec<Point2<f64>>,
+    /// Each used point's cell under the guess translation, heading after heading.
+    cells: Vec<(i64, i64)>,
+    headings: Vec<f64>,
+    candidates: Vec<(f32, usize, i64, i64)>,
+    /// While a candidate is refined: the most its points from each one on can still add.
+    rest: Vec<f32>,
+    /// One point's Gaussian over its (2 REACH + 1)² neighbourhood, and its maxima along rows
+    /// over the low-resolution blocks.
+    stamp: Vec<f32>,
+    rows: Vec<f32>,
+}
+
+/// Where the fine likelihood table and its low-resolution bound lie (the cells themselves
+/// are in `CorrelativeScratch`).
+#[derive(Clone, Copy)]
 struct Table {
     origin: Point2<f64>,
     width: i64,
     height: i64,
-    fine: Vec<f32>,
-    coarse: Vec<f32>,
 }
 
 impl Table {
-    fn build(reference: &[Point2<f64>], res: f64, factor: usize, margin: f64) -> Option<Table> {
+    fn around(reference: &[Point2<f64>], res: f64, margin: f64) -> Option<Table> {
         let (mut lo, mut hi) = (
             Point2::new(f64::INFINITY, f64::INFINITY),
             Point2::new(f64::NEG_INFINITY, f64::NEG_INFINITY),
@@ -71,58 +96,144 @@ impl Table {
         let origin = Point2::new(lo.x - margin, lo.y - margin);
         let width = ((hi.x - lo.x + 2.0 * margin) / res).ceil() as i64 + 1;
         let height = ((hi.y - lo.y + 2.0 * margin) / res).ceil() as i64 + 1;
-        let mut fine = vec![0f32; (width * height) as usize];
-        // Each point spreads a Gaussian of one cell's sigma over its neighbourhood (Olson eq. 5's
-        // rasterised cost), keeping the maximum where neighbourhoods overlap.
-        let reach = 2i64;
-        for p in reference {
-            let cx = ((p.x - origin.x) / res).round() as i64;
-            let cy = ((p.y - origin.y) / res).round() as i64;
-            for dy in -reach..=reach {
-                for dx in -reach..=reach {
-                    let (x, y) = (cx + dx, cy + dy);
-                    if x < 0 || y < 0 || x >= width || y >= height {
-                        continue;
-                    }
-                    let cell = Point2::new(origin.x + x as f64 * res, origin.y + y as f64 * res);
-                    let d2 = (cell - p).norm_squared() / (res * res);
-                    let v = (-0.5 * d2).exp() as f32;
-                    let slot = &mut fine[(y * width + x) as usize];
-                    if v > *slot {
-                        *slot = v;
-                    }
-                }
-            }
-        }
-        // coarse[x, y] = max over fine[x + i, y + j], 0 <= i, j < factor (separable).
-        let f = factor as i64;
-        let mut rows = vec![0f32; fine.len()];
-        for y in 0..height {
-            for x in 0..width {
-                let mut m = 0f32;
-                for i in 0..f.min(width - x) {
-                    m = m.max(fine[(y * width + x + i) as usize]);
-                }
-                rows[(y * width + x) as usize] = m;
-            }
-        }
-        let mut coarse = vec![0f32; fine.len()];
-        for y in 0..height {
-            for x in 0..width {
-                let mut m = 0f32;
-                for j in 0..f.min(height - y) {
-                    m = m.max(rows[((y + j) * width + x) as usize]);
-                }
-                coarse[(y * width + x) as usize] = m;
-            }
-        }
         Some(Table {
             origin,
             width,
             height,
-            fine,
-            coarse,
         })
+    }
+
+    fn cell_of(&self, p: &Point2<f64>, res: f64) -> (i64, i64) {
+        (
+            ((p.x - self.origin.x) / res).round() as i64,
+            ((p.y - self.origin.y) / res).round() as i64,
+        )
+    }
+
+    /// Fills the fine table, where each point spreads a Gaussian of one cell's sigma over its
+    /// neighbourhood (Olson eq. 5's rasterised cost), keeping the maximum where neighbourhoods
+    /// overlap; and the low-resolution one, `coarse[x, y] = max fine[x + i, y + j]` over
+    /// `0 <= i, j < factor` (cells inside the table). A maximum of maxima is the maximum over
+    /// the union, so each point's block maxima are taken over its own neighbourhood and
+    /// merged: the same values as from the whole fine table, from only the cells it reaches.
+    fn fill(&self, reference: &[Point2<f64>], res: f64, factor: i64, s: &mut CorrelativeScratch) {
+        let side = 2 * REACH + 1;
+        let span = side + factor - 1;
+        s.stamp.clear();
+        s.stamp.resize((side * side) as usize, 0.0);
+        s.rows.clear();
+        s.rows.resize((side * span) as usize, 0.0);
+        for p in reference {
+            let (cx, cy) = self.cell_of(p, res);
+            for dy in -REACH..=REACH {
+                for dx in -REACH..=REACH {
+                    let (x, y) = (cx + dx, cy + dy);
+                    let slot = ((dy + REACH) * side + dx + REACH) as usize;
+                    if x < 0 || y < 0 || x >= self.width || y >= self.height {
+                        s.stamp[slot] = 0.0;
+                        continue;
+                    }
+                    let cell = Point2::new(
+                        self.origin.x + x as f64 * res,
+                        self.origin.y + y as f64 * res,
+                    );
+                    let d2 = (cell - p).norm_squared() / (res * res);
+                    let v = (-0.5 * d2).exp() as f32;
+                    s.stamp[slot] = v;
+                    let fine = &mut s.fine[(y * self.width + x) as usize];
+                    if v > *fine {
+                        *fine = v;
+                    }
+                }
+            }
+            // Block maxima along rows: rows[r, a] is the maximum of stamp row r over the
+            // columns a - factor + 1 ..= a (of the stamp), the block of coarse column
+            // cx - REACH - factor + 1 + a.
+            for r in 0..side {
+                for a in 0..span {
+                    let mut m = 0f32;
+                    for c in (a - factor + 1).max(0)..=a.min(side - 1) {
+                        m = m.max(s.stamp[(r * side + c) as usize]);
+                    }
+                    s.rows[(r * span + a) as usize] = m;
+                }
+            }
+            for b in 0..span {
+                let y = cy - REACH - factor + 1 + b;
+                if y < 0 || y >= self.height {
+                    continue;
+                }
+                for a in 0..span {
+                    let x = cx - REACH - factor + 1 + a;
+                    if x < 0 || x >= self.width {
+                        continue;
+                    }
+                    let mut m = 0f32;
+                    for r in (b - factor + 1).max(0)..=b.min(side - 1) {
+                        m = m.max(s.rows[(r * span + a) as usize]);
+                    }
+                    let coarse = &mut s.coarse[(y * self.width + x) as usize];
+                    if m > *coarse {
+                        *coarse = m;
+                    }
+                }
+            }
+        }
+    }
+
+    /// Zeroes the cells `fill` wrote, which leaves both tables all zeros again.
+    fn clear(&self, reference: &[Point2<f64>], res: f64, factor: i64, s: &mut CorrelativeScratch) {
+        for p in reference {
+            let (cx, cy) = self.cell_of(p, res);
+            let (y0, y1) = (
+                (cy - REACH - factor + 1).max(0),
+                (cy + REACH).min(self.height - 1),
+            );
+            let (x0, x1) = (
+                (cx - REACH - factor + 1).max(0),
+                (cx + REACH).min(self.width - 1),
+            );
+            for y in y0..=y1 {
+                let row = (y * self.width) as usize;
+                s.coarse[row + x0 as usize..=row + x1 as usize].fill(0.0);
+                if (y - cy).abs() <= REACH {
+                    let (f0, f1) = ((cx - REACH).max(0), x1);
+                    s.fine[row + f0 as usize..=row + f1 as usize].fill(0.0);
+                }
+            }
+        }
+    }
+
+    #[inline]
+    fn value(&self, table: &[f32], (cx, cy): (i64, i64), ox: i64, oy: i64) -> f32 {
+        let (x, y) = (cx + ox, cy + oy);
+        if x >= 0 && y >= 0 && x < self.width && y < self.height {
+            table[(y * self.width + x) as usize]
+        } else {
+            0.0
+        }
+    }
+
+    /// The most a point at `cell` can add at any offset of the block from `(ox, oy)`: the
+    /// low-resolution value there, or 1 (every cell's largest value) where the block starts
+    /// before the table's first row or column but reaches into it.
+    #[inline]
+    fn block_bound(
+        &self,
+        coarse: &[f32],
+        (cx, cy): (i64, i64),
+        ox: i64,
+        oy: i64,
+        factor: i64,
+    ) -> f32 {
+        let (x, y) = (cx + ox, cy + oy);
+        if x >= 0 && y >= 0 && x < self.width && y < self.height {
+            coarse[(y * self.width + x) as usize]
+        } else if x + factor > 0 && y + factor > 0 && x < self.width && y < self.height {
+            1.0
+        } else {
+            0.0
+        }
     }
 
     #[inline]
@@ -136,6 +247,30 @@ impl Table {
         }
         s
     }
+
+    /// `score`, or `None` once the partial sum plus what the remaining points can add at most
+    /// (`rest`) shows it cannot exceed `best`. The bound is widened by far more than the
+    /// rounding of either sum, so a score that would beat `best` is never cut short.
+    #[inline]
+    fn score_above(
+        &self,
+        table: &[f32],
+        cells: &[(i64, i64)],
+        ox: i64,
+        oy: i64,
+        rest: &[f32],
+        best: f32,
+    ) -> Option<f32> {
+        const CHECK_EVERY: usize = 16;
+        let mut s = 0f32;
+        for (i, &cell) in cells.iter().enumerate() {
+            s += self.value(table, cell, ox, oy);
+            if (i + 1) % CHECK_EVERY == 0 && (s + rest[i + 1]) * (1.0 + 1e-4) + 1e-6 < best {
+                return None;
+            }
+        }
+        Some(s)
+    }
 }
 
 /// Best pose (`reference_from_source`) in the window around `guess`, with its score as the
@@ -147,52 +282,93 @@ pub fn correlative_search(
     guess: Pose2,
     params: &CorrelativeParams,
 ) -> Option<(Pose2, f64)> {
-    let near: Vec<Point2<f64>> = reference
-        .iter()
-        .filter(|p| (*p - reference_sensor).norm() <= params.max_range)
-        .copied()
-        .collect();
+    let mut scratch = CorrelativeScratch::default();
+    correlative_search_with(
+        &mut scratch,
+        source,
+        reference,
+        reference_sensor,
+        guess,
+        params,
+    )
+}
+
+/// [`correlative_search`] in buffers kept by the caller (a matcher keeps one set for its run).
+pub fn correlative_search_with(
+    s: &mut CorrelativeScratch,
+    source: &[Point2<f64>],
+    reference: &[Point2<f64>],
+    reference_sensor: &Point2<f64>,
+    guess: Pose2,
+    params: &CorrelativeParams,
+) -> Option<(Pose2, f64)> {
+    s.near.clear();
+    s.near.extend(
+        reference
+            .iter()
+            .filter(|p| (*p - reference_sensor).norm() <= params.max_range),
+    );
     let stride = source.len().div_ceil(params.max_points.max(1)).max(1);
-    let used: Vec<Point2<f64>> = source.iter().step_by(stride).copied().collect();
-    if used.is_empty() {
+    s.used.clear();
+    s.used.extend(source.iter().step_by(stride));
+    if s.used.is_empty() {
         return None;
     }
     let res = params.resolution;
     let factor = params.coarse_factor.max(1) as i64;
-    let table = Table::build(&near, res, factor as usize, 2.0 * res)?;
+    let table = Table::around(&s.near, res, 2.0 * res)?;
+    let cells = (table.width * table.height) as usize;
+    if s.fine.len() < cells {
+        s.fine.resize(cells, 0.0);
+        s.coarse.resize(cells, 0.0);
+    }
+    let near = std::mem::take(&mut s.near);
+    table.fill(&near, res, factor, s);
+    let found = search(&table, s, guess, params, factor);
+    table.clear(&near, res, factor, s);
+    s.near = near;
+    Some((found.1, found.0 as f64 / s.used.len() as f64))
+}
+
+/// The branch and bound over the filled tables: best fine score and its pose.
+fn search(
+    table: &Table,
+    s: &mut CorrelativeScratch,
+    guess: Pose2,
+    params: &CorrelativeParams,
+    factor: i64,
+) -> (f32, Pose2) {
+    let res = params.resolution;
     let w = (params.window_xy / res).ceil() as i64;
     let kt = (params.window_theta / params.step_theta).round() as i64;
-
-    // Per heading, each used point's cell under the guess translation.
-    let mut cells_per_heading: Vec<(f64, Vec<(i64, i64)>)> = Vec::new();
-    let mut candidates: Vec<(f32, usize, i64, i64)> = Vec::new();
+    let n = s.used.len();
+    s.cells.clear();
+    s.headings.clear();
+    s.candidates.clear();
     for k in -kt..=kt {
         let theta = guess.theta + k as f64 * params.step_theta;
         let pose = Pose2::new(guess.x, guess.y, theta);
-        let cells: Vec<(i64, i64)> = used
-            .iter()
-            .map(|p| {
-                let m = pose.transform_point(p);
-                (
-                    ((m.x - table.origin.x) / res).round() as i64,
-                    ((m.y - table.origin.y) / res).round() as i64,
-                )
-            })
-            .collect();
-        let h = cells_per_heading.len();
+        let h = s.headings.len();
+        s.cells.extend(
+            s.used
+                .iter()
+                .map(|p| table.cell_of(&pose.transform_point(p), res)),
+        );
+        let cells = &s.cells[h * n..];
         let mut oy = -w;
         while oy <= w {
             let mut ox = -w;
             while ox <= w {
-                candidates.push((table.score(&table.coarse, &cells, ox, oy), h, ox, oy));
+                s.candidates
+                    .push((table.score(&s.coarse, cells, ox, oy), h, ox, oy));
                 ox += factor;
             }
             oy += factor;
         }
-        cells_per_heading.push((theta, cells));
+        s.headings.push(theta);
     }
     // Best bound first; ties go to the candidate nearer the guess (smaller offsets).
-    candidates.sort_by(|a, b| {
+    s.candidates.sort_by(|a, b| {
         b.0.total_cmp(&a.0).then_with(|| {
             let da = a.2.abs() + a.3.abs() + (a.1 as i64 - kt).abs();
             let db = b.2.abs() + b.3.abs() + (b.1 as i64 - kt).abs();
@@ -200,29 +376,87 @@ pub fn correlative_search(
         })
     });
     let mut best: (f32, Pose2) = (f32::NEG_INFINITY, guess);
-    for &(bound, h, ox0, oy0) in &candidates {
+    for &(bound, h, ox0, oy0) in &s.candidates {
         if bound <= best.0 {
             break;
         }
-        let (theta, cells) = &cells_per_heading[h];
+        let (theta, cells) = (s.headings[h], &s.cells[h * n..(h + 1) * n]);
+        // rest[i]: what points i.. can add at most over the block's offsets.
+        s.rest.clear();
+        s.rest.resize(n + 1, 0.0);
+        for i in (0..n).rev() {
+            s.rest[i] = s.rest[i + 1] + table.block_bound(&s.coarse, cells[i], ox0, oy0, factor);
+        }
         for oy in oy0..(oy0 + factor).min(w + 1) {
             for ox in ox0..(ox0 + factor).min(w + 1) {
-                let s = table.score(&table.fine, cells, ox, oy);
-                if s > best.0 {
+                let Some(score) = table.score_above(&s.fine, cells, ox, oy, &s.rest, best.0) else {
+                    continue;
+                };
+                if score > best.0 {
                     best = (
-                        s,
-                        Pose2::new(guess.x + ox as f64 * res, guess.y + oy as f64 * res, *theta),
+                        score,
+                        Pose2::new(guess.x + ox as f64 * res, guess.y + oy as f64 * res, theta),
                     );
                 }
             }
         }
     }
-    Some((best.1, best.0 as f64 / used.len() as f64))
+    best
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn stamped_tables_equal_whole_table_passes_and_clear_to_zero() {
+        // Points near the table's edges and overlapping each other.
+        let reference: Vec<Point2<f64>> = (0..200)
+            .map(|i| {
+                let a = i as f64 * 0.7;
+                Point2::new(2.0 * a.cos() + 0.013 * i as f64, 1.5 * (1.3 * a).sin())
+            })
+            .collect();
+        let (res, factor) = (0.05, 4);
+        let table = Table::around(&reference, res, 2.0 * res).unwrap();
+        let (w, h) = (table.width, table.height);
+        let mut s = CorrelativeScratch {
+            fine: vec![0.0; (w * h) as usize],
+            coarse: vec![0.0; (w * h) as usize],
+            ..CorrelativeScratch::default()
+        };
+        table.fill(&reference, res, factor, &mut s);
+        // The fine table point by point, then its block maxima over the whole table.
+        let mut fine = vec![0f32; (w * h) as usize];
+        for p in &reference {
+            let (cx, cy) = table.cell_of(p, res);
+            for y in (cy - REACH).max(0)..=(cy + REACH).min(h - 1) {
+                for x in (cx - REACH).max(0)..=(cx + REACH).min(w - 1) {
+                    let cell = Point2::new(
+                        table.origin.x + x as f64 * res,
+                        table.origin.y + y as f64 * res,
+                    );
+                    let v = (-0.5 * (cell - p).norm_squared() / (res * res)).exp() as f32;
+                    let slot = &mut fine[(y * w + x) as usize];
+                    *slot = slot.max(v);
+                }
+            }
+        }
+        assert_eq!(s.fine, fine);
+        for y in 0..h {
+            for x in 0..w {
+                let mut m = 0f32;
+                for j in y..(y + factor).min(h) {
+                    for i in x..(x + factor).min(w) {
+                        m = m.max(fine[(j * w + i) as usize]);
+                    }
+                }
+                assert_eq!(s.coarse[(y * w + x) as usize], m, "cell {x}, {y}");
+            }
+        }
+        table.clear(&reference, res, factor, &mut s);
+        assert!(s.fine.iter().chain(&s.coarse).all(|&v| v == 0.0));
+    }
 
     #[test]
     fn finds_a_far_offset_that_icp_would_miss() {

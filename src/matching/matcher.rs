@@ -5,7 +5,7 @@
 //! that scan's estimate and match report. Every scan gets a report; when a match is not
 //! trustworthy the step falls back to the odometry and the report says why (CSM issue #17).
 
-use super::correlative::correlative_search;
+use super::correlative::{CorrelativeScratch, correlative_search_with};
 use super::covariance::{fuse, inflation, rays_per_degree, rotate_into};
 use super::degeneracy::{remap_around, slides_as_the_scan_does};
 use super::icp::{IcpParams, IcpResult, icp, icp_remapped, icp_with_prior};
@@ -18,6 +18,7 @@ pub use super::report::{FallbackReason, MatchReport, MatchStatus};
 use crate::geometry::Pose2;
 use crate::scan::Scan;
 use nalgebra::{Matrix3, Point2, Vector2};
+use std::cell::RefCell;
 
 /// A scan's usable rays as robot-frame 2D points, in ray order.
 pub fn scan_points(scan: &Scan, ranges: &RangeParams) -> Vec<Point2<f64>> {
@@ -63,6 +64,11 @@ pub struct Matcher {
     keyframe_covariance: Matrix3<f64>,
     /// The current scan's rays per degree, which widens its covariance.
     rays_per_degree: f64,
+    /// The coarse search's buffers, reused from scan to scan.
+    correlative: RefCell<CorrelativeScratch>,
+    /// Pairwise: the current scan as a reference, when the match the other way built it; it
+    /// becomes the next keyframe instead of being built again.
+    built: Option<ScanReference>,
 }
 
 impl Matcher {
@@ -75,6 +81,8 @@ impl Matcher {
             has_odometry: false,
             keyframe_covariance: Matrix3::zeros(),
             rays_per_degree: 0.0,
+            correlative: RefCell::new(CorrelativeScratch::default()),
+            built: None,
         }
     }
 
@@ -89,6 +97,7 @@ impl Matcher {
         self.has_odometry =
             odometry.is_some() && self.previous.is_some_and(|(_, prev)| prev.is_some());
         self.rays_per_degree = rays_per_degree(points);
+        self.built = None;
         let report = match self.previous {
             None => self.first(points, odometry),
             Some((prev_estimate, prev_odometry)) => match self.params.mode {
@@ -123,8 +132,11 @@ impl Matcher {
 
     /// Makes `points` (at `estimate`) the scan the next one is first matched against.
     fn set_keyframe(&mut self, points: &[Point2<f64>], estimate: Pose2, odometry: Option<Pose2>) {
+        let reference = self.built.take().unwrap_or_else(|| {
+            ScanReference::new(points.to_vec(), &Point2::origin(), &self.params.normals)
+        });
         self.keyframe = Some(Keyframe {
-            reference: ScanReference::new(points.to_vec(), &Point2::origin(), &self.params.normals),
+            reference,
             estimate,
             odometry,
         });
@@ -191,8 +203,15 @@ impl Matcher {
             );
         }
         let (result, coarse) = self.align(points, &keyframe.reference, guess);
-        let result = result.map(|r| self.symmetrize(points, &keyframe.reference, r));
+        let (result, current) = match result {
+            Ok(r) => {
+                let (r, current) = self.symmetrize(points, &keyframe.reference, r);
+                (Ok(r), current)
+            }
+            Err(e) => (Err(e), None),
+        };
         let keyframe_estimate = keyframe.estimate;
+        self.built = current;
         // The ICP pose is already keyframe_from_scan, so its covariance is relative to it.
         let reference = Reference {
             base: keyframe_estimate,
@@ -205,40 +224,37 @@ impl Matcher {
 
     /// Matches the other way too (the reference's points against this scan's lines) and takes
     /// the midpoint of the two motions when they agree: each direction fits lines to a
-    /// different scan's noise, so their errors partly cancel.
+    /// different scan's noise, so their errors partly cancel. Also returns the current scan as
+    /// a reference when it was built for the way back.
     fn symmetrize(
         &self,
         points: &[Point2<f64>],
         reference: &ScanReference,
         r: IcpResult,
-    ) -> IcpResult {
+    ) -> (IcpResult, Option<ScanReference>) {
         // A match that took directions from the odometry keeps them exactly: the way back
         // would move them by half its own (unpinned) answer.
         if !self.params.symmetric || r.remapped.is_some_and(|m| m.free > 0) {
-            return r;
+            return (r, None);
         }
         let current = ScanReference::new(points.to_vec(), &Point2::origin(), &self.params.normals);
-        let Some(back) = icp(
+        let back = icp(
             reference.points(),
             &current,
             r.pose.inverse(),
             &self.params.icp,
-        ) else {
-            return r;
+        );
+        let Some(back) = back.filter(|b| self.check(*b).is_ok()) else {
+            return (r, Some(current));
         };
-        if self.check(back).is_err() {
-            return r;
-        }
         let d = r.pose.between(&back.pose.inverse());
         if d.translation().norm() > 0.02 || d.theta.abs() > 1f64.to_radians() {
-            return r;
+            return (r, Some(current));
         }
-        IcpResult {
-            pose: r
-                .pose
-                .compose(&Pose2::new(0.5 * d.x, 0.5 * d.y, 0.5 * d.theta)),
-            ..r
-        }
+        let pose = r
+            .pose
+            .compose(&Pose2::new(0.5 * d.x, 0.5 * d.y, 0.5 * d.theta));
+        (IcpResult { pose, ..r }, Some(current))
     }
 
     fn metascan(
@@ -329,7 +345,8 @@ impl Matcher {
         guess: Pose2,
     ) -> (Result<IcpResult, FallbackReason>, bool) {
         let coarse_search = |g| {
-            correlative_search(
+            correlative_search_with(
+                &mut self.correlative.borrow_mut(),
                 points,
                 reference.points(),
                 &Point2::origin(),

@@ -26,7 +26,9 @@ pub mod reference;
 pub mod report;
 pub mod solve;
 
-pub use correlative::{CorrelativeParams, correlative_search};
+pub use correlative::{
+    CorrelativeParams, CorrelativeScratch, correlative_search, correlative_search_with,
+};
 pub use covariance::rays_per_degree;
 pub use icp::{IcpParams, IcpResult, Kernel, Metric, PosePrior, icp, icp_with_prior};
 pub use map::{MapParams, VoxelMap};
