@@ -369,3 +369,41 @@ fn odometry_beyond_the_limits_is_refused() {
     let line = one_line_failure(&levelscan(&["level", &path]), "odometry at 1e12 m");
     assert_names(&line, &[&path, "/odom"], "odometry at 1e12 m");
 }
+
+/// A bad scan late in a bag: the scans handed out before its error are numbered 1, 2, ...
+/// without a gap, the error comes once and last, and names the topic. Scans still held for
+/// stamp ordering (a window of 64) when the error is met are not handed out; at scan 140 the
+/// good ones span several of the reading thread's batches.
+#[test]
+fn scans_before_a_bad_one_come_in_order_then_its_error_once() {
+    use levelscan::formats::bag::{Bag, BagOptions, BagScans};
+    let dir = TempDir::new("bad-late");
+    let mut msgs = bag_messages(&simulated_scans(50, 61, 5), &BagSpec::default());
+    let bad = 140;
+    let i = msgs
+        .iter()
+        .enumerate()
+        .filter(|(_, m)| m.topic == "/scan")
+        .nth(bad - 1)
+        .unwrap()
+        .0;
+    msgs[i].data.truncate(60);
+    let path = write(&dir, "late.mcap", &mcap_bytes(&msgs, Layout::default()));
+    let bag = Bag::detect(std::path::Path::new(&path)).unwrap().unwrap();
+    let (scans, _) = BagScans::open(bag, &BagOptions::default()).unwrap();
+    let items: Vec<_> = scans.collect();
+    let numbers: Vec<usize> = items
+        .iter()
+        .map_while(|r| r.as_ref().ok().map(|(n, _)| *n))
+        .collect();
+    let good = numbers.len();
+    assert!(good > 64 && good < bad, "{good} scans before the error");
+    assert_eq!(numbers, (1..=good).collect::<Vec<_>>(), "in order, no gap");
+    assert_eq!(
+        items.len(),
+        good + 1,
+        "then one error, and nothing after it"
+    );
+    let e = items[good].as_ref().unwrap_err().to_string();
+    assert!(e.contains("/scan"), "names the topic: {e}");
+}

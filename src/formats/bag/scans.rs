@@ -297,12 +297,25 @@ pub fn read_scans(
 /// number of scans ahead. Yields `(scan number, scan)` and stops after the first error, like
 /// the text readers.
 pub struct BagScans {
-    rx: std::sync::mpsc::Receiver<Result<(usize, Scan), InputError>>,
+    rx: std::sync::mpsc::Receiver<Batch>,
+    /// The batch being handed out, in reverse order (popped from the back).
+    current: Vec<(usize, Scan)>,
+    /// The error that ended the current batch, handed out after its scans.
+    error: Option<InputError>,
     done: bool,
 }
 
-/// Scans queued between the reading thread and the consumer.
-const QUEUE: usize = 256;
+/// Scans sent between the reading thread and the consumer in one message: one channel
+/// operation per scan cost more than converting a 1081-ray scan (docs/BAGS.md, Speed).
+struct Batch {
+    scans: Vec<(usize, Scan)>,
+    /// Set on the last batch when the reading stopped on an error.
+    error: Option<InputError>,
+}
+
+/// Scans per batch, and batches queued ahead of the consumer (at most 256 scans in flight).
+const BATCH: usize = 32;
+const QUEUE: usize = 8;
 
 impl BagScans {
     /// Runs the first pass now (so that topic and joint errors come before any output), then
@@ -318,20 +331,36 @@ impl BagScans {
         if let Some(e) = &survey.scan_topic_error {
             return Err(e.clone());
         }
-        let (tx, rx) = std::sync::mpsc::sync_channel(QUEUE);
+        let (tx, rx) = std::sync::mpsc::sync_channel::<Batch>(QUEUE);
         std::thread::spawn(move || {
+            let mut scans = Vec::with_capacity(BATCH);
             let result = read_scans(&bag, &survey, &mut |n, scan| {
-                Ok(if tx.send(Ok((n, scan))).is_err() {
-                    ControlFlow::Break(())
-                } else {
-                    ControlFlow::Continue(())
-                })
+                scans.push((n, scan));
+                if scans.len() < BATCH {
+                    return Ok(ControlFlow::Continue(()));
+                }
+                let full = std::mem::replace(&mut scans, Vec::with_capacity(BATCH));
+                Ok(
+                    match tx.send(Batch {
+                        scans: full,
+                        error: None,
+                    }) {
+                        Ok(()) => ControlFlow::Continue(()),
+                        Err(_) => ControlFlow::Break(()),
+                    },
+                )
             });
-            if let Err(e) = result {
-                let _ = tx.send(Err(e));
-            }
+            let _ = tx.send(Batch {
+                scans,
+                error: result.err(),
+            });
         });
-        Ok(BagScans { rx, done: false })
+        Ok(BagScans {
+            rx,
+            current: Vec::new(),
+            error: None,
+            done: false,
+        })
     }
 }
 
@@ -339,12 +368,25 @@ impl Iterator for BagScans {
     type Item = Result<(usize, Scan), InputError>;
 
     fn next(&mut self) -> Option<Self::Item> {
-        if self.done {
-            return None;
+        loop {
+            if self.done {
+                return None;
+            }
+            if let Some(scan) = self.current.pop() {
+                return Some(Ok(scan));
+            }
+            if let Some(e) = self.error.take() {
+                self.done = true;
+                return Some(Err(e));
+            }
+            let Ok(batch) = self.rx.recv() else {
+                self.done = true;
+                return None;
+            };
+            self.current = batch.scans;
+            self.current.reverse();
+            self.error = batch.error;
         }
-        let item = self.rx.recv().ok()?;
-        self.done = item.is_err();
-        Some(item)
     }
 }
 
