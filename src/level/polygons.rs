@@ -113,12 +113,13 @@ fn quad_at(
     // Every point valid, and their plain sum: the same sum and division as
     // `PlaneAccumulator::centroid` (weights of one), for the cheap test below, before the
     // scatter sums that only quads passing it need.
+    let span = || (r..r + qr).flat_map(move |rr| (c..c + qc).map(move |cc| grid.at(rr, cc)));
     let mut sum = Vector3::zeros();
-    for rr in r..r + qr {
-        for cc in c..c + qc {
-            sum += grid.at(rr, cc)?.p.coords;
-        }
+    for g in span() {
+        sum += g?.p.coords;
     }
+    // Every point is valid from here.
+    let points = || span().flatten().map(|g| g.p);
     let corner = |rr: usize, cc: usize| grid.at(rr, cc).map(|g| g.p);
     let corners = [
         corner(r, c)?,
@@ -126,11 +127,7 @@ fn quad_at(
         corner(r + qr - 1, c + qc - 1)?,
         corner(r + qr - 1, c)?,
     ];
-    // Not close to a triangle: opposite sides of comparable length (sect. 5.2).
-    let side = |a: usize, b: usize| (corners[a] - corners[b]).norm();
-    let (bottom, right, top, left) = (side(0, 1), side(1, 2), side(2, 3), side(3, 0));
-    let ratio = |a: f64, b: f64| a.min(b) / a.max(b).max(1e-300);
-    if ratio(bottom, top) < params.min_edge_ratio || ratio(left, right) < params.min_edge_ratio {
+    if near_triangle(&corners, params.min_edge_ratio) {
         return None;
     }
     // Cheap rejection before the eigen decomposition: the plane through the centroid normal to
@@ -139,33 +136,19 @@ fn quad_at(
     let diag = (corners[2] - corners[0]).cross(&(corners[3] - corners[1]));
     if let Some(n) = diag.try_normalize(1e-12) {
         let centroid = Point3::from(sum / (qr * qc) as f64);
-        for rr in r..r + qr {
-            for cc in c..c + qc {
-                let p = grid.at(rr, cc)?.p;
-                if n.dot(&(p - centroid)).abs() > DIAGONAL_PLANE_TOLERANCES * tol {
-                    return None;
-                }
-            }
+        if any_beyond(&n, &centroid, points(), DIAGONAL_PLANE_TOLERANCES * tol) {
+            return None;
         }
     }
     let mut acc = PlaneAccumulator::default();
-    for rr in r..r + qr {
-        for cc in c..c + qc {
-            acc.add(grid.at(rr, cc)?);
-        }
+    for g in span().flatten() {
+        acc.add(g);
     }
     let fit = acc.fit(sigma)?;
     // No point is farther than `sqrt(residual_ss)` from the plane: when that is clearly within
     // the tolerance, every point is, and the points need no visit.
-    if fit.residual_ss > 0.99 * tol * tol {
-        for rr in r..r + qr {
-            for cc in c..c + qc {
-                let p = grid.at(rr, cc)?.p;
-                if fit.distance(&p).abs() > tol {
-                    return None;
-                }
-            }
-        }
+    if fit.residual_ss > 0.99 * tol * tol && any_beyond(&fit.normal, &fit.centroid, points(), tol) {
+        return None;
     }
     let area = 0.5 * diag.norm();
     Some(Polygon {
@@ -178,4 +161,25 @@ fn quad_at(
         kind: classify_below(&fit.normal, &fit.centroid, wall_cos),
         fit,
     })
+}
+
+/// [`Check::QuadNearTriangle`](super::checks::Check::QuadNearTriangle): whether a quad with
+/// `corners` in order around it is close to a triangle, the shorter of two opposite sides below
+/// `min_edge_ratio` of the longer (sect. 5.2).
+pub(crate) fn near_triangle(corners: &[Point3<f64>; 4], min_edge_ratio: f64) -> bool {
+    let side = |a: usize, b: usize| (corners[a] - corners[b]).norm();
+    let ratio = |a: f64, b: f64| a.min(b) / a.max(b).max(1e-300);
+    ratio(side(0, 1), side(2, 3)) < min_edge_ratio || ratio(side(3, 0), side(1, 2)) < min_edge_ratio
+}
+
+/// [`Check::QuadDiagonal`](super::checks::Check::QuadDiagonal) and
+/// [`Check::QuadCoplanar`](super::checks::Check::QuadCoplanar): whether any of `points` lies
+/// farther than `limit` from the plane through `origin` with unit normal `n`.
+pub(crate) fn any_beyond(
+    n: &Vector3<f64>,
+    origin: &Point3<f64>,
+    mut points: impl Iterator<Item = Point3<f64>>,
+    limit: f64,
+) -> bool {
+    points.any(|p| n.dot(&(p - origin)).abs() > limit)
 }

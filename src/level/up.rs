@@ -312,7 +312,6 @@ pub(crate) fn up_robust(planes: &[PlaneObs], sigma: f64, iterations: usize) -> O
     if constraints < 2 {
         return None;
     }
-    let min_z = MAX_TILT.cos();
     let mut candidates: Vec<Vector3<f64>> = planes.iter().filter_map(|p| p.proposal()).collect();
     let mut m = Matrix3::zeros();
     for p in planes {
@@ -342,7 +341,7 @@ pub(crate) fn up_robust(planes: &[PlaneObs], sigma: f64, iterations: usize) -> O
     let mut up = candidates
         .into_iter()
         .map(|c| if c.z < 0.0 { -c } else { c })
-        .filter(|c| c.z >= min_z)
+        .filter(within_max_tilt)
         .map(|c| (loss(&c), c))
         .min_by(|a, b| a.0.total_cmp(&b.0))?
         .1;
@@ -362,10 +361,17 @@ pub(crate) fn up_robust(planes: &[PlaneObs], sigma: f64, iterations: usize) -> O
             break;
         }
     }
-    if up.z < min_z {
+    // The result is held to the same limit.
+    if up.z < MAX_TILT.cos() {
         return None;
     }
     Some(solution_at(up, planes, sigma, true))
+}
+
+/// [`Check::MaxTilt`](super::checks::Check::MaxTilt): whether a unit `up` (`z >= 0`) lies
+/// within `MAX_TILT_DEG` of the robot's z axis, as every candidate of [`up_robust`] must.
+pub(crate) fn within_max_tilt(up: &Vector3<f64>) -> bool {
+    up.z >= MAX_TILT.cos()
 }
 
 /// [`PlaneObs::z2`] from the evidence's terms.

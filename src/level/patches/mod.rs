@@ -300,7 +300,7 @@ fn split_two_plane_patches(
 ) -> Vec<Patch> {
     let mut split = Vec::with_capacity(patches.len());
     for p in patches {
-        if p.fit.misfit_ratio(sigma.max(params.min_sigma)) <= params.split_misfit {
+        if plane_explained(&p.fit, sigma, params) {
             split.push(p);
             continue;
         }
@@ -309,6 +309,13 @@ fn split_two_plane_patches(
         }
     }
     split
+}
+
+/// [`Check::PatchSplitMisfit`](super::checks::Check::PatchSplitMisfit): whether a patch's
+/// plane explains its points within `split_misfit` of the noise, so that it is not tested for
+/// being two planes (nor its edge rows for standing off).
+pub(crate) fn plane_explained(fit: &PlaneFit, sigma: f64, params: &LevelParams) -> bool {
+    fit.misfit_ratio(sigma.max(params.min_sigma)) <= params.split_misfit
 }
 
 /// [`rows_span`] of members in ascending order: their first and last.
@@ -327,6 +334,17 @@ fn rows_span(members: &[usize], cols: usize) -> (usize, usize) {
     (lo, hi)
 }
 
+/// [`Check::PatchMinPoints`](super::checks::Check::PatchMinPoints): the rows that ascending
+/// `members` span, when they are at least `min_patch_points` over two rows or more.
+pub(crate) fn patch_rows(
+    members: &[usize],
+    cols: usize,
+    params: &LevelParams,
+) -> Option<(usize, usize)> {
+    let (lo, hi) = rows_span_sorted(members, cols);
+    (members.len() >= params.min_patch_points && hi > lo).then_some((lo, hi))
+}
+
 /// A patch from members when it is big enough and spans at least two rows (one row is a
 /// line, which leaves its plane free to turn about it). `acc` holds the sums of the members'
 /// points (the callers have just visited them).
@@ -342,10 +360,7 @@ fn make_patch(
     let members = &sorted[..];
     // The rows spanned, unless too small or one row: nothing to fit (trimming only takes
     // points away).
-    let span = |members: &[usize]| {
-        let (lo, hi) = rows_span_sorted(members, grid.cols);
-        (members.len() >= params.min_patch_points && hi > lo).then_some((lo, hi))
-    };
+    let span = |members: &[usize]| patch_rows(members, grid.cols, params);
     // Still a patch once points went: big enough, over two rows, and stacked.
     let still_a_patch =
         |members: &[usize]| span(members).is_some() && stacked(members, grid, params);

@@ -264,7 +264,13 @@ fn split_significant(
     else {
         return false;
     };
-    let rss2 = fa.residual_ss + fb.residual_ss;
+    two_planes(rss1, fa.residual_ss + fb.residual_ss, n, params)
+}
+
+/// [`Check::PatchSplitF`](crate::level::checks::Check::PatchSplitF): whether two planes of
+/// residual sum of squares `rss2` explain `n` points significantly better than one of `rss1`:
+/// the F statistic of [`split_members`] above `split_f`.
+pub(crate) fn two_planes(rss1: f64, rss2: f64, n: usize, params: &LevelParams) -> bool {
     let f = ((rss1 - rss2) / 3.0) / (rss2 / (n as f64 - 6.0)).max(1e-300);
     !(f.is_nan() || f <= params.split_f)
 }

@@ -32,10 +32,9 @@ pub(super) fn trim_edge_rows(
     if hi < lo + 2 {
         return None;
     }
-    let s = sigma.max(params.min_sigma);
     // A plane the noise explains has no row standing off it worth the test: a floor line
     // taken in at a wall's foot leaves the whole patch's fit about half as scattered again.
-    if all_fit.misfit_ratio(s) <= params.split_misfit {
+    if plane_explained(all_fit, sigma, params) {
         return None;
     }
     let rc = grid.row_col();
@@ -132,7 +131,7 @@ impl EdgeRows<'_> {
         });
         let offset = s * s * fit.dn2 / fit.weight;
         let spread = (var / (n * n) + offset + tilt) * fit.misfit_ratio(s).max(1.0);
-        (sum / n).abs() > params.trim_sigmas * spread.sqrt()
+        edge_row_off(sum / n, spread, params)
     }
 
     /// Whether the rows `first..=last` left after trimming are still a wall over three
@@ -141,11 +140,26 @@ impl EdgeRows<'_> {
     /// line at its foot, coplanar, with a few stray points in other rows: trimmed, such a patch
     /// leveled a pose 28 degrees off at 1 cm noise.
     fn rest_holds(&self, first: usize, last: usize) -> bool {
-        let held: Vec<usize> = (first..=last)
-            .filter(|&r| self.per_row[r].n as f64 >= MIN_TRIMMED_ROW_SHARE * self.all.n as f64)
-            .collect();
-        held.len() >= 3 && held.windows(2).all(|w| w[1] == w[0] + 1)
+        let counts: Vec<usize> = (first..=last).map(|r| self.per_row[r].n).collect();
+        trimmed_rows_hold(&counts, self.all.n)
     }
+}
+
+/// [`Check::PatchEdgeRow`](crate::level::checks::Check::PatchEdgeRow): whether an edge row
+/// whose mean residual from the other rows' plane is `mean`, of variance `spread`, stands off
+/// it by more than `trim_sigmas`.
+pub(crate) fn edge_row_off(mean: f64, spread: f64, params: &LevelParams) -> bool {
+    mean.abs() > params.trim_sigmas * spread.sqrt()
+}
+
+/// [`Check::PatchTrimmedRows`](crate::level::checks::Check::PatchTrimmedRows): whether rows
+/// left after a trim, with `counts` points each of the patch's `total`, hold three adjacent
+/// rows of [`MIN_TRIMMED_ROW_SHARE`] of them each.
+pub(crate) fn trimmed_rows_hold(counts: &[usize], total: usize) -> bool {
+    let held: Vec<usize> = (0..counts.len())
+        .filter(|&r| counts[r] as f64 >= MIN_TRIMMED_ROW_SHARE * total as f64)
+        .collect();
+    held.len() >= 3 && held.windows(2).all(|w| w[1] == w[0] + 1)
 }
 
 /// The members (ascending) without the runs of points at either end of their rows that stand

@@ -158,15 +158,22 @@ fn lines_evidence(
         let Some((fit, members)) = lines_plane(grid, &found, s) else {
             return LevelEvidence::None;
         };
-        let misfit = fit.misfit_ratio(s);
+        let skew = skew_lines(&fit, s);
         if let Some(plane) = level_plane(ctx, fit, members, params) {
             return plane;
         }
-        if misfit > LINES_PLANE_MISFIT {
+        if skew {
             return LevelEvidence::None;
         }
     }
     LevelEvidence::Lines(found.into_iter().map(|(l, _)| l).collect())
+}
+
+/// [`Check::LinesPlaneMisfit`](checks::Check::LinesPlaneMisfit): whether several scans'
+/// lines are skew, the plane `fit` through their points misfitting beyond `LINES_PLANE_MISFIT`
+/// at noise `s`.
+pub(crate) fn skew_lines(fit: &PlaneFit, s: f64) -> bool {
+    fit.misfit_ratio(s) > LINES_PLANE_MISFIT
 }
 
 /// The plane through level lines' points, with those points (ascending).
@@ -305,8 +312,7 @@ pub(crate) fn fit_line(
                     a + b
                 })
                 .sum();
-            let dof = (2 * pts.len()).saturating_sub(4).max(1) as f64;
-            if kept.len() < idx.len() || chi2 / dof > params.level_line_misfit {
+            if kept.len() < idx.len() || line_misfits(chi2, pts.len(), params) {
                 return None;
             }
             // A floor line is level in the provisional frame, within that frame's
@@ -324,6 +330,14 @@ pub(crate) fn fit_line(
         idx = kept;
     }
     None
+}
+
+/// [`Check::LineMisfit`](checks::Check::LineMisfit): whether a line's `points` misfit it, their
+/// chi-square about it (two residuals each, four parameters) beyond `level_line_misfit` per
+/// degree of freedom.
+pub(crate) fn line_misfits(chi2: f64, points: usize, params: &LevelParams) -> bool {
+    let dof = (2 * points).saturating_sub(4).max(1) as f64;
+    chi2 / dof > params.level_line_misfit
 }
 
 /// Floor and ceiling lines found without a level frame, for a start where neither the walls

@@ -28,7 +28,7 @@ use crate::geometry::Attitude;
 use nalgebra::{Matrix2, Point3, Rotation3, Vector2, Vector3};
 
 mod floor;
-mod lines;
+pub(crate) mod lines;
 mod ransac;
 mod steps;
 mod support;
@@ -105,7 +105,7 @@ struct Line {
 }
 
 /// Every valid grid point in the provisional level frame: position and ray direction.
-struct Leveled {
+pub(crate) struct Leveled {
     q: Vec<Option<(Vector3<f64>, Vector3<f64>)>>,
 }
 
@@ -321,7 +321,7 @@ fn assign_levels(
     if !level_fits.iter().any(|f| f.centroid.coords.dot(&up) > 0.0) {
         if let Some(high) = extreme_height(lv, false) {
             let band: Vec<usize> = level_band(lv, high, false, sigma_up, k, s, params).collect();
-            if band.iter().filter(|&&i| steps.ceiling[i]).count() >= CEILING_BAND_MIN_STEPS {
+            if steps_as_ceiling(&band, &steps.ceiling) {
                 for i in band {
                     near_level[i] = true;
                 }
@@ -329,6 +329,13 @@ fn assign_levels(
         }
     }
     (level_members, near_level)
+}
+
+/// [`Check::CeilingBandSteps`](checks::Check::CeilingBandSteps): whether the highest points
+/// `band` stand for a ceiling: `CEILING_BAND_MIN_STEPS` of them step as a ceiling does
+/// (`ceiling`, per grid point).
+pub(crate) fn steps_as_ceiling(band: &[usize], ceiling: &[bool]) -> bool {
+    band.iter().filter(|&&i| ceiling[i]).count() >= CEILING_BAND_MIN_STEPS
 }
 
 /// Points assigned to walls: the walls' lines (`wall_fits` in this frame, merged, and with
@@ -421,12 +428,9 @@ fn models_of(
 ) -> (Vec<Model>, usize) {
     let (grid, params, up, s, sigma, k, sigma_up) =
         (f.grid, f.params, f.up, f.s, f.sigma, f.k, f.sigma_up);
-    let min_rows = params.refine_min_rows.max(2);
     let mut models: Vec<Model> = Vec::new();
     for members in wall_members {
-        if members.len() < params.min_patch_points
-            || rows_supported(grid, &members, WALL_ROW_SHARE) < min_rows
-        {
+        if !spans_wall_rows(grid, &members, params) {
             continue;
         }
         let Some(fit) = fit_members(grid, &members, sigma) else {
@@ -467,6 +471,14 @@ fn models_of(
         models.push(Model { kind, fit, members });
     }
     (models, walls_found)
+}
+
+/// [`Check::RefinedWallRows`](checks::Check::RefinedWallRows): whether a re-segmented wall's
+/// `members` are a wall: `min_patch_points` of them, with `WALL_ROW_SHARE` of them in each of
+/// `refine_min_rows` scans (at least two).
+pub(crate) fn spans_wall_rows(grid: &PoseGrid, members: &[usize], params: &LevelParams) -> bool {
+    members.len() >= params.min_patch_points
+        && rows_supported(grid, members, WALL_ROW_SHARE) >= params.refine_min_rows.max(2)
 }
 
 /// Floor and ceiling lines where no level model was found (`level_lines`): each added to
