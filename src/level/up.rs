@@ -51,23 +51,23 @@ impl LevelLine {
         }
         let nf = n as f64;
         let c = points.iter().map(|(p, _)| p.coords).sum::<Vector3<f64>>() / nf;
-        let mut scatter = Matrix3::zeros();
-        let mut dd = Matrix3::zeros();
-        for (p, d) in points {
-            let v = p.coords - c;
-            scatter += v * v.transpose();
-            dd += d * d.transpose();
-        }
+        let outer = |v: Vector3<f64>| v * v.transpose();
+        let scatter: Matrix3<f64> = points.iter().map(|(p, _)| outer(p.coords - c)).sum();
+        let dd: Matrix3<f64> = points.iter().map(|(_, d)| outer(*d)).sum();
         let corrected = scatter - dd * (sigma * sigma * (nf - 1.0) / nf);
         let eig = super::eigen3::sym_eigen3(&corrected);
         let dir = eig.vectors[2].try_normalize(1e-300)?;
-        let mut spread_dd = Matrix3::zeros();
-        let mut spread = 0.0;
-        for (p, d) in points {
-            let t = dir.dot(&(p.coords - c));
-            spread += t * t;
-            spread_dd += d * d.transpose() * (t * t);
-        }
+        // Each point's squared position along the line, `t_i^2`.
+        let t2: Vec<f64> = points
+            .iter()
+            .map(|(p, _)| dir.dot(&(p.coords - c)).powi(2))
+            .collect();
+        let spread: f64 = t2.iter().sum();
+        let spread_dd: Matrix3<f64> = points
+            .iter()
+            .zip(&t2)
+            .map(|((_, d), t2)| outer(*d) * *t2)
+            .sum();
         (spread > 0.0).then_some(LevelLine {
             dir,
             centroid: nalgebra::Point3::from(c),
