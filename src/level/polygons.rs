@@ -113,13 +113,17 @@ fn quad_at(
     // Every point valid, and their plain sum: the same sum and division as
     // `PlaneAccumulator::centroid` (weights of one), for the cheap test below, before the
     // scatter sums that only quads passing it need.
-    let span = || (r..r + qr).flat_map(move |rr| (c..c + qc).map(move |cc| grid.at(rr, cc)));
+    let row = |rr: usize| &grid.points[rr * grid.cols + c..rr * grid.cols + c + qc];
     let mut sum = Vector3::zeros();
-    for g in span() {
-        sum += g?.p.coords;
+    for rr in r..r + qr {
+        for g in row(rr) {
+            sum += g.as_ref()?.p.coords;
+        }
     }
-    // Every point is valid from here.
-    let points = || span().flatten().map(|g| g.p);
+    // Every point is valid from here: whether any lies beyond `limit` from a plane.
+    let beyond = |n: &Vector3<f64>, origin: &Point3<f64>, limit: f64| {
+        (r..r + qr).any(|rr| any_beyond(n, origin, row(rr).iter().flatten().map(|g| g.p), limit))
+    };
     let corner = |rr: usize, cc: usize| grid.at(rr, cc).map(|g| g.p);
     let corners = [
         corner(r, c)?,
@@ -136,18 +140,18 @@ fn quad_at(
     let diag = (corners[2] - corners[0]).cross(&(corners[3] - corners[1]));
     if let Some(n) = diag.try_normalize(1e-12) {
         let centroid = Point3::from(sum / (qr * qc) as f64);
-        if any_beyond(&n, &centroid, points(), DIAGONAL_PLANE_TOLERANCES * tol) {
+        if beyond(&n, &centroid, DIAGONAL_PLANE_TOLERANCES * tol) {
             return None;
         }
     }
     let mut acc = PlaneAccumulator::default();
-    for g in span().flatten() {
-        acc.add(g);
+    for rr in r..r + qr {
+        row(rr).iter().flatten().for_each(|g| acc.add(g));
     }
     let fit = acc.fit(sigma)?;
     // No point is farther than `sqrt(residual_ss)` from the plane: when that is clearly within
     // the tolerance, every point is, and the points need no visit.
-    if fit.residual_ss > 0.99 * tol * tol && any_beyond(&fit.normal, &fit.centroid, points(), tol) {
+    if fit.residual_ss > 0.99 * tol * tol && beyond(&fit.normal, &fit.centroid, tol) {
         return None;
     }
     let area = 0.5 * diag.norm();
