@@ -320,7 +320,7 @@ pub(crate) mod first_pass {
     /// Share of a level plane's points each of its scan lines must hold (or half of an even
     /// split, `refine::supported_rows`) to count as one of the plane's lines: a level plane from
     /// one scan line is that scan's own plane, free to turn about the line. Used by the first
-    /// pass and by re-segmentation (`two_rows_support`).
+    /// pass and by re-segmentation (`level_support`).
     pub(crate) const LEVEL_ROW_SHARE: f64 = 0.2;
 
     /// Fewest scan-to-scan range steps inside a floor or ceiling patch to tell its prevailing

@@ -189,7 +189,7 @@ fn refit_rounds(
     s: f64,
 ) -> Option<PlaneFit> {
     for round in 0..LEVEL_ROUNDS {
-        if members.len() < params.min_level_points || !two_rows_support(grid, &members) {
+        if !level_support(grid, &members, params) {
             return None;
         }
         let f = fit_members(grid, &members, s)?;

@@ -419,7 +419,7 @@ fn models_of(
     let walls_found = models.len();
     for (f, members) in level_fits.iter().zip(level_members) {
         let members = without_standing_rows(grid, members, s, params);
-        if members.len() < params.min_level_points || !two_rows_support(grid, &members) {
+        if !level_support(grid, &members, params) {
             continue;
         }
         let Some(fit) = fit_members(grid, &members, sigma) else {

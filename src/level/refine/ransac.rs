@@ -28,7 +28,7 @@ pub fn level_start(
     let min_z = MAX_TILT_DEG.to_radians().cos();
     let members = sampled_plane(grid, &idx, &idx, |n| n.z.abs() >= min_z, s, params)?;
     let members = without_standing_rows(grid, members, s, params);
-    if members.len() < params.min_level_points || !two_rows_support(grid, &members) {
+    if !level_support(grid, &members, params) {
         return None;
     }
     let fit = fit_members(grid, &members, sigma)?;
