@@ -313,11 +313,8 @@ pub(crate) fn up_robust(planes: &[PlaneObs], sigma: f64, iterations: usize) -> O
         return None;
     }
     let mut candidates: Vec<Vector3<f64>> = planes.iter().filter_map(|p| p.proposal()).collect();
-    let mut m = Matrix3::zeros();
-    for p in planes {
-        m += p.start_matrix();
-    }
-    if let Some(v) = smallest_eigenvector(&m) {
+    let start: Matrix3<f64> = planes.iter().map(|p| p.start_matrix()).sum();
+    if let Some(v) = smallest_eigenvector(&start) {
         candidates.push(v);
     }
     // Walls and level lines: each pair proposes the direction normal to both.

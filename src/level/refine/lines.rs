@@ -302,7 +302,9 @@ pub(crate) fn fit_line(
             })
             .collect();
         if kept.len() == idx.len() || round + 1 == LINE_ROUNDS {
-            if kept.len() < min_points {
+            // Points still going after the last round: no line. (All kept, they are the
+            // `min_points` or more checked above.)
+            if kept.len() < idx.len() {
                 return None;
             }
             let chi2: f64 = pts
@@ -312,7 +314,7 @@ pub(crate) fn fit_line(
                     a + b
                 })
                 .sum();
-            if kept.len() < idx.len() || line_misfits(chi2, pts.len(), params) {
+            if line_misfits(chi2, pts.len(), params) {
                 return None;
             }
             // A floor line is level in the provisional frame, within that frame's
