@@ -211,7 +211,7 @@ pub(crate) fn refine(
 }
 
 /// One pass's provisional level frame and the tolerances of assigning points in it.
-struct Frame<'a> {
+pub(crate) struct Frame<'a> {
     grid: &'a PoseGrid,
     params: &'a LevelParams,
     steps: &'a LevelSteps,
@@ -458,7 +458,7 @@ fn level_line_evidence(
     walls: &WallAssignment,
     models: &mut Vec<Model>,
 ) -> Vec<LevelLine> {
-    let (grid, params, steps, lv, up) = (f.grid, f.params, f.steps, &f.lv, f.up);
+    let (grid, params, steps, lv) = (f.grid, f.params, f.steps, &f.lv);
     let (lines, candidate, in_reach) = (&walls.lines, &walls.candidate, &walls.in_reach);
     let mut flat_lines: Vec<LevelLine> = Vec::new();
     if params.level_surfaces && params.level_lines {
@@ -486,20 +486,17 @@ fn level_line_evidence(
             if models.iter().any(|m| m.kind == kind) {
                 continue;
             }
-            let ctx = LineContext {
-                grid,
-                lv,
-                levelish: if kind == SurfaceKind::Floor {
-                    &steps.floor_line
-                } else {
-                    &steps.ceiling
-                },
-                taken: &taken,
-                up: &up,
-                s: f.s,
-                sigma_up: f.sigma_up,
+            let levelish = if kind == SurfaceKind::Floor {
+                &steps.floor_line
+            } else {
+                &steps.ceiling
             };
-            match level_lines(&ctx, kind, params) {
+            let ctx = LineContext {
+                f,
+                levelish,
+                taken: &taken,
+            };
+            match level_lines(&ctx, kind) {
                 LevelEvidence::None => {}
                 LevelEvidence::Lines(found) => flat_lines.extend(found),
                 LevelEvidence::Plane(fit, members) => models.push(Model { kind, fit, members }),
