@@ -92,29 +92,26 @@ pub(super) fn bent_across_rows(
 }
 
 /// Drops members farther than `tol` from the members' plane, then makes the patch.
-pub(super) fn release_and_make(
-    grid: &PoseGrid,
-    members: &[usize],
-    params: &LevelParams,
-    sigma: f64,
-    tol: f64,
-) -> Option<Patch> {
-    let fit = grid.accumulate(members).fit(sigma)?;
-    let mut acc = PlaneAccumulator::default();
-    let kept: Vec<usize> = members
-        .iter()
-        .copied()
-        .filter(|&i| {
-            grid.points[i].as_ref().is_some_and(|g| {
-                let near = fit.distance(&g.p).abs() <= tol;
-                if near {
-                    acc.add(g);
-                }
-                near
+impl Growth<'_> {
+    pub(super) fn release_and_make(&self, members: &[usize]) -> Option<Patch> {
+        let (grid, sigma, tol) = (self.grid, self.sigma, self.tol);
+        let fit = grid.accumulate(members).fit(sigma)?;
+        let mut acc = PlaneAccumulator::default();
+        let kept: Vec<usize> = members
+            .iter()
+            .copied()
+            .filter(|&i| {
+                grid.points[i].as_ref().is_some_and(|g| {
+                    let near = fit.distance(&g.p).abs() <= tol;
+                    if near {
+                        acc.add(g);
+                    }
+                    near
+                })
             })
-        })
-        .collect();
-    make_patch(grid, &kept, acc, params, sigma)
+            .collect();
+        self.make_patch(&kept, acc)
+    }
 }
 
 /// Splits a patch's members into planes while two planes explain them significantly better

@@ -174,8 +174,8 @@ pub(crate) fn trimmed_rows_hold(counts: &[usize], total: usize) -> bool {
 /// concave corner join the same way. A true plane's residuals take no side, so the test is the
 /// sum of the residuals towards the scanner over the first `m` points of the run (`m` from
 /// [`MIN_FRONT_RUN`] to half the run), over that sum's standard deviation (each point's
-/// `sigma |d . n|` in quadrature), above `front_end_sigmas`. [`make_patch`] applies it to the
-/// plane it has fitted and fits again without the runs that go. Over 129,600 protocol poses at
+/// `sigma |d . n|` in quadrature), above `front_end_sigmas`. [`Growth::make_patch`] applies it
+/// to the plane it has fitted and fits again without the runs that go. Over 129,600 protocol poses at
 /// 5-10 cm (two seed sets, nine plans), poses reported ok and more than 5 degrees off fell from
 /// 14 to 4 and those beyond 3 sigmas from 157 to 110, with 0.24 points more leveled; at 1 cm,
 /// 0.04 points more.
