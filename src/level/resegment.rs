@@ -126,8 +126,7 @@ pub fn refine_estimate(
         .into_iter()
         .filter(|start| start_tight_enough(start, params))
         .filter_map(|start| {
-            let r = refine::refine(grid, &start, &walls, &steps, params, sigma)?;
-            Some((start, r))
+            refine::refine(grid, &start, &walls, &steps, params, sigma).map(|r| (start, r))
         })
         .collect();
     let (best, _) = refined

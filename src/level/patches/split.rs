@@ -134,10 +134,7 @@ pub fn split_members(
     let Some(fit_all) = grid.accumulate(members).fit(sigma) else {
         return whole;
     };
-    let orders: [Vec<usize>; 2] = [
-        in_order(grid, members, false),
-        in_order(grid, members, true),
-    ];
+    let orders = [false, true].map(|by_row| in_order(grid, members, by_row));
     let cuts = [0, 1].map(|which| candidate_cuts(grid, &orders[which], which, params));
     let Some((which, cut)) = best_cut(&cuts, sigma) else {
         return whole;
