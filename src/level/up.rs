@@ -114,26 +114,21 @@ type Term = (Vector3<f64>, f64);
 impl PlaneObs<'_> {
     /// A wall plane.
     pub(crate) fn wall(fit: &PlaneFit, inflate: f64) -> PlaneObs<'_> {
-        PlaneObs {
-            evidence: Evidence::Wall(fit),
-            inflate,
-        }
+        PlaneObs::of(Evidence::Wall(fit), inflate)
     }
 
     /// A floor or ceiling plane taken as level.
     pub(crate) fn level(fit: &PlaneFit, inflate: f64) -> PlaneObs<'_> {
-        PlaneObs {
-            evidence: Evidence::Level(fit),
-            inflate,
-        }
+        PlaneObs::of(Evidence::Level(fit), inflate)
     }
 
     /// A line on a floor or ceiling.
     pub(crate) fn level_line(line: &LevelLine, inflate: f64) -> PlaneObs<'_> {
-        PlaneObs {
-            evidence: Evidence::LevelLine(line),
-            inflate,
-        }
+        PlaneObs::of(Evidence::LevelLine(line), inflate)
+    }
+
+    fn of(evidence: Evidence<'_>, inflate: f64) -> PlaneObs<'_> {
+        PlaneObs { evidence, inflate }
     }
 
     /// Scalar residuals this evidence contributes.
