@@ -23,15 +23,6 @@ pub(crate) fn solve(
     if est.wall_polygons() < params.min_polygons && levels.is_empty() {
         return Err(FailCause::TooFewPolygons);
     }
-    solve_up(est, levels, params, sigma)
-}
-
-pub(crate) fn solve_up(
-    est: &LevelEstimate,
-    levels: &[PlaneFit],
-    params: &LevelParams,
-    sigma: f64,
-) -> Result<UpSolution, FailCause> {
     let misfit = |f: &grid::PlaneFit| f.misfit_ratio(sigma.max(params.min_sigma)).max(1.0);
     let sigma_eff = sigma.max(params.min_sigma);
     let sol = match params.estimator {

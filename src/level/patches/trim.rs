@@ -66,7 +66,8 @@ pub(super) fn trim_edge_rows(
     if last >= first + 3 && rows.stands_off(last, first, last) {
         last -= 1;
     }
-    if (first, last) == (lo, hi) || !rows.rest_holds(first, last) {
+    let counts: Vec<usize> = (first..=last).map(|r| per_row[r].n).collect();
+    if (first, last) == (lo, hi) || !trimmed_rows_hold(&counts, all.n) {
         return None;
     }
     Some(
@@ -133,16 +134,6 @@ impl EdgeRows<'_> {
         let spread = (var / (n * n) + offset + tilt) * fit.misfit_ratio(s).max(1.0);
         edge_row_off(sum / n, spread, params)
     }
-
-    /// Whether the rows `first..=last` left after trimming are still a wall over three
-    /// adjacent rows, each holding a fair share ([`MIN_TRIMMED_ROW_SHARE`]) of its points.
-    /// Else the row that stood off may be the true wall and the rest a wall line and the floor
-    /// line at its foot, coplanar, with a few stray points in other rows: trimmed, such a patch
-    /// leveled a pose 28 degrees off at 1 cm noise.
-    fn rest_holds(&self, first: usize, last: usize) -> bool {
-        let counts: Vec<usize> = (first..=last).map(|r| self.per_row[r].n).collect();
-        trimmed_rows_hold(&counts, self.all.n)
-    }
 }
 
 /// [`Check::PatchEdgeRow`](crate::level::checks::Check::PatchEdgeRow): whether an edge row
@@ -152,9 +143,12 @@ pub(crate) fn edge_row_off(mean: f64, spread: f64, params: &LevelParams) -> bool
     mean.abs() > params.trim_sigmas * spread.sqrt()
 }
 
-/// [`Check::PatchTrimmedRows`](crate::level::checks::Check::PatchTrimmedRows): whether rows
-/// left after a trim, with `counts` points each of the patch's `total`, hold three adjacent
-/// rows of [`MIN_TRIMMED_ROW_SHARE`] of them each.
+/// [`Check::PatchTrimmedRows`](crate::level::checks::Check::PatchTrimmedRows): whether the
+/// rows left after a trim, with `counts` points each of the patch's `total`, are still a wall
+/// over three adjacent rows, each holding [`MIN_TRIMMED_ROW_SHARE`] of the points. Else the
+/// row that stood off may be the true wall and the rest a wall line and the floor line at its
+/// foot, coplanar, with a few stray points in other rows: trimmed, such a patch leveled a pose
+/// 28 degrees off at 1 cm noise.
 pub(crate) fn trimmed_rows_hold(counts: &[usize], total: usize) -> bool {
     let held: Vec<usize> = (0..counts.len())
         .filter(|&r| counts[r] as f64 >= MIN_TRIMMED_ROW_SHARE * total as f64)
