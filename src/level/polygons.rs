@@ -32,20 +32,16 @@ impl Polygon {
 }
 
 /// Classifies a plane by the angle of its normal to the robot's up (0, 0, 1): more than
-/// `wall_min_angle` away is a wall (the paper assumes tilts below 45 degrees), otherwise floor
-/// when the plane passes below the scanner (along its up-pointing normal) and ceiling when above.
-/// (A point's robot-frame z would not do: a beam tilted up in the robot frame still meets the
-/// floor when the robot pitches down.)
+/// `wall_min_angle` away (`wall_cos`, [`LevelParams::wall_cos`], computed once for many quads)
+/// is a wall (the paper assumes tilts below 45 degrees), otherwise floor when the plane passes
+/// below the scanner (along its up-pointing normal) and ceiling when above. (A point's
+/// robot-frame z would not do: a beam tilted up in the robot frame still meets the floor when
+/// the robot pitches down.)
 pub(crate) fn classify(
     normal: &Vector3<f64>,
     centroid: &Point3<f64>,
-    params: &LevelParams,
+    wall_cos: f64,
 ) -> SurfaceKind {
-    classify_below(normal, centroid, params.wall_cos())
-}
-
-/// [`classify`] with the cosine of the wall angle given (computed once for many quads).
-fn classify_below(normal: &Vector3<f64>, centroid: &Point3<f64>, wall_cos: f64) -> SurfaceKind {
     if normal.z.abs() < wall_cos {
         SurfaceKind::Wall
     } else if normal.dot(&centroid.coords) * normal.z.signum() < 0.0 {
@@ -162,7 +158,7 @@ fn quad_at(
         cols: qc,
         corners,
         area,
-        kind: classify_below(&fit.normal, &fit.centroid, wall_cos),
+        kind: classify(&fit.normal, &fit.centroid, wall_cos),
         fit,
     })
 }

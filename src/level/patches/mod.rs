@@ -307,7 +307,7 @@ impl Growth<'_> {
             return None;
         }
         Some(Patch {
-            kind: classify(&fit.normal, &fit.centroid, params),
+            kind: classify(&fit.normal, &fit.centroid, params.wall_cos()),
             fit,
             members: members.to_vec(),
             row_range: (lo, hi),
