@@ -29,24 +29,19 @@ pub(crate) fn resegmented(
         return (first, None);
     }
     let mut result = first;
-    let Refinement {
-        accepted,
-        raw,
-        start,
-        models,
-    } = refined_solution(est, levels, &result, params);
-    let confirmed = accepted.is_some();
+    let refinement = refined_solution(est, levels, &result, params);
+    let confirmed = refinement.accepted.is_some();
     // The solution kept and the other one of the two: the first when the refined one is
     // kept, else the refined one, gated or not; none when the first failed.
-    let other = match accepted {
+    let other = match refinement.accepted {
         Some(refined) => std::mem::replace(&mut result, Ok(refined)).ok(),
-        None => raw,
+        None => refinement.raw,
     };
     let widened = match (&result, other) {
         (Ok(kept), Some(first)) if confirmed => widened_against_first(kept, &first),
         (Ok(kept), Some(other)) => widened_unconfirmed(kept, &other),
         // The refined solution stands alone: checked against where it started.
-        (Ok(kept), None) => start.and_then(|s| widened_from_start(kept, &s)),
+        (Ok(kept), None) => refinement.start.and_then(|s| widened_from_start(kept, &s)),
         (Err(_), _) => None,
     };
     let result = match widened {
@@ -56,7 +51,7 @@ pub(crate) fn resegmented(
             .map_err(|_| FailCause::ResegmentationDisagrees),
         None => result,
     };
-    (result, models)
+    (result, refinement.models)
 }
 
 /// [`Check::RefineAboveSigma`]: whether the first solution is re-segmented: when it failed,
@@ -188,14 +183,10 @@ pub(crate) fn refined_solution(
     first: &Result<UpSolution, FailCause>,
     params: &LevelParams,
 ) -> Refinement {
-    let Some(Resegmented {
-        start,
-        refined,
-        rivals,
-    }) = refine_estimate(est, levels, first, params)
-    else {
+    let Some(found) = refine_estimate(est, levels, first, params) else {
         return Refinement::default();
     };
+    let (start, refined, rivals) = (found.start, found.refined, found.rivals);
     let raw = Some(refined.solution);
     let start = Some(start);
     let level_models = refined.models.iter().any(|m| m.kind != SurfaceKind::Wall);
