@@ -291,13 +291,7 @@ pub(crate) fn fit_line(
             if kept.len() < idx.len() {
                 return None;
             }
-            let chi2: f64 = pts
-                .iter()
-                .map(|(p, d)| {
-                    let (a, b) = z2(p, d);
-                    a + b
-                })
-                .sum();
+            let chi2: f64 = pts.iter().map(|(p, d)| z2(p, d)).map(|(a, b)| a + b).sum();
             if line_misfits(chi2, pts.len(), params) {
                 return None;
             }
