@@ -7,11 +7,12 @@ use super::failure::tests::solution;
 use super::failure::{acceptable, reported, within_wall_angle};
 use super::grid::{GridPoint, PlaneFit, PoseGrid};
 use super::params::{refine as refine_consts, resegment as reseg};
-use super::polygons::Polygon;
+use super::polygons::{Polygon, any_beyond, extract_quads, near_triangle};
 use super::resegment::{
-    widened_against_first, widened_by_disagreement, widened_from_start, widened_unconfirmed,
+    needs_refine, passes_line_gate, start_tight_enough, widened_against_first,
+    widened_by_disagreement, widened_from_start, widened_unconfirmed,
 };
-use super::up::UpSolution;
+use super::up::{UpSolution, within_max_tilt};
 use super::{FailCause, LevelEstimate, LevelParams, SurfaceKind, first_pass, refine};
 use crate::scan::Scan;
 use nalgebra::{Point3, Vector3};
@@ -20,51 +21,50 @@ use nalgebra::{Point3, Vector3};
 const TESTED: &[Check] = &[
     Check::TooFewScans,
     Check::InconsistentScans,
+    Check::QuadCoplanar,
+    Check::QuadNearTriangle,
+    Check::QuadDiagonal,
+    Check::LevelMinPoints,
+    Check::LevelMisfit,
+    Check::LevelMinRowsNoisy,
+    Check::LevelSteepVeto,
     Check::LevelOpaque,
     Check::MinPolygons,
     Check::Facing,
     Check::ParallelRatio,
     Check::WallAngle,
     Check::MaxSigma,
+    Check::RefineAboveSigma,
+    Check::StartMaxSigma,
+    Check::LineMaxSigma,
     Check::Disagreement,
     Check::TighterThanFirst,
     Check::Unconfirmed,
     Check::FromStart,
+    Check::RefinedWallRows,
     Check::RefinedLevelAngle,
     Check::RefinedLevelMisfit,
     Check::RefinedClearOfScanner,
+    Check::LineMinPoints,
+    Check::LineMisfit,
+    Check::LinesPlaneMisfit,
+    Check::CeilingBandSteps,
+    Check::MaxTilt,
     // In patches/tests.rs, beside the private functions they test.
+    Check::PatchMinPoints,
     Check::PatchStacked,
     Check::PatchTooBent,
-];
-
-/// The checks still without a test of their own here: they decide deep inside a stage, with
-/// no entry point of their own yet. Covered only by the stage tests and the golden corpus.
-const NOT_YET_TESTED: &[Check] = &[
-    Check::QuadCoplanar,
-    Check::QuadNearTriangle,
-    Check::QuadDiagonal,
-    Check::PatchMinPoints,
     Check::PatchBentAcrossRows,
     Check::PatchEdgeRow,
     Check::PatchTrimmedRows,
     Check::PatchFrontRun,
     Check::PatchSplitMisfit,
     Check::PatchSplitF,
-    Check::LevelMinPoints,
-    Check::LevelMisfit,
-    Check::LevelMinRowsNoisy,
-    Check::LevelSteepVeto,
-    Check::RefineAboveSigma,
-    Check::StartMaxSigma,
-    Check::LineMaxSigma,
-    Check::RefinedWallRows,
-    Check::LineMinPoints,
-    Check::LineMisfit,
-    Check::LinesPlaneMisfit,
-    Check::CeilingBandSteps,
-    Check::MaxTilt,
 ];
+
+/// The checks still without a test of their own here. Covered only by the stage tests and
+/// the golden corpus.
+const NOT_YET_TESTED: &[Check] = &[];
 
 /// Every row of the table is either tested here or listed as not yet tested, never both, and
 /// no check is named twice.
@@ -362,4 +362,228 @@ fn refined_clear_of_scanner() {
         0.01,
         &p
     ));
+}
+
+/// A grid of `rows` scans of `cols` rays with points `at(row, col)` seen along their own
+/// direction from the scanner.
+fn grid_of(rows: usize, cols: usize, at: impl Fn(usize, usize) -> Option<Point3<f64>>) -> PoseGrid {
+    PoseGrid {
+        scan_index: (0..rows).collect(),
+        elevation: (0..rows).map(|r| 0.05 * r as f64).collect(),
+        cols,
+        points: (0..rows * cols)
+            .map(|i| {
+                at(i / cols, i % cols).map(|p| GridPoint {
+                    p,
+                    dir: p.coords.normalize(),
+                    range: p.coords.norm(),
+                })
+            })
+            .collect(),
+    }
+}
+
+/// A quad of a wall 3 m ahead whose middle point stands `d` off it: by symmetry the fitted
+/// plane keeps the wall's normal and moves by `d / 15`, so that point lies `14 d / 15` off
+/// the fit, the others `d / 15`.
+#[test]
+fn quad_coplanar() {
+    let p = LevelParams::default();
+    let sigma = 0.01;
+    let (lo, hi) = around(Check::QuadCoplanar.threshold(&p) * sigma * 15.0 / 14.0);
+    let quads = |d: f64| {
+        let grid = grid_of(3, 5, |r, c| {
+            let off = if (r, c) == (1, 2) { d } else { 0.0 };
+            Some(Point3::new(
+                3.0 + off,
+                0.1 * (c as f64 - 2.0),
+                0.1 * (r as f64 - 1.0),
+            ))
+        });
+        extract_quads(&grid, &p, sigma).len()
+    };
+    assert_eq!(quads(lo), 1);
+    assert_eq!(quads(hi), 0);
+}
+
+/// Opposite sides 1 and `t` long: near a triangle once `t` is below `min_edge_ratio`.
+#[test]
+fn quad_near_triangle() {
+    let p = LevelParams::default();
+    let (lo, hi) = around(Check::QuadNearTriangle.threshold(&p));
+    let corners = |t: f64| {
+        [
+            Point3::new(0.0, 0.0, 0.0),
+            Point3::new(1.0, 0.0, 0.0),
+            Point3::new(t, 1.0, 0.0),
+            Point3::new(0.0, 1.0, 0.0),
+        ]
+    };
+    assert!(near_triangle(&corners(lo), p.min_edge_ratio));
+    assert!(!near_triangle(&corners(hi), p.min_edge_ratio));
+}
+
+/// A point off the diagonals' plane refuses the quad beyond `DIAGONAL_PLANE_TOLERANCES`
+/// coplanarity tolerances.
+#[test]
+fn quad_diagonal() {
+    let p = LevelParams::default();
+    let tol = Check::QuadCoplanar.threshold(&p) * 0.01;
+    let (lo, hi) = around(Check::QuadDiagonal.threshold(&p) * tol);
+    let limit = super::params::quads::DIAGONAL_PLANE_TOLERANCES * tol;
+    let points = |d: f64| [Point3::new(1.0, 2.0, 0.0), Point3::new(-1.0, 0.5, d)].into_iter();
+    assert!(!any_beyond(
+        &Vector3::z(),
+        &Point3::origin(),
+        points(lo),
+        limit
+    ));
+    assert!(any_beyond(
+        &Vector3::z(),
+        &Point3::origin(),
+        points(-hi),
+        limit
+    ));
+}
+
+#[test]
+fn level_min_points() {
+    let p = LevelParams::default();
+    let t = Check::LevelMinPoints.threshold(&p) as usize;
+    let rows = |n: usize| [n / 3, n / 3, n - 2 * (n / 3)];
+    assert!(first_pass::enough_for_level(t, &rows(t), 0.01, &p));
+    assert!(!first_pass::enough_for_level(t - 1, &rows(t - 1), 0.01, &p));
+}
+
+/// From `level_steep_min_sigma` of noise a level plane needs three scan lines, below it two.
+#[test]
+fn level_min_rows_noisy() {
+    let p = LevelParams::default();
+    let t = Check::LevelMinRowsNoisy.threshold(&p) as usize;
+    let rows = |n: usize| -> Vec<usize> { (0..4).map(|r| if r < n { 20 } else { 0 }).collect() };
+    let noisy = p.level_steep_min_sigma;
+    assert!(first_pass::enough_for_level(60, &rows(t), noisy, &p));
+    assert!(!first_pass::enough_for_level(60, &rows(t - 1), noisy, &p));
+    assert!(first_pass::enough_for_level(60, &rows(2), noisy * 0.9, &p));
+}
+
+/// On three scan lines the veto applies from `level_steep_min_sigma` up; on two, always.
+#[test]
+fn level_steep_veto() {
+    let p = LevelParams::default();
+    let (lo, hi) = around(Check::LevelSteepVeto.threshold(&p));
+    assert!(!first_pass::steep_veto(&[20, 20, 20], lo, &p));
+    assert!(first_pass::steep_veto(&[20, 20, 20], hi, &p));
+    assert!(first_pass::steep_veto(&[30, 30, 0], lo, &p));
+}
+
+#[test]
+fn level_misfit() {
+    let p = LevelParams::default();
+    let (lo, hi) = around(Check::LevelMisfit.threshold(&p));
+    let empty = grid_of(1, 0, |_, _| None);
+    let stands =
+        |m: f64| first_pass::level_plane_stands(&empty, &level_fit(-1.0, 0.0, m), 0.01, &p);
+    assert!(stands(lo));
+    assert!(!stands(hi));
+}
+
+/// The reported sigma, the propagated one times `sigma_inflation`, decides; a failed first
+/// solution is always re-segmented.
+#[test]
+fn refine_above_sigma() {
+    let p = LevelParams::default();
+    let t = Check::RefineAboveSigma.threshold(&p).to_radians() / p.sigma_inflation;
+    let (lo, hi) = around(t);
+    assert!(!needs_refine(&Ok(solution(5.0, lo, (1.0, 1.0))), &p));
+    assert!(needs_refine(&Ok(solution(5.0, hi, (1.0, 1.0))), &p));
+    assert!(needs_refine(&Err(FailCause::NoUp), &p));
+}
+
+#[test]
+fn start_max_sigma() {
+    let p = LevelParams::default();
+    let (lo, hi) = around(Check::StartMaxSigma.threshold(&p));
+    assert!(start_tight_enough(&solution(5.0, lo, (1.0, 1.0)), &p));
+    assert!(!start_tight_enough(&solution(5.0, hi, (1.0, 1.0)), &p));
+}
+
+#[test]
+fn line_max_sigma() {
+    let p = LevelParams::default();
+    let t = Check::LineMaxSigma.threshold(&p);
+    assert!(t < Check::MaxSigma.threshold(&p));
+    let (lo, hi) = around(t.to_radians() / p.sigma_inflation);
+    assert!(passes_line_gate(&solution(5.0, lo, (1.0, 1.0)), &p));
+    assert!(!passes_line_gate(&solution(5.0, hi, (1.0, 1.0)), &p));
+}
+
+/// Members in the first `rows` of three scans, `WALL_ROW_SHARE` or more of them each.
+#[test]
+fn refined_wall_rows() {
+    let p = LevelParams::default();
+    let t = Check::RefinedWallRows.threshold(&p) as usize;
+    let grid = grid_of(3, 40, |_, _| None);
+    let members = |rows: usize| -> Vec<usize> {
+        (0..rows)
+            .flat_map(|r| (0..30).map(move |c| r * 40 + c))
+            .collect()
+    };
+    assert!(refine::spans_wall_rows(&grid, &members(t), &p));
+    assert!(!refine::spans_wall_rows(&grid, &members(t - 1), &p));
+}
+
+/// A scan's exact floor line of `n` points (2 m ahead, 1 m down).
+fn floor_line_grid(n: usize) -> PoseGrid {
+    grid_of(1, n, |_, c| {
+        Some(Point3::new(2.0, 0.1 * c as f64 - 1.0, -1.0))
+    })
+}
+
+#[test]
+fn line_min_points() {
+    let p = LevelParams::default();
+    let t = Check::LineMinPoints.threshold(&p) as usize;
+    let fit = |n: usize| {
+        let grid = floor_line_grid(n);
+        refine::lines::fit_line(&grid, (0..n).collect(), &Vector3::z(), None, 0.01, &p, t)
+    };
+    assert!(fit(t).is_some());
+    assert!(fit(t - 1).is_none());
+}
+
+/// Ten points: sixteen degrees of freedom.
+#[test]
+fn line_misfit() {
+    let p = LevelParams::default();
+    let (lo, hi) = around(Check::LineMisfit.threshold(&p) * 16.0);
+    assert!(!refine::lines::line_misfits(lo, 10, &p));
+    assert!(refine::lines::line_misfits(hi, 10, &p));
+}
+
+#[test]
+fn lines_plane_misfit() {
+    let p = LevelParams::default();
+    let (lo, hi) = around(Check::LinesPlaneMisfit.threshold(&p));
+    assert!(!refine::lines::skew_lines(&level_fit(-1.0, 0.0, lo), 0.01));
+    assert!(refine::lines::skew_lines(&level_fit(-1.0, 0.0, hi), 0.01));
+}
+
+#[test]
+fn ceiling_band_steps() {
+    let p = LevelParams::default();
+    let t = Check::CeilingBandSteps.threshold(&p) as usize;
+    let ceiling: Vec<bool> = (0..20).map(|i| i % 2 == 0).collect();
+    let band = |steps: usize| -> Vec<usize> { (0..2 * steps).collect() };
+    assert!(refine::steps_as_ceiling(&band(t), &ceiling));
+    assert!(!refine::steps_as_ceiling(&band(t - 1), &ceiling));
+}
+
+#[test]
+fn max_tilt() {
+    let p = LevelParams::default();
+    let (lo, hi) = around(Check::MaxTilt.threshold(&p));
+    let up = |deg: f64| Vector3::new(deg.to_radians().sin(), 0.0, deg.to_radians().cos());
+    assert!(within_max_tilt(&up(lo)));
+    assert!(!within_max_tilt(&up(hi)));
 }

@@ -84,13 +84,13 @@ checks! {
     InconsistentScans: Grid, "rays", |_| 0.0, Fails(F::InconsistentScans),
         "every scan has as many rays (grid::PoseGrid::from_scans_with)";
     QuadCoplanar: Quads, "sigma", |p| p.coplanar_k, Drops("quad"),
-        "every point of a quad within coplanar_k sigmas of its plane (polygons::quad_at)";
+        "every point of a quad within coplanar_k sigmas of its plane (polygons::any_beyond)";
     QuadNearTriangle: Quads, "1", |p| p.min_edge_ratio, Drops("quad"),
-        "the shorter of opposite sides over the longer (polygons::quad_at)";
+        "the shorter of opposite sides over the longer (polygons::near_triangle)";
     QuadDiagonal: Quads, "tolerances", |_| quads::DIAGONAL_PLANE_TOLERANCES, Drops("quad"),
-        "each diagonal half's corner off the other half's plane: a corner or an edge (polygons::quad_at)";
+        "a point this many coplanarity tolerances off the plane through the centroid normal to the diagonals: a corner or an edge (polygons::any_beyond)";
     PatchMinPoints: Patches, "points", |p| p.min_patch_points as f64, Drops("patch"),
-        "a patch's points, over at least two rows (patches::make_patch)";
+        "a patch's points, over at least two rows (patches::patch_rows)";
     PatchStacked: Patches, "1", |p| p.min_stacked_share, Drops("patch"),
         "share of members with a member in an adjacent row of their column (patches::split::stacked)";
     PatchTooBent: Patches, "1", |p| p.max_misfit_sigmas, Drops("patch"),
@@ -98,23 +98,23 @@ checks! {
     PatchBentAcrossRows: Patches, "1", |p| p.max_row_bend_sigmas, Drops("patch"),
         "rows' mean residuals, chi2 / dof beyond 1 + k sqrt(2 / dof) (patches::split::bent_across_rows)";
     PatchEdgeRow: Patches, "sigma", |p| p.trim_sigmas, Drops("edge row, or a three-row patch"),
-        "an edge row's mean residual from the other rows' plane (patches::trim::trim_edge_rows)";
+        "an edge row's mean residual from the other rows' plane (patches::trim::edge_row_off)";
     PatchTrimmedRows: Patches, "1", |_| patches::MIN_TRIMMED_ROW_SHARE, Drops("trim"),
-        "each of three adjacent rows left after a trim holds this share of the points (patches::trim)";
+        "each of three adjacent rows left after a trim holds this share of the points (patches::trim::trimmed_rows_hold)";
     PatchFrontRun: Patches, "sigma", |p| p.front_end_sigmas, Drops("run at a row's end"),
-        "a run of at least MIN_FRONT_RUN points in front of the plane (patches::trim::without_front_row_ends)";
+        "a run of at least MIN_FRONT_RUN points in front of the plane (patches::trim::front_run)";
     PatchSplitMisfit: Patches, "1", |p| p.split_misfit, Drops("unsplit patch"),
-        "a patch's misfit ratio above which it is tested for two planes (patches::grow_patches)";
+        "a patch's misfit ratio above which it is tested for two planes (patches::plane_explained)";
     PatchSplitF: Patches, "1", |p| p.split_f, Drops("unsplit patch"),
-        "F statistic of two planes against one (patches::split::split_members)";
+        "F statistic of two planes against one (patches::split::two_planes)";
     LevelMinPoints: LevelSurfaces, "points", |p| p.min_level_points as f64, Drops("level plane"),
-        "a floor or ceiling plane's points (first_pass::level_fits, refine)";
+        "a floor or ceiling plane's points (first_pass::enough_for_level, refine::level_support)";
     LevelMisfit: LevelSurfaces, "1", |p| p.max_level_misfit, Drops("level plane"),
-        "a cleaned floor or ceiling patch's misfit ratio (first_pass::clean_level_fit)";
+        "a cleaned floor or ceiling patch's misfit ratio (first_pass::level_plane_stands)";
     LevelMinRowsNoisy: LevelSurfaces, "scans", |_| first_pass::LEVEL_MIN_ROWS_NOISY as f64, Drops("level plane"),
-        "scan lines of a level plane from level_steep_min_sigma of noise (first_pass::fit_without_steep)";
+        "scan lines of a level plane from level_steep_min_sigma of noise (first_pass::enough_for_level)";
     LevelSteepVeto: LevelSurfaces, "m", |p| p.level_steep_min_sigma, Drops("level plane"),
-        "noise from which a plane only points on a steep surface make is vetoed (first_pass::fit_without_steep)";
+        "noise from which a plane only points on a steep surface make is vetoed (first_pass::steep_veto)";
     LevelOpaque: LevelSurfaces, "points", |_| refine::MAX_BEYOND as f64, Drops("level plane"),
         "points seen beyond a floor or ceiling (refine::opaque)";
     MinPolygons: Gate, "quads", |p| p.min_polygons as f64, Fails(F::TooFewPolygons),
@@ -128,11 +128,11 @@ checks! {
     MaxSigma: Gate, "deg", |p| p.max_sigma_deg, Fails(F::SigmaAboveGate),
         "both reported attitude sigmas (failure::acceptable_within)";
     RefineAboveSigma: Resegment, "deg", |p| p.refine_above_sigma_deg, Drops("re-segmentation"),
-        "a first solution this tight stands without re-segmentation (resegment::resegmented)";
+        "a first solution this tight stands without re-segmentation (resegment::needs_refine)";
     StartMaxSigma: Resegment, "rad", |_| resegment::START_MAX_SIGMA, Drops("start"),
-        "largest attitude sigma of a start of re-segmentation (resegment::refine_estimate)";
+        "largest attitude sigma of a start of re-segmentation (resegment::start_tight_enough)";
     LineMaxSigma: Resegment, "deg", |p| p.level_line_max_sigma_deg, Drops("refined solution's lines"),
-        "the stricter sigma gate of a refined solution that uses floor lines (resegment::refined_solution)";
+        "the stricter sigma gate of a refined solution that uses floor lines (resegment::passes_line_gate)";
     Disagreement: Resegment, "sigma", |_| resegment::DISAGREEMENT_SIGMAS, Widens,
         "two solutions apart beyond this of their joint uncertainty (resegment::widened_by_disagreement)";
     TighterThanFirst: Resegment, "1", |_| resegment::TIGHTER_THAN_FIRST, Widens,
@@ -142,7 +142,7 @@ checks! {
     FromStart: Resegment, "sigma", |_| resegment::FROM_START_SIGMAS, Widens,
         "a refined solution beyond this of its start's sigmas (resegment::widened_from_start)";
     RefinedWallRows: Refine, "scans", |p| p.refine_min_rows as f64, Drops("re-segmented wall"),
-        "scans holding WALL_ROW_SHARE of a re-segmented wall's points each (refine::models_of)";
+        "scans holding WALL_ROW_SHARE of a re-segmented wall's points each (refine::spans_wall_rows)";
     RefinedLevelAngle: Refine, "deg", |p| p.refine_level_max_deg, Drops("re-segmented floor or ceiling"),
         "its normal within this of up (checks::refined_level)";
     RefinedLevelMisfit: Refine, "1", |p| p.refine_level_misfit, Drops("re-segmented floor or ceiling"),
@@ -150,15 +150,15 @@ checks! {
     RefinedClearOfScanner: Refine, "m", |_| refine::MIN_LEVEL_DISTANCE, Drops("floor or ceiling"),
         "its plane's distance from the scanner (refine::clear_of_scanner)";
     LineMinPoints: Refine, "points", |p| p.level_line_min_points as f64, Drops("floor or ceiling line"),
-        "a scan's floor line alone; PLANE_LINE_MIN_POINTS beside a full one (refine::lines)";
+        "a scan's floor line alone; PLANE_LINE_MIN_POINTS beside a full one (refine::lines::fit_line)";
     LineMisfit: Refine, "1", |p| p.level_line_misfit, Drops("floor or ceiling line"),
-        "a line's points' chi2 / dof about it (refine::lines::fit_line)";
+        "a line's points' chi2 / dof about it (refine::lines::line_misfits)";
     LinesPlaneMisfit: Refine, "1", |_| refine::LINES_PLANE_MISFIT, Drops("floor or ceiling lines"),
-        "several scans' lines, skew when their plane misfits beyond this (refine::lines::lines_evidence)";
+        "several scans' lines, skew when their plane misfits beyond this (refine::lines::skew_lines)";
     CeilingBandSteps: Refine, "points", |_| refine::CEILING_BAND_MIN_STEPS as f64, Drops("ceiling"),
-        "points stepping as a ceiling does among the highest (refine::refine)";
+        "points stepping as a ceiling does among the highest (refine::steps_as_ceiling)";
     MaxTilt: Refine, "deg", |_| up::MAX_TILT_DEG, Drops("up candidate"),
-        "largest robot tilt the up search and the frameless level start consider (up, refine::ransac)";
+        "largest robot tilt the up search and the frameless level start consider (up::within_max_tilt, refine::ransac)";
 }
 
 impl Check {

@@ -23,15 +23,6 @@ pub(crate) fn solve(
     if est.wall_polygons() < params.min_polygons && levels.is_empty() {
         return Err(FailCause::TooFewPolygons);
     }
-    solve_up(est, levels, params, sigma)
-}
-
-pub(crate) fn solve_up(
-    est: &LevelEstimate,
-    levels: &[PlaneFit],
-    params: &LevelParams,
-    sigma: f64,
-) -> Result<UpSolution, FailCause> {
     let misfit = |f: &grid::PlaneFit| f.misfit_ratio(sigma.max(params.min_sigma)).max(1.0);
     let sigma_eff = sigma.max(params.min_sigma);
     let sol = match params.estimator {
@@ -127,11 +118,22 @@ pub(crate) fn clean_level_fit(
 ) -> Option<PlaneFit> {
     let kept = level_stepping_members(grid, p)?;
     let fit = fit_without_steep(grid, &kept, sigma, params)?;
-    let floorlike = fit.normal.z.abs() > params.wall_cos();
-    (floorlike
+    level_plane_stands(grid, &fit, sigma, params).then_some(fit)
+}
+
+/// [`Check::LevelMisfit`](super::checks::Check::LevelMisfit): whether a cleaned floor or
+/// ceiling plane stands as level evidence of the first solution: near level (within
+/// `wall_min_angle_deg` of the robot's z axis), explaining its points within
+/// `max_level_misfit` at noise `sigma`, and opaque.
+pub(crate) fn level_plane_stands(
+    grid: &PoseGrid,
+    fit: &PlaneFit,
+    sigma: f64,
+    params: &LevelParams,
+) -> bool {
+    fit.normal.z.abs() > params.wall_cos()
         && fit.misfit_ratio(sigma) <= params.max_level_misfit
-        && refine::opaque(grid, &fit, sigma, params))
-    .then_some(fit)
+        && refine::opaque(grid, fit, sigma, params)
 }
 
 /// The members of `p` (in its order) whose range steps to the next scan in their column like a
@@ -214,7 +216,6 @@ fn fit_without_steep(
     params: &LevelParams,
 ) -> Option<PlaneFit> {
     let rc = grid.row_col();
-    let noisy = sigma >= params.level_steep_min_sigma;
     let kept_points = || {
         kept.iter()
             .filter_map(|&i| Some((i, grid.points[i].as_ref()?)))
@@ -223,8 +224,7 @@ fn fit_without_steep(
     for (i, _) in kept_points() {
         rows_all[rc.row(i)] += 1;
     }
-    let veto = params.level_steep_veto
-        && (noisy || refine::supported_rows(&rows_all, LEVEL_ROW_SHARE) < LEVEL_MIN_ROWS_NOISY);
+    let veto = steep_veto(&rows_all, sigma, params);
     // The fit with every kept point, and (for the veto) without those on a steep surface.
     let mut all = grid::PlaneAccumulator::default();
     let mut flat = grid::PlaneAccumulator::default();
@@ -236,13 +236,10 @@ fn fit_without_steep(
             rows_flat[rc.row(i)] += 1;
         }
     }
-    let min_rows = if noisy { LEVEL_MIN_ROWS_NOISY } else { 2 };
-    let usable = |acc: &grid::PlaneAccumulator, per_row: &[usize]| -> Option<PlaneFit> {
-        let supported = refine::supported_rows(per_row, LEVEL_ROW_SHARE);
-        if acc.n < params.min_level_points || supported < min_rows {
-            return None;
-        }
-        acc.fit(sigma)
+    let usable = |acc: &grid::PlaneAccumulator, per_row: &[usize]| {
+        enough_for_level(acc.n, per_row, sigma, params)
+            .then(|| acc.fit(sigma))
+            .flatten()
     };
     let fit = usable(&all, &rows_all)?;
     let steep = if veto { all.n - flat.n } else { 0 };
@@ -250,6 +247,33 @@ fn fit_without_steep(
         return None;
     }
     Some(fit)
+}
+
+/// [`Check::LevelMinPoints`](super::checks::Check::LevelMinPoints) and
+/// [`Check::LevelMinRowsNoisy`](super::checks::Check::LevelMinRowsNoisy): whether `points`
+/// points, `per_row` of them in each scan line, are enough for a level plane at noise `sigma`:
+/// `min_level_points`, over `LEVEL_MIN_ROWS_NOISY` scan lines from `level_steep_min_sigma` of
+/// noise up, else two.
+pub(crate) fn enough_for_level(
+    points: usize,
+    per_row: &[usize],
+    sigma: f64,
+    params: &LevelParams,
+) -> bool {
+    let noisy = sigma >= params.level_steep_min_sigma;
+    let min_rows = if noisy { LEVEL_MIN_ROWS_NOISY } else { 2 };
+    points >= params.min_level_points
+        && refine::supported_rows(per_row, LEVEL_ROW_SHARE) >= min_rows
+}
+
+/// [`Check::LevelSteepVeto`](super::checks::Check::LevelSteepVeto): whether a level plane with
+/// `per_row` points in each scan line at noise `sigma` must survive without its points on a
+/// steep surface ([`fit_without_steep`]): from `level_steep_min_sigma` up, and below it on
+/// fewer than `LEVEL_MIN_ROWS_NOISY` scan lines.
+pub(crate) fn steep_veto(per_row: &[usize], sigma: f64, params: &LevelParams) -> bool {
+    params.level_steep_veto
+        && (sigma >= params.level_steep_min_sigma
+            || refine::supported_rows(per_row, LEVEL_ROW_SHARE) < LEVEL_MIN_ROWS_NOISY)
 }
 
 pub(crate) fn grid_rows(est: &LevelEstimate) -> usize {

@@ -290,14 +290,6 @@ impl PlaneAccumulator {
         }
     }
 
-    fn sum(&self) -> Vector3<f64> {
-        Vector3::new(self.sums[SUM], self.sums[SUM + 1], self.sums[SUM + 2])
-    }
-
-    fn sum_pp(&self, k: usize) -> f64 {
-        self.sums[PP + k]
-    }
-
     /// The accumulator of the points in `self` but not in `part` (a subset of them).
     pub fn minus(&self, part: &PlaneAccumulator) -> PlaneAccumulator {
         let mut out = *self;
@@ -313,9 +305,9 @@ impl PlaneAccumulator {
     /// [`Moments`]).
     fn scatter(&self) -> (Vector3<f64>, [f64; 6]) {
         let nf = self.weight;
-        let c = self.sum() / nf;
+        let c = Vector3::new(self.sums[SUM], self.sums[SUM + 1], self.sums[SUM + 2]) / nf;
         let cv = [c.x, c.y, c.z];
-        let raw = std::array::from_fn(|t| self.sum_pp(t) - nf * cv[UPPER_I[t]] * cv[UPPER_J[t]]);
+        let raw = std::array::from_fn(|t| self.sums[PP + t] - nf * cv[UPPER_I[t]] * cv[UPPER_J[t]]);
         (c, raw)
     }
 

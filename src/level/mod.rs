@@ -59,12 +59,11 @@ pub enum Estimator {
     Robust,
 }
 
+/// Its command-line spelling (`paper`, `robust`).
 impl fmt::Display for Estimator {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(match self {
-            Estimator::Paper => "paper",
-            Estimator::Robust => "robust",
-        })
+        let value = clap::ValueEnum::to_possible_value(self).expect("no variant is skipped");
+        f.write_str(value.get_name())
     }
 }
 
@@ -109,7 +108,7 @@ impl fmt::Display for FailReason {
 }
 
 /// The result of leveling one pose.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, Default)]
 pub struct LevelEstimate {
     /// `None` when leveled, else why not (the contract's reason, `cause`'s).
     pub failure: Option<FailReason>,
@@ -176,19 +175,8 @@ impl LevelEstimate {
     /// An estimate of no grid and no solution yet, at range noise `range_sigma`.
     fn empty(range_sigma: f64) -> Self {
         LevelEstimate {
-            failure: None,
-            cause: None,
-            attitude: None,
-            sigmas: None,
-            up: None,
             range_sigma,
-            grid: None,
-            quads: Vec::new(),
-            patches: Vec::new(),
-            labels: Vec::new(),
-            wall_mask: Vec::new(),
-            base_scan: None,
-            bearing_trig: None,
+            ..LevelEstimate::default()
         }
     }
 
@@ -371,6 +359,14 @@ mod tests {
     use super::resegment::*;
     use super::up::UpSolution;
     use super::*;
+
+    /// The estimators print as they are spelled on the command line (the accuracy tables'
+    /// `estimator` column).
+    #[test]
+    fn estimators_print_their_command_line_names() {
+        assert_eq!(Estimator::Paper.to_string(), "paper");
+        assert_eq!(Estimator::Robust.to_string(), "robust");
+    }
 
     /// Up tilted by `deg` about the robot's x axis, with a 1-sigma of `sigma_deg` both ways.
     fn solution(deg: f64, sigma_deg: f64) -> UpSolution {

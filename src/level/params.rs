@@ -5,98 +5,116 @@
 
 use super::Estimator;
 
-/// Parameters of level estimation, grouped by the stage that reads them.
-#[derive(Clone, Debug, PartialEq)]
-pub struct LevelParams {
+/// Declares [`LevelParams`] and its [`Default`] from one list, so that each parameter's
+/// default stands beside its unit and why.
+macro_rules! level_params {
+    ($($(#[$doc:meta])* $name:ident: $ty:ty = $default:expr,)*) => {
+        /// Parameters of level estimation, grouped by the stage that reads them.
+        #[derive(Clone, Debug, PartialEq)]
+        pub struct LevelParams {
+            $($(#[$doc])* pub $name: $ty,)*
+        }
+
+        impl Default for LevelParams {
+            fn default() -> Self {
+                Self {
+                    $($name: $default,)*
+                }
+            }
+        }
+    };
+}
+
+level_params! {
     // ---- The pose as a whole: noise and estimator (sect. 5.1) ----
     /// Range noise sigma \[m\]. `None` (default): the scans' `readings_sigma`, else estimated
     /// from the data.
-    pub sigma: Option<f64>,
+    sigma: Option<f64> = None,
     /// Up-vector estimator. Default: robust.
-    pub estimator: Estimator,
+    estimator: Estimator = Estimator::Robust,
     /// Floor on the noise sigma used for tolerances \[m\], so noise-free data still has one.
     /// Default 0.001.
-    pub min_sigma: f64,
+    min_sigma: f64 = 0.001,
     // ---- Quads (sect. 5.2, `polygons`) ----
     /// Quad height in scans (rows). Default 3 (the paper's).
-    pub quad_rows: usize,
+    quad_rows: usize = 3,
     /// Quad width in rays (columns). Default 5 (the paper's).
-    pub quad_cols: usize,
+    quad_cols: usize = 5,
     /// Coplanarity tolerance of a quad, in range-noise sigmas. Default 3.5.
-    pub coplanar_k: f64,
+    coplanar_k: f64 = 3.5,
     /// A plane is a wall when its normal is more than this from the robot's up \[deg\].
     /// Default 45 (the paper's bound on floor slopes).
-    pub wall_min_angle_deg: f64,
+    wall_min_angle_deg: f64 = 45.0,
     /// A quad whose opposite sides differ by more than this ratio is near a triangle and
     /// dropped \[1\]. Default 0.3.
-    pub min_edge_ratio: f64,
+    min_edge_ratio: f64 = 0.3,
     // ---- Patches: growing, robust fits, splits and trims (after sect. 9, `patches`) ----
     /// Region growing admits points within this many sigmas of a patch's plane. Default 3.
-    pub grow_k: f64,
+    grow_k: f64 = 3.0,
     /// Those sigmas are each point's own range noise along the plane's normal,
     /// `sigma |d . n|`, rather than `sigma`: a floor seen at a grazing angle lies within
     /// centimetres of its plane even at 10 cm noise, and an isotropic tolerance lets floor
     /// patches run up the walls' feet. Default true. Walls grown this tightly keep the floor
     /// line at their foot only as a bend across rows, which `max_row_bend_sigmas` rejects;
     /// neither helps without the other.
-    pub ray_tolerance: bool,
+    ray_tolerance: bool = true,
     /// Smallest share of sigma used for that tolerance, `|d . n|` floor \[1\]. Default 0.1.
-    pub min_ray_share: f64,
+    min_ray_share: f64 = 0.1,
     /// Floor on `|d . n|` in the ray weights of each patch's plane, `1 / (d . n)^2` \[1\].
     /// Default 0.2.
-    pub ray_weight_floor: f64,
+    ray_weight_floor: f64 = 0.2,
     /// Region-growing seeds span about this many range-noise sigmas sideways \[1\]. Default 6.
-    pub seed_span_sigmas: f64,
+    seed_span_sigmas: f64 = 6.0,
     /// Widest seed \[columns\]. Default 25.
-    pub max_seed_cols: usize,
+    max_seed_cols: usize = 25,
     /// Floors and ceilings also seed from the paper's narrow quads when the seeds are wider.
     /// Default true: along a level surface's normal the grazing rays carry little noise.
-    pub narrow_level_seeds: bool,
+    narrow_level_seeds: bool = true,
     /// Patches whose residuals exceed this multiple of what the noise explains are tested for
     /// being two planes \[1\]. Default 1.1.
-    pub split_misfit: f64,
+    split_misfit: f64 = 1.1,
     /// F statistic above which two planes replace one \[1\]. Default 20.
-    pub split_f: f64,
+    split_f: f64 = 20.0,
     /// Nested splits allowed per patch. Default 3.
-    pub split_depth: usize,
+    split_depth: usize = 3,
     /// Cauchy scale of the robust refit of each patch's plane, in sigmas of each point's noise along the normal \[1\].
     /// Default 2.5.
-    pub plane_cauchy: f64,
+    plane_cauchy: f64 = 2.5,
     /// Height band around the floor and ceiling left out of walls in that pass, on top of
     /// three sigmas of the range noise along the vertical \[m\]. Default 0.02.
-    pub flat_margin: f64,
+    flat_margin: f64 = 0.02,
     /// Smallest patch kept \[points\]. Default 20.
-    pub min_patch_points: usize,
+    min_patch_points: usize = 20,
     /// A patch too small to split is dropped when its residual variance exceeds the noise's by
     /// more than this many standard deviations of a true plane's ratio \[1\]. Default 4; 0 keeps
     /// every patch.
-    pub max_misfit_sigmas: f64,
+    max_misfit_sigmas: f64 = 4.0,
     /// A patch needs at least this share of its points in columns where it holds two rows or
     /// more \[1\]. Default 0.75; 0 accepts any patch over two rows.
-    pub min_stacked_share: f64,
+    min_stacked_share: f64 = 0.75,
     /// A patch over three or more rows is dropped when its rows' mean residuals bend away from
     /// its plane by more than this many standard deviations of a true plane's chi-square per
     /// degree of freedom \[1\] (a wall line and a floor line at its foot). Default 4; 0 keeps
     /// every patch.
-    pub max_row_bend_sigmas: f64,
+    max_row_bend_sigmas: f64 = 4.0,
     /// An edge row of a patch over four rows or more goes when its mean residual from the
     /// plane of the patch's other rows exceeds this many sigmas (its points' noise and that
     /// plane's uncertainty), as the floor line at a wall's foot does; 0 keeps every row.
     /// Default 5 (on three-row patches, which it would cut to two, it left wrong planes to
     /// decide a few poses at 10 cm noise).
-    pub trim_sigmas: f64,
+    trim_sigmas: f64 = 5.0,
     /// A run of points at either end of a patch's row goes when it stands in front of the
     /// patch's plane (towards the scanner): the sum of its residuals beyond this many standard
     /// deviations of that sum, as the floor just in front of a wall's foot does; 0 keeps them.
     /// Default 3.
-    pub front_end_sigmas: f64,
+    front_end_sigmas: f64 = 3.0,
     // ---- Up, attitude and the first pass's level surfaces (sect. 5.3-5.4) ----
     /// Reweighting iterations of the robust estimator. Default 10.
-    pub iterations: usize,
+    iterations: usize = 10,
     /// Factor on the propagated attitude sigmas \[1\]: the noise model does not see
     /// segmentation errors (a few floor points in a wall, a corner split a little off), which
     /// simulations show add about a fifth. Default 1.2.
-    pub sigma_inflation: f64,
+    sigma_inflation: f64 = 1.2,
     /// Take the floor and ceiling planes seen as level, as extra evidence of up beside the
     /// walls (robust estimator). Default true: the contract's world has a level floor (z = 0)
     /// and ceiling, and the robot is tilted by what it stands on, not by the floor it sees
@@ -104,27 +122,27 @@ pub struct LevelParams {
     /// pins up down well even at 10 cm noise, and it still levels a robot that faces the floor
     /// or sees only parallel walls. Walls outvote a floor that disagrees (robust weights).
     /// Turn off where the visible floor itself slopes (long ramps, rubble).
-    pub level_surfaces: bool,
+    level_surfaces: bool = true,
     /// A floor or ceiling patch is used as level only with at least this many points.
     /// Default 30.
-    pub min_level_points: usize,
+    min_level_points: usize = 30,
     /// ... and only when its points fit one plane within this multiple of the residual the
     /// noise explains \[1\]. Default 3. A patch that is no plane (a wall's strip seen through
     /// heavy noise, a wall foot) can fit a normal near the robot's own z axis; along that
     /// normal the grazing rays carry little noise, so its variance would claim a confidence
     /// it has not earned.
-    pub max_level_misfit: f64,
+    max_level_misfit: f64 = 3.0,
     /// Factor on a level plane's normal variance \[1\]. The noise model does not see what
     /// cleaning leaves of a wall's foot in a floor patch; simulations at 1-10 cm noise show its
     /// sigmas about this much too small. Default 2 (measured with `ray_tolerance`, which keeps
     /// the wall's foot out of floor patches; 4 without it).
-    pub level_inflation: f64,
+    level_inflation: f64 = 2.0,
     /// A floor or ceiling patch is not used as level when it only spans two scans thanks to
     /// points whose range hardly changes to a neighbouring scan's point (member of the patch
     /// or not), i.e. points on a wall, and those are more than a fifth of it: a floor line and
     /// a wall's line at its foot, coplanar within high noise, gave planes 10 degrees off with
     /// sigmas under 1 degree (a box room and an angled room at 10 cm). Default true.
-    pub level_steep_veto: bool,
+    level_steep_veto: bool = true,
     /// ... for every patch from range noise of this sigma \[m\], and below it for a patch on
     /// fewer than `LEVEL_MIN_ROWS_NOISY` scan lines. Default 0.03: at 1 cm noise the misfit
     /// test refuses most such planes, and the veto on every patch cost a thousandth of a
@@ -132,18 +150,18 @@ pub struct LevelParams {
     /// lines it does not: a wall's line parallel to the floor line below it always fits a
     /// plane, and one such "floor", 15 degrees off with a misfit of 0.9, leveled a 1 cm pose
     /// (an L-shaped room, facing a corner) 13 degrees off with a sigma of 0.5.
-    pub level_steep_min_sigma: f64,
+    level_steep_min_sigma: f64 = 0.03,
     // ---- Failure detection, the gate (sect. 5.5, `failure`) ----
     /// Fewer wall quads than this fails the pose (too_few_polygons / facing_floor /
     /// facing_ceiling). Default 3.
-    pub min_polygons: usize,
+    min_polygons: usize = 3,
     /// The pose fails as parallel_walls when the smaller eigenvalue of up's information
     /// matrix is below this fraction of the larger \[1\]. Default 0.01.
-    pub parallel_ratio: f64,
+    parallel_ratio: f64 = 0.01,
     /// The pose fails as parallel_walls when either attitude sigma exceeds this \[deg\]: the
     /// walls seen do not pin the attitude down. Default 1.5, so that an accepted attitude is
     /// within 4.5 degrees at three sigmas (measured: no accepted pose off by more than 5).
-    pub max_sigma_deg: f64,
+    max_sigma_deg: f64 = 1.5,
     // ---- Re-segmentation in the level frame (after sect. 9, `resegment`, `refine`) ----
     /// Passes of re-segmentation in the provisional level frame ([`refine`], robust
     /// estimator): points re-assigned to the floor and ceiling by height and to walls as
@@ -151,59 +169,59 @@ pub struct LevelParams {
     /// replaces the first when it passes the gate. 0 turns it off. Default 1 (measured on
     /// the example plans, seeds 1-3: more leveled and lower means in every cell at 1, 5 and
     /// 10 cm; a second pass changed nothing measurable).
-    pub refine_passes: usize,
+    refine_passes: usize = 1,
     /// Re-segment only poses whose first solution failed or has an attitude sigma above this
     /// \[deg\]; 0 re-segments every pose. Default 0.6: re-segmenting a pose the first solution
     /// already pins down to a few tenths of a degree changes its error by hundredths, and
     /// skipping it makes `level` a third faster at 1 cm (example plans, seeds 1-3 and five
     /// unseen plans: the same poses leveled and none ok off by more than 5 degrees; at 1.0,
     /// one was).
-    pub refine_above_sigma_deg: f64,
+    refine_above_sigma_deg: f64 = 0.6,
     /// Re-segmentation admits a point within this many sigmas of a model \[1\]. Default 3.
-    pub refine_k: f64,
+    refine_k: f64 = 3.0,
     /// A re-segmented wall is used only when at least this many scans hold 15% of its points
     /// each. Default 2 (the floor's points are kept out of walls, so two scan lines on a wall
     /// are a wall).
-    pub refine_min_rows: usize,
+    refine_min_rows: usize = 2,
     /// Walls whose level-frame normals are within this angle \[deg\] and whose lines coincide
     /// within the tolerance are one wall. Default 10.
-    pub refine_merge_deg: f64,
+    refine_merge_deg: f64 = 10.0,
     /// Factor on a re-segmented floor's or ceiling's normal variance \[1\]. Default 4 (with 2,
     /// 3-sigma coverage fell to 96.8% at 3 scans and 10 cm, from 99.4%).
-    pub refine_level_inflation: f64,
+    refine_level_inflation: f64 = 4.0,
     /// Smallest up uncertainty assumed while assigning points \[deg\]. Default 0.2.
-    pub refine_min_sigma_deg: f64,
+    refine_min_sigma_deg: f64 = 0.2,
     /// A re-segmented floor or ceiling must be within this angle of up \[deg\]. Default 10.
-    pub refine_level_max_deg: f64,
+    refine_level_max_deg: f64 = 10.0,
     /// A point whose range steps to its neighbours in the adjacent scans like a level
     /// surface's (by more than `r de`, plus this many sigmas of the step's noise) joins no
     /// re-segmented wall \[1\]. Default 1.
-    pub refine_step_k: f64,
+    refine_step_k: f64 = 1.0,
     /// A re-segmented floor or ceiling is used only when its points fit one plane within this
     /// multiple of the residual the noise explains \[1\]. Default 1.5 (2 or 3 leveled a few more
     /// poses at 10 cm, but 3-sigma coverage fell to 92-94%: the extra floors were biased).
-    pub refine_level_misfit: f64,
+    refine_level_misfit: f64 = 1.5,
     // ---- Floor and ceiling lines (re-segmentation, `refine::lines`) ----
     /// Where re-segmentation finds no floor (or ceiling) plane, use each scan's floor points
     /// as a line that must be level ([`refine`], [`up::LevelLine`]): a scan's plane meets the
     /// floor in a line, and its grazing rays pin that line's slope down even at 10 cm noise.
     /// Default true: it levels poses that see the floor in one scan only (on the example
     /// plans, seeds 1-3, 1-3% more poses at 5 and 10 cm).
-    pub level_lines: bool,
+    level_lines: bool = true,
     /// Fewest points of a scan's floor or ceiling line. Default 10.
-    pub level_line_min_points: usize,
+    level_line_min_points: usize = 10,
     /// A floor or ceiling line's points must fit it within this multiple of the residual the
     /// noise explains \[1\]. Default 1.5.
-    pub level_line_misfit: f64,
+    level_line_misfit: f64 = 1.5,
     /// Factor on a floor or ceiling line's slope variance \[1\]. Default 4 (as
     /// `refine_level_inflation`).
-    pub level_line_inflation: f64,
+    level_line_inflation: f64 = 4.0,
     /// A refined solution that uses floor or ceiling lines passes the gate only with both
     /// attitude sigmas below this \[deg\] (and `max_sigma_deg`). Default 1.0.
-    pub level_line_max_sigma_deg: f64,
+    level_line_max_sigma_deg: f64 = 1.0,
     // ---- The last stage: maximum likelihood on the chosen segmentation (`ml`) ----
     /// Up by maximum likelihood on the segmentation chosen ([`super::ml`]).
-    pub ml: super::MlParams,
+    ml: super::MlParams = super::MlParams::default(),
 }
 
 impl LevelParams {
@@ -215,73 +233,6 @@ impl LevelParams {
     /// Cosine of `refine_level_max_deg`.
     pub fn refine_level_cos(&self) -> f64 {
         self.refine_level_max_deg.to_radians().cos()
-    }
-}
-
-impl Default for LevelParams {
-    fn default() -> Self {
-        Self {
-            // The pose as a whole: noise and estimator
-            sigma: None,
-            estimator: Estimator::Robust,
-            min_sigma: 0.001,
-            // Quads
-            quad_rows: 3,
-            quad_cols: 5,
-            coplanar_k: 3.5,
-            wall_min_angle_deg: 45.0,
-            min_edge_ratio: 0.3,
-            // Patches: region growing, robust plane fits, splits and trims
-            grow_k: 3.0,
-            ray_tolerance: true,
-            min_ray_share: 0.1,
-            ray_weight_floor: 0.2,
-            seed_span_sigmas: 6.0,
-            max_seed_cols: 25,
-            narrow_level_seeds: true,
-            split_misfit: 1.1,
-            split_f: 20.0,
-            split_depth: 3,
-            plane_cauchy: 2.5,
-            flat_margin: 0.02,
-            min_patch_points: 20,
-            max_misfit_sigmas: 4.0,
-            min_stacked_share: 0.75,
-            max_row_bend_sigmas: 4.0,
-            trim_sigmas: 5.0,
-            front_end_sigmas: 3.0,
-            // Up and attitude, level surfaces of the first pass
-            iterations: 10,
-            sigma_inflation: 1.2,
-            level_surfaces: true,
-            min_level_points: 30,
-            max_level_misfit: 3.0,
-            level_inflation: 2.0,
-            level_steep_veto: true,
-            level_steep_min_sigma: 0.03,
-            // Failure detection, the gate
-            min_polygons: 3,
-            parallel_ratio: 0.01,
-            max_sigma_deg: 1.5,
-            // Re-segmentation in the provisional level frame
-            refine_passes: 1,
-            refine_above_sigma_deg: 0.6,
-            refine_k: 3.0,
-            refine_min_rows: 2,
-            refine_merge_deg: 10.0,
-            refine_level_inflation: 4.0,
-            refine_min_sigma_deg: 0.2,
-            refine_level_max_deg: 10.0,
-            refine_step_k: 1.0,
-            refine_level_misfit: 1.5,
-            // Floor and ceiling lines
-            level_lines: true,
-            level_line_min_points: 10,
-            level_line_misfit: 1.5,
-            level_line_inflation: 4.0,
-            level_line_max_sigma_deg: 1.0,
-            ml: super::MlParams::default(),
-        }
     }
 }
 
@@ -369,7 +320,7 @@ pub(crate) mod first_pass {
     /// Share of a level plane's points each of its scan lines must hold (or half of an even
     /// split, `refine::supported_rows`) to count as one of the plane's lines: a level plane from
     /// one scan line is that scan's own plane, free to turn about the line. Used by the first
-    /// pass and by re-segmentation (`two_rows_support`).
+    /// pass and by re-segmentation (`level_support`).
     pub(crate) const LEVEL_ROW_SHARE: f64 = 0.2;
 
     /// Fewest scan-to-scan range steps inside a floor or ceiling patch to tell its prevailing

@@ -32,20 +32,16 @@ impl Polygon {
 }
 
 /// Classifies a plane by the angle of its normal to the robot's up (0, 0, 1): more than
-/// `wall_min_angle` away is a wall (the paper assumes tilts below 45 degrees), otherwise floor
-/// when the plane passes below the scanner (along its up-pointing normal) and ceiling when above.
-/// (A point's robot-frame z would not do: a beam tilted up in the robot frame still meets the
-/// floor when the robot pitches down.)
+/// `wall_min_angle` away (`wall_cos`, [`LevelParams::wall_cos`], computed once for many quads)
+/// is a wall (the paper assumes tilts below 45 degrees), otherwise floor when the plane passes
+/// below the scanner (along its up-pointing normal) and ceiling when above. (A point's
+/// robot-frame z would not do: a beam tilted up in the robot frame still meets the floor when
+/// the robot pitches down.)
 pub(crate) fn classify(
     normal: &Vector3<f64>,
     centroid: &Point3<f64>,
-    params: &LevelParams,
+    wall_cos: f64,
 ) -> SurfaceKind {
-    classify_below(normal, centroid, params.wall_cos())
-}
-
-/// [`classify`] with the cosine of the wall angle given (computed once for many quads).
-fn classify_below(normal: &Vector3<f64>, centroid: &Point3<f64>, wall_cos: f64) -> SurfaceKind {
     if normal.z.abs() < wall_cos {
         SurfaceKind::Wall
     } else if normal.dot(&centroid.coords) * normal.z.signum() < 0.0 {
@@ -113,12 +109,17 @@ fn quad_at(
     // Every point valid, and their plain sum: the same sum and division as
     // `PlaneAccumulator::centroid` (weights of one), for the cheap test below, before the
     // scatter sums that only quads passing it need.
+    let row = |rr: usize| &grid.points[rr * grid.cols + c..rr * grid.cols + c + qc];
     let mut sum = Vector3::zeros();
     for rr in r..r + qr {
-        for cc in c..c + qc {
-            sum += grid.at(rr, cc)?.p.coords;
+        for g in row(rr) {
+            sum += g.as_ref()?.p.coords;
         }
     }
+    // Every point is valid from here: whether any lies beyond `limit` from a plane.
+    let beyond = |n: &Vector3<f64>, origin: &Point3<f64>, limit: f64| {
+        (r..r + qr).any(|rr| any_beyond(n, origin, row(rr).iter().flatten().map(|g| g.p), limit))
+    };
     let corner = |rr: usize, cc: usize| grid.at(rr, cc).map(|g| g.p);
     let corners = [
         corner(r, c)?,
@@ -126,11 +127,7 @@ fn quad_at(
         corner(r + qr - 1, c + qc - 1)?,
         corner(r + qr - 1, c)?,
     ];
-    // Not close to a triangle: opposite sides of comparable length (sect. 5.2).
-    let side = |a: usize, b: usize| (corners[a] - corners[b]).norm();
-    let (bottom, right, top, left) = (side(0, 1), side(1, 2), side(2, 3), side(3, 0));
-    let ratio = |a: f64, b: f64| a.min(b) / a.max(b).max(1e-300);
-    if ratio(bottom, top) < params.min_edge_ratio || ratio(left, right) < params.min_edge_ratio {
+    if near_triangle(&corners, params.min_edge_ratio) {
         return None;
     }
     // Cheap rejection before the eigen decomposition: the plane through the centroid normal to
@@ -139,33 +136,19 @@ fn quad_at(
     let diag = (corners[2] - corners[0]).cross(&(corners[3] - corners[1]));
     if let Some(n) = diag.try_normalize(1e-12) {
         let centroid = Point3::from(sum / (qr * qc) as f64);
-        for rr in r..r + qr {
-            for cc in c..c + qc {
-                let p = grid.at(rr, cc)?.p;
-                if n.dot(&(p - centroid)).abs() > DIAGONAL_PLANE_TOLERANCES * tol {
-                    return None;
-                }
-            }
+        if beyond(&n, &centroid, DIAGONAL_PLANE_TOLERANCES * tol) {
+            return None;
         }
     }
     let mut acc = PlaneAccumulator::default();
     for rr in r..r + qr {
-        for cc in c..c + qc {
-            acc.add(grid.at(rr, cc)?);
-        }
+        row(rr).iter().flatten().for_each(|g| acc.add(g));
     }
     let fit = acc.fit(sigma)?;
     // No point is farther than `sqrt(residual_ss)` from the plane: when that is clearly within
     // the tolerance, every point is, and the points need no visit.
-    if fit.residual_ss > 0.99 * tol * tol {
-        for rr in r..r + qr {
-            for cc in c..c + qc {
-                let p = grid.at(rr, cc)?.p;
-                if fit.distance(&p).abs() > tol {
-                    return None;
-                }
-            }
-        }
+    if fit.residual_ss > 0.99 * tol * tol && beyond(&fit.normal, &fit.centroid, tol) {
+        return None;
     }
     let area = 0.5 * diag.norm();
     Some(Polygon {
@@ -175,7 +158,28 @@ fn quad_at(
         cols: qc,
         corners,
         area,
-        kind: classify_below(&fit.normal, &fit.centroid, wall_cos),
+        kind: classify(&fit.normal, &fit.centroid, wall_cos),
         fit,
     })
+}
+
+/// [`Check::QuadNearTriangle`](super::checks::Check::QuadNearTriangle): whether a quad with
+/// `corners` in order around it is close to a triangle, the shorter of two opposite sides below
+/// `min_edge_ratio` of the longer (sect. 5.2).
+pub(crate) fn near_triangle(corners: &[Point3<f64>; 4], min_edge_ratio: f64) -> bool {
+    let side = |a: usize, b: usize| (corners[a] - corners[b]).norm();
+    let ratio = |a: f64, b: f64| a.min(b) / a.max(b).max(1e-300);
+    ratio(side(0, 1), side(2, 3)) < min_edge_ratio || ratio(side(3, 0), side(1, 2)) < min_edge_ratio
+}
+
+/// [`Check::QuadDiagonal`](super::checks::Check::QuadDiagonal) and
+/// [`Check::QuadCoplanar`](super::checks::Check::QuadCoplanar): whether any of `points` lies
+/// farther than `limit` from the plane through `origin` with unit normal `n`.
+pub(crate) fn any_beyond(
+    n: &Vector3<f64>,
+    origin: &Point3<f64>,
+    mut points: impl Iterator<Item = Point3<f64>>,
+    limit: f64,
+) -> bool {
+    points.any(|p| n.dot(&(p - origin)).abs() > limit)
 }

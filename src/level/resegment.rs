@@ -22,34 +22,26 @@ pub(crate) fn resegmented(
     first: Result<UpSolution, FailCause>,
     params: &LevelParams,
 ) -> (Result<UpSolution, FailCause>, Option<Vec<refine::Model>>) {
-    let needs_refine = match &first {
-        Ok(sol) => attitude_sigmas(sol, params)
-            .iter()
-            .any(|s| s.to_degrees() > Check::RefineAboveSigma.threshold(params)),
-        Err(_) => true,
-    };
-    if params.estimator != Estimator::Robust || params.refine_passes == 0 || !needs_refine {
+    if params.estimator != Estimator::Robust
+        || params.refine_passes == 0
+        || !needs_refine(&first, params)
+    {
         return (first, None);
     }
     let mut result = first;
-    let Refinement {
-        accepted,
-        raw,
-        start,
-        models,
-    } = refined_solution(est, levels, &result, params);
-    let confirmed = accepted.is_some();
+    let refinement = refined_solution(est, levels, &result, params);
+    let confirmed = refinement.accepted.is_some();
     // The solution kept and the other one of the two: the first when the refined one is
     // kept, else the refined one, gated or not; none when the first failed.
-    let other = match accepted {
+    let other = match refinement.accepted {
         Some(refined) => std::mem::replace(&mut result, Ok(refined)).ok(),
-        None => raw,
+        None => refinement.raw,
     };
     let widened = match (&result, other) {
         (Ok(kept), Some(first)) if confirmed => widened_against_first(kept, &first),
         (Ok(kept), Some(other)) => widened_unconfirmed(kept, &other),
         // The refined solution stands alone: checked against where it started.
-        (Ok(kept), None) => start.and_then(|s| widened_from_start(kept, &s)),
+        (Ok(kept), None) => refinement.start.and_then(|s| widened_from_start(kept, &s)),
         (Err(_), _) => None,
     };
     let result = match widened {
@@ -59,7 +51,34 @@ pub(crate) fn resegmented(
             .map_err(|_| FailCause::ResegmentationDisagrees),
         None => result,
     };
-    (result, models)
+    (result, refinement.models)
+}
+
+/// [`Check::RefineAboveSigma`]: whether the first solution is re-segmented: when it failed,
+/// or when either reported sigma exceeds `refine_above_sigma_deg`.
+pub(crate) fn needs_refine(first: &Result<UpSolution, FailCause>, params: &LevelParams) -> bool {
+    first.as_ref().map_or(true, |sol| {
+        attitude_sigmas(sol, params)
+            .iter()
+            .any(|s| s.to_degrees() > Check::RefineAboveSigma.threshold(params))
+    })
+}
+
+/// [`Check::StartMaxSigma`]: whether re-segmentation may start from `start`. From a start
+/// looser than that, it can settle on a wrong but self-consistent set of planes (a pose 16
+/// degrees off at the start, 23 degrees of sigma, ended 7 degrees off with sigmas near one
+/// degree); it rescues almost nothing from there.
+pub(crate) fn start_tight_enough(start: &UpSolution, params: &LevelParams) -> bool {
+    start.max_attitude_sigma() <= Check::StartMaxSigma.threshold(params)
+}
+
+/// [`Check::LineMaxSigma`]: whether a refined solution that uses floor or ceiling lines
+/// passes the stricter gate of `level_line_max_sigma_deg` (and `max_sigma_deg`).
+pub(crate) fn passes_line_gate(sol: &UpSolution, params: &LevelParams) -> bool {
+    let strict = Check::MaxSigma
+        .threshold(params)
+        .min(Check::LineMaxSigma.threshold(params));
+    acceptable_within(sol, params, true, strict).is_ok()
 }
 
 /// Re-segmentation in the provisional level frame ([`refine`]): its start, its refined model
@@ -100,13 +119,9 @@ pub fn refine_estimate(
         .collect();
     let mut refined: Vec<(UpSolution, refine::Refined)> = starts
         .into_iter()
-        // From a start this loose, re-segmentation can settle on a wrong but self-consistent
-        // set of planes (a pose 16 degrees off at the start, 23 degrees of sigma, ended 7
-        // degrees off with sigmas near one degree); it rescues almost nothing from there.
-        .filter(|start| start.max_attitude_sigma() <= Check::StartMaxSigma.threshold(params))
+        .filter(|start| start_tight_enough(start, params))
         .filter_map(|start| {
-            let r = refine::refine(grid, &start, &walls, &steps, params, sigma)?;
-            Some((start, r))
+            refine::refine(grid, &start, &walls, &steps, params, sigma).map(|r| (start, r))
         })
         .collect();
     let (best, _) = refined
@@ -168,14 +183,10 @@ pub(crate) fn refined_solution(
     first: &Result<UpSolution, FailCause>,
     params: &LevelParams,
 ) -> Refinement {
-    let Some(Resegmented {
-        start,
-        refined,
-        rivals,
-    }) = refine_estimate(est, levels, first, params)
-    else {
+    let Some(found) = refine_estimate(est, levels, first, params) else {
         return Refinement::default();
     };
+    let (start, refined, rivals) = (found.start, found.refined, found.rivals);
     let raw = Some(refined.solution);
     let start = Some(start);
     let level_models = refined.models.iter().any(|m| m.kind != SurfaceKind::Wall);
@@ -194,10 +205,7 @@ pub(crate) fn refined_solution(
         // A line pins up down across it only: the other direction rests on the walls that
         // alone could not pass the gate, so it is held to a stricter one; failing that, the
         // models without the lines are gated as usual.
-        let strict = Check::MaxSigma
-            .threshold(params)
-            .min(Check::LineMaxSigma.threshold(params));
-        if acceptable_within(&refined.solution, params, true, strict).is_ok() {
+        if passes_line_gate(&refined.solution, params) {
             Some(refined.solution)
         } else {
             refined

@@ -51,23 +51,23 @@ impl LevelLine {
         }
         let nf = n as f64;
         let c = points.iter().map(|(p, _)| p.coords).sum::<Vector3<f64>>() / nf;
-        let mut scatter = Matrix3::zeros();
-        let mut dd = Matrix3::zeros();
-        for (p, d) in points {
-            let v = p.coords - c;
-            scatter += v * v.transpose();
-            dd += d * d.transpose();
-        }
+        let outer = |v: Vector3<f64>| v * v.transpose();
+        let scatter: Matrix3<f64> = points.iter().map(|(p, _)| outer(p.coords - c)).sum();
+        let dd: Matrix3<f64> = points.iter().map(|(_, d)| outer(*d)).sum();
         let corrected = scatter - dd * (sigma * sigma * (nf - 1.0) / nf);
         let eig = super::eigen3::sym_eigen3(&corrected);
         let dir = eig.vectors[2].try_normalize(1e-300)?;
-        let mut spread_dd = Matrix3::zeros();
-        let mut spread = 0.0;
-        for (p, d) in points {
-            let t = dir.dot(&(p.coords - c));
-            spread += t * t;
-            spread_dd += d * d.transpose() * (t * t);
-        }
+        // Each point's squared position along the line, `t_i^2`.
+        let t2: Vec<f64> = points
+            .iter()
+            .map(|(p, _)| dir.dot(&(p.coords - c)).powi(2))
+            .collect();
+        let spread: f64 = t2.iter().sum();
+        let spread_dd: Matrix3<f64> = points
+            .iter()
+            .zip(&t2)
+            .map(|((_, d), t2)| outer(*d) * *t2)
+            .sum();
         (spread > 0.0).then_some(LevelLine {
             dir,
             centroid: nalgebra::Point3::from(c),
@@ -114,26 +114,21 @@ type Term = (Vector3<f64>, f64);
 impl PlaneObs<'_> {
     /// A wall plane.
     pub(crate) fn wall(fit: &PlaneFit, inflate: f64) -> PlaneObs<'_> {
-        PlaneObs {
-            evidence: Evidence::Wall(fit),
-            inflate,
-        }
+        PlaneObs::of(Evidence::Wall(fit), inflate)
     }
 
     /// A floor or ceiling plane taken as level.
     pub(crate) fn level(fit: &PlaneFit, inflate: f64) -> PlaneObs<'_> {
-        PlaneObs {
-            evidence: Evidence::Level(fit),
-            inflate,
-        }
+        PlaneObs::of(Evidence::Level(fit), inflate)
     }
 
     /// A line on a floor or ceiling.
     pub(crate) fn level_line(line: &LevelLine, inflate: f64) -> PlaneObs<'_> {
-        PlaneObs {
-            evidence: Evidence::LevelLine(line),
-            inflate,
-        }
+        PlaneObs::of(Evidence::LevelLine(line), inflate)
+    }
+
+    fn of(evidence: Evidence<'_>, inflate: f64) -> PlaneObs<'_> {
+        PlaneObs { evidence, inflate }
     }
 
     /// Scalar residuals this evidence contributes.
@@ -312,13 +307,9 @@ pub(crate) fn up_robust(planes: &[PlaneObs], sigma: f64, iterations: usize) -> O
     if constraints < 2 {
         return None;
     }
-    let min_z = MAX_TILT.cos();
     let mut candidates: Vec<Vector3<f64>> = planes.iter().filter_map(|p| p.proposal()).collect();
-    let mut m = Matrix3::zeros();
-    for p in planes {
-        m += p.start_matrix();
-    }
-    if let Some(v) = smallest_eigenvector(&m) {
+    let start: Matrix3<f64> = planes.iter().map(|p| p.start_matrix()).sum();
+    if let Some(v) = smallest_eigenvector(&start) {
         candidates.push(v);
     }
     // Walls and level lines: each pair proposes the direction normal to both.
@@ -342,7 +333,7 @@ pub(crate) fn up_robust(planes: &[PlaneObs], sigma: f64, iterations: usize) -> O
     let mut up = candidates
         .into_iter()
         .map(|c| if c.z < 0.0 { -c } else { c })
-        .filter(|c| c.z >= min_z)
+        .filter(within_max_tilt)
         .map(|c| (loss(&c), c))
         .min_by(|a, b| a.0.total_cmp(&b.0))?
         .1;
@@ -362,10 +353,17 @@ pub(crate) fn up_robust(planes: &[PlaneObs], sigma: f64, iterations: usize) -> O
             break;
         }
     }
-    if up.z < min_z {
+    // The result is held to the same limit.
+    if up.z < MAX_TILT.cos() {
         return None;
     }
     Some(solution_at(up, planes, sigma, true))
+}
+
+/// [`Check::MaxTilt`](super::checks::Check::MaxTilt): whether a unit `up` (`z >= 0`) lies
+/// within `MAX_TILT_DEG` of the robot's z axis, as every candidate of [`up_robust`] must.
+pub(crate) fn within_max_tilt(up: &Vector3<f64>) -> bool {
+    up.z >= MAX_TILT.cos()
 }
 
 /// [`PlaneObs::z2`] from the evidence's terms.

@@ -107,7 +107,12 @@ pub(crate) fn grow_patches(
 ) -> (Vec<Patch>, Vec<u32>) {
     let mut labels = vec![UNLABELLED; grid.points.len()];
     let mut patches = Vec::new();
-    let tol = params.grow_k * sigma.max(params.min_sigma);
+    let growth = Growth {
+        grid,
+        params,
+        sigma,
+        tol: params.grow_k * sigma.max(params.min_sigma),
+    };
     let width = seed_cols(grid, params, sigma);
     let wide: Vec<Polygon>;
     let three_row: &[Polygon] = if width == params.quad_cols {
@@ -120,11 +125,11 @@ pub(crate) fn grow_patches(
     let mut members = Vec::new();
     for q in ordered_seeds(three_row, quads, narrow_level) {
         let id = patches.len() as u32;
-        if let Some(p) = grow_seed(grid, q, id, &mut labels, &mut members, params, sigma, tol) {
+        if let Some(p) = growth.grow_seed(q, id, &mut labels, &mut members) {
             patches.push(p);
         }
     }
-    let split = split_two_plane_patches(grid, patches, params, sigma, tol);
+    let split = growth.split_two_plane_patches(patches);
     labels.fill(UNLABELLED);
     for (id, p) in split.iter().enumerate() {
         for &i in &p.members {
@@ -170,66 +175,144 @@ fn ordered_seeds<'a>(
         .collect()
 }
 
-/// One patch grown from seed `q` as patch `id` (sect. 9's region growing from a sect. 5.2
-/// quad): nothing when the seed overlaps a patch already grown, or when the grown members
-/// make no patch ([`make_patch`]), in which case their labels are freed again. `members` is
-/// scratch space reused across seeds.
-#[allow(clippy::too_many_arguments)]
-fn grow_seed(
-    grid: &PoseGrid,
-    q: &Polygon,
-    id: u32,
-    labels: &mut [u32],
-    members: &mut Vec<usize>,
-    params: &LevelParams,
+/// What growing patches over one grid needs: the grid, the parameters, the range noise as given
+/// and the growing tolerance `grow_k sigma` \[m\].
+struct Growth<'a> {
+    grid: &'a PoseGrid,
+    params: &'a LevelParams,
     sigma: f64,
     tol: f64,
-) -> Option<Patch> {
-    let cols = grid.cols;
-    if q.span(cols).any(|i| labels[i] != UNLABELLED) {
-        return None;
-    }
-    let mut acc = PlaneAccumulator::default();
-    members.clear();
-    for i in q.span(cols) {
-        labels[i] = id;
-        members.push(i);
-        if let Some(g) = &grid.points[i] {
-            acc.add(g);
+}
+
+impl Growth<'_> {
+    /// One patch grown from seed `q` as patch `id` (sect. 9's region growing from a sect. 5.2
+    /// quad): nothing when the seed overlaps a patch already grown, or when the grown members
+    /// make no patch ([`Growth::make_patch`]), in which case their labels are freed again.
+    /// `members` is scratch space reused across seeds.
+    fn grow_seed(
+        &self,
+        q: &Polygon,
+        id: u32,
+        labels: &mut [u32],
+        members: &mut Vec<usize>,
+    ) -> Option<Patch> {
+        let (grid, params, sigma, tol) = (self.grid, self.params, self.sigma, self.tol);
+        let cols = grid.cols;
+        if q.span(cols).any(|i| labels[i] != UNLABELLED) {
+            return None;
         }
+        let mut acc = PlaneAccumulator::default();
+        members.clear();
+        for i in q.span(cols) {
+            labels[i] = id;
+            members.push(i);
+            if let Some(g) = &grid.points[i] {
+                acc.add(g);
+            }
+        }
+        let mut fit = acc.fit(sigma)?;
+        let s_eff = sigma.max(params.min_sigma);
+        let tol_at = |fit: &PlaneFit, g: &GridPoint| ray_tolerance(fit, g, tol, s_eff, params);
+        flood(
+            grid, id, labels, members, &mut acc, &mut fit, &tol_at, sigma,
+        );
+        // Release members that the final plane does not explain, then refit.
+        if let Some(f) = acc.fit(sigma) {
+            fit = f;
+        }
+        // Few are released: their sums come off the accumulator, rather than the kept ones'
+        // being summed again.
+        let mut released = PlaneAccumulator::default();
+        members.retain(|&i| {
+            let Some(g) = grid.points[i].as_ref() else {
+                return false;
+            };
+            if fit.distance(&g.p).abs() <= tol_at(&fit, g) {
+                true
+            } else {
+                released.add(g);
+                labels[i] = UNLABELLED;
+                false
+            }
+        });
+        let made = self.make_patch(members, acc.minus(&released));
+        if made.is_none() {
+            for &i in members.iter() {
+                labels[i] = UNLABELLED;
+            }
+        }
+        made
     }
-    let mut fit = acc.fit(sigma)?;
-    let s_eff = sigma.max(params.min_sigma);
-    let tol_at = |fit: &PlaneFit, g: &GridPoint| ray_tolerance(fit, g, tol, s_eff, params);
-    flood(
-        grid, id, labels, members, &mut acc, &mut fit, &tol_at, sigma,
-    );
-    // Release members that the final plane does not explain, then refit.
-    if let Some(f) = acc.fit(sigma) {
-        fit = f;
+
+    /// Patches that are really two planes (grown across a corner or a wall's foot) split into
+    /// their planes ([`split_members`]) when their misfit ratio exceeds `split_misfit`: sect. 9's
+    /// EM would give each plane its own points; here a contiguous split does.
+    fn split_two_plane_patches(&self, patches: Vec<Patch>) -> Vec<Patch> {
+        let (grid, params, sigma) = (self.grid, self.params, self.sigma);
+        let mut split = Vec::with_capacity(patches.len());
+        for p in patches {
+            if plane_explained(&p.fit, sigma, params) {
+                split.push(p);
+                continue;
+            }
+            for part in split_members(grid, &p.members, params, sigma, params.split_depth) {
+                split.extend(self.release_and_make(&part));
+            }
+        }
+        split
     }
-    // Few are released: their sums come off the accumulator, rather than the kept ones'
-    // being summed again.
-    let mut released = PlaneAccumulator::default();
-    members.retain(|&i| {
-        let Some(g) = grid.points[i].as_ref() else {
-            return false;
+
+    /// A patch from members when it is big enough and spans at least two rows (one row is a
+    /// line, which leaves its plane free to turn about it). `acc` holds the sums of the members'
+    /// points (the callers have just visited them).
+    fn make_patch(&self, members: &[usize], acc: PlaneAccumulator) -> Option<Patch> {
+        let (grid, params, sigma) = (self.grid, self.params, self.sigma);
+        // In grid order from here: the passes below then walk the grid forwards.
+        let sorted = ascending(members);
+        let members = &sorted[..];
+        // The rows spanned, unless too small or one row: nothing to fit (trimming only takes
+        // points away).
+        let span = |members: &[usize]| patch_rows(members, grid.cols, params);
+        // Still a patch once points went: big enough, over two rows, and stacked.
+        let still_a_patch =
+            |members: &[usize]| span(members).is_some() && stacked(members, grid, params);
+        span(members)?;
+        let first = acc.fit(sigma)?;
+        let trimmed = trim_edge_rows(grid, members, &acc, &first, sigma, params);
+        let (members, first) = match &trimmed {
+            // A three-row patch that lost a row is no wall.
+            Some(kept) if kept.is_empty() => return None,
+            Some(kept) => (&kept[..], grid.accumulate(kept).fit(sigma)?),
+            None => (members, first),
         };
-        if fit.distance(&g.p).abs() <= tol_at(&fit, g) {
-            true
-        } else {
-            released.add(g);
-            labels[i] = UNLABELLED;
-            false
+        if !still_a_patch(members) {
+            return None;
         }
-    });
-    let made = make_patch(grid, members, acc.minus(&released), params, sigma);
-    if made.is_none() {
-        for &i in members.iter() {
-            labels[i] = UNLABELLED;
+        let fit = robust_fit(grid, members, first, params, sigma)?;
+        let fronted = without_front_row_ends(grid, members, &fit, params, sigma);
+        let (members, fit) = match &fronted {
+            Some(kept) => {
+                if !still_a_patch(kept) {
+                    return None;
+                }
+                let first = grid.accumulate(kept).fit(sigma)?;
+                (&kept[..], robust_fit(grid, kept, first, params, sigma)?)
+            }
+            None => (members, fit),
+        };
+        let (lo, hi) = span(members)?;
+        if too_bent_to_split(&fit, members.len(), params, sigma)
+            || bent_across_rows(grid, members, &fit, params, sigma)
+        {
+            return None;
         }
+        Some(Patch {
+            kind: classify(&fit.normal, &fit.centroid, params.wall_cos()),
+            fit,
+            members: members.to_vec(),
+            row_range: (lo, hi),
+        })
     }
-    made
 }
 
 /// The breadth-first growth of one patch (sect. 9's region growing): an unlabelled neighbour
@@ -255,6 +338,8 @@ fn flood(
     while let Some(&i) = members.get(next) {
         next += 1;
         let c = rc.col(i);
+        // Left, right, previous and next row; `usize::MAX` where the grid ends (cheaper in
+        // this, the hottest loop of region growing, than Options).
         let mut neighbours = [usize::MAX; 4];
         if c > 0 {
             neighbours[0] = i - 1;
@@ -288,27 +373,11 @@ fn flood(
     }
 }
 
-/// Patches that are really two planes (grown across a corner or a wall's foot) split into
-/// their planes ([`split_members`]) when their misfit ratio exceeds `split_misfit`: sect. 9's
-/// EM would give each plane its own points; here a contiguous split does.
-fn split_two_plane_patches(
-    grid: &PoseGrid,
-    patches: Vec<Patch>,
-    params: &LevelParams,
-    sigma: f64,
-    tol: f64,
-) -> Vec<Patch> {
-    let mut split = Vec::with_capacity(patches.len());
-    for p in patches {
-        if p.fit.misfit_ratio(sigma.max(params.min_sigma)) <= params.split_misfit {
-            split.push(p);
-            continue;
-        }
-        for part in split_members(grid, &p.members, params, sigma, params.split_depth) {
-            split.extend(release_and_make(grid, &part, params, sigma, tol));
-        }
-    }
-    split
+/// [`Check::PatchSplitMisfit`](super::checks::Check::PatchSplitMisfit): whether a patch's
+/// plane explains its points within `split_misfit` of the noise, so that it is not tested for
+/// being two planes (nor its edge rows for standing off).
+pub(crate) fn plane_explained(fit: &PlaneFit, sigma: f64, params: &LevelParams) -> bool {
+    fit.misfit_ratio(sigma.max(params.min_sigma)) <= params.split_misfit
 }
 
 /// [`rows_span`] of members in ascending order: their first and last.
@@ -327,64 +396,15 @@ fn rows_span(members: &[usize], cols: usize) -> (usize, usize) {
     (lo, hi)
 }
 
-/// A patch from members when it is big enough and spans at least two rows (one row is a
-/// line, which leaves its plane free to turn about it). `acc` holds the sums of the members'
-/// points (the callers have just visited them).
-fn make_patch(
-    grid: &PoseGrid,
+/// [`Check::PatchMinPoints`](super::checks::Check::PatchMinPoints): the rows that ascending
+/// `members` span, when they are at least `min_patch_points` over two rows or more.
+pub(crate) fn patch_rows(
     members: &[usize],
-    acc: PlaneAccumulator,
+    cols: usize,
     params: &LevelParams,
-    sigma: f64,
-) -> Option<Patch> {
-    // In grid order from here: the passes below then walk the grid forwards.
-    let sorted = ascending(members);
-    let members = &sorted[..];
-    // The rows spanned, unless too small or one row: nothing to fit (trimming only takes
-    // points away).
-    let span = |members: &[usize]| {
-        let (lo, hi) = rows_span_sorted(members, grid.cols);
-        (members.len() >= params.min_patch_points && hi > lo).then_some((lo, hi))
-    };
-    // Still a patch once points went: big enough, over two rows, and stacked.
-    let still_a_patch =
-        |members: &[usize]| span(members).is_some() && stacked(members, grid, params);
-    span(members)?;
-    let first = acc.fit(sigma)?;
-    let trimmed = trim_edge_rows(grid, members, &acc, &first, sigma, params);
-    let (members, first) = match &trimmed {
-        // A three-row patch that lost a row is no wall.
-        Some(kept) if kept.is_empty() => return None,
-        Some(kept) => (&kept[..], grid.accumulate(kept).fit(sigma)?),
-        None => (members, first),
-    };
-    if !still_a_patch(members) {
-        return None;
-    }
-    let fit = robust_fit(grid, members, first, params, sigma)?;
-    let fronted = without_front_row_ends(grid, members, &fit, params, sigma);
-    let (members, fit) = match &fronted {
-        Some(kept) => {
-            if !still_a_patch(kept) {
-                return None;
-            }
-            let first = grid.accumulate(kept).fit(sigma)?;
-            (&kept[..], robust_fit(grid, kept, first, params, sigma)?)
-        }
-        None => (members, fit),
-    };
-    let (lo, hi) = span(members)?;
-    if too_bent_to_split(&fit, members.len(), params, sigma)
-        || bent_across_rows(grid, members, &fit, params, sigma)
-    {
-        return None;
-    }
-    Some(Patch {
-        kind: classify(&fit.normal, &fit.centroid, params),
-        fit,
-        members: members.to_vec(),
-        row_range: (lo, hi),
-    })
+) -> Option<(usize, usize)> {
+    let (lo, hi) = rows_span_sorted(members, cols);
+    (members.len() >= params.min_patch_points && hi > lo).then_some((lo, hi))
 }
 
 #[cfg(test)]

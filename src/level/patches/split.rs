@@ -92,29 +92,26 @@ pub(super) fn bent_across_rows(
 }
 
 /// Drops members farther than `tol` from the members' plane, then makes the patch.
-pub(super) fn release_and_make(
-    grid: &PoseGrid,
-    members: &[usize],
-    params: &LevelParams,
-    sigma: f64,
-    tol: f64,
-) -> Option<Patch> {
-    let fit = grid.accumulate(members).fit(sigma)?;
-    let mut acc = PlaneAccumulator::default();
-    let kept: Vec<usize> = members
-        .iter()
-        .copied()
-        .filter(|&i| {
-            grid.points[i].as_ref().is_some_and(|g| {
-                let near = fit.distance(&g.p).abs() <= tol;
-                if near {
-                    acc.add(g);
-                }
-                near
+impl Growth<'_> {
+    pub(super) fn release_and_make(&self, members: &[usize]) -> Option<Patch> {
+        let (grid, sigma, tol) = (self.grid, self.sigma, self.tol);
+        let fit = grid.accumulate(members).fit(sigma)?;
+        let mut acc = PlaneAccumulator::default();
+        let kept: Vec<usize> = members
+            .iter()
+            .copied()
+            .filter(|&i| {
+                grid.points[i].as_ref().is_some_and(|g| {
+                    let near = fit.distance(&g.p).abs() <= tol;
+                    if near {
+                        acc.add(g);
+                    }
+                    near
+                })
             })
-        })
-        .collect();
-    make_patch(grid, &kept, acc, params, sigma)
+            .collect();
+        self.make_patch(&kept, acc)
+    }
 }
 
 /// Splits a patch's members into planes while two planes explain them significantly better
@@ -137,10 +134,7 @@ pub fn split_members(
     let Some(fit_all) = grid.accumulate(members).fit(sigma) else {
         return whole;
     };
-    let orders: [Vec<usize>; 2] = [
-        in_order(grid, members, false),
-        in_order(grid, members, true),
-    ];
+    let orders = [false, true].map(|by_row| in_order(grid, members, by_row));
     let cuts = [0, 1].map(|which| candidate_cuts(grid, &orders[which], which, params));
     let Some((which, cut)) = best_cut(&cuts, sigma) else {
         return whole;
@@ -264,7 +258,13 @@ fn split_significant(
     else {
         return false;
     };
-    let rss2 = fa.residual_ss + fb.residual_ss;
+    two_planes(rss1, fa.residual_ss + fb.residual_ss, n, params)
+}
+
+/// [`Check::PatchSplitF`](crate::level::checks::Check::PatchSplitF): whether two planes of
+/// residual sum of squares `rss2` explain `n` points significantly better than one of `rss1`:
+/// the F statistic of [`split_members`] above `split_f`.
+pub(crate) fn two_planes(rss1: f64, rss2: f64, n: usize, params: &LevelParams) -> bool {
     let f = ((rss1 - rss2) / 3.0) / (rss2 / (n as f64 - 6.0)).max(1e-300);
     !(f.is_nan() || f <= params.split_f)
 }

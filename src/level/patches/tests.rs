@@ -354,3 +354,129 @@ fn check_patch_too_bent() {
     let large = 2 * params.min_patch_points;
     assert!(!too_bent_to_split(&fit(limit * 2.0), large, &params, sigma));
 }
+
+/// A wall's plane 2 m ahead whose points fit it with misfit ratio `ratio` at noise 0.01.
+fn wall_fit(ratio: f64) -> PlaneFit {
+    PlaneFit {
+        centroid: Point3::new(2.0, 0.0, 0.0),
+        normal: Vector3::x(),
+        in_plane: [(1.0, Vector3::y()), (1.0, Vector3::z())],
+        n: 103,
+        weight: 103.0,
+        dn2: 1.0,
+        residual_ss: ratio * 1e-4 * 100.0,
+    }
+}
+
+/// Just below and just above `t`, by a relative `1e-6`.
+fn around(t: f64) -> (f64, f64) {
+    (t * (1.0 - 1e-6), t * (1.0 + 1e-6))
+}
+
+/// [`Check::PatchMinPoints`](crate::level::checks::Check::PatchMinPoints): `min_patch_points`
+/// members over two rows make a patch, one fewer do not.
+#[test]
+fn check_patch_min_points() {
+    let params = LevelParams::default();
+    let t = params.min_patch_points;
+    let members = |n: usize| -> Vec<usize> { (0..n).map(|k| (k % 2) * 100 + k / 2).collect() };
+    let sorted = |n: usize| ascending(&members(n));
+    assert_eq!(patch_rows(&sorted(t), 100, &params), Some((0, 1)));
+    assert_eq!(patch_rows(&sorted(t - 1), 100, &params), None);
+    // One row is no patch, however many points.
+    assert_eq!(
+        patch_rows(&(0..2 * t).collect::<Vec<_>>(), 100, &params),
+        None
+    );
+}
+
+/// [`Check::PatchBentAcrossRows`](crate::level::checks::Check::PatchBentAcrossRows): one point
+/// per row on three rows, the first `a` off the plane: `chi2 = a^2 / sigma^2` over one degree
+/// of freedom against `1 + k sqrt(2)`.
+#[test]
+fn check_patch_bent_across_rows() {
+    let params = LevelParams::default();
+    let sigma = 0.01;
+    let (lo, hi) = around(1.0 + params.max_row_bend_sigmas * 2f64.sqrt());
+    let bent = |chi2: f64| {
+        let a = sigma * chi2.sqrt();
+        let points = (0..3)
+            .map(|r| {
+                let p = Point3::new(2.0 + if r == 0 { a } else { 0.0 }, 0.0, 0.1 * r as f64);
+                Some(GridPoint {
+                    p,
+                    dir: Vector3::x(),
+                    range: p.coords.norm(),
+                })
+            })
+            .collect();
+        let grid = PoseGrid {
+            scan_index: vec![0, 1, 2],
+            elevation: vec![0.0, 0.05, 0.1],
+            cols: 1,
+            points,
+        };
+        bent_across_rows(&grid, &[0, 1, 2], &wall_fit(1.0), &params, sigma)
+    };
+    assert!(!bent(lo));
+    assert!(bent(hi));
+}
+
+/// [`Check::PatchEdgeRow`](crate::level::checks::Check::PatchEdgeRow): an edge row's mean
+/// residual against `trim_sigmas` of its spread.
+#[test]
+fn check_patch_edge_row() {
+    let params = LevelParams::default();
+    let spread: f64 = 4e-4;
+    let (lo, hi) = around(params.trim_sigmas * spread.sqrt());
+    assert!(!edge_row_off(-lo, spread, &params));
+    assert!(edge_row_off(-hi, spread, &params));
+    assert!(edge_row_off(hi, spread, &params));
+}
+
+/// [`Check::PatchTrimmedRows`](crate::level::checks::Check::PatchTrimmedRows): three adjacent
+/// rows of `MIN_TRIMMED_ROW_SHARE` of the points each hold; one row a point short does not,
+/// nor three rows that are not adjacent.
+#[test]
+fn check_patch_trimmed_rows() {
+    let total = 200;
+    let t = (MIN_TRIMMED_ROW_SHARE * total as f64).ceil() as usize;
+    assert!(trimmed_rows_hold(&[t, t, t], total));
+    assert!(!trimmed_rows_hold(&[t, t - 1, t], total));
+    assert!(!trimmed_rows_hold(&[t, t, 0, t], total));
+    assert!(trimmed_rows_hold(&[0, t, t, t], total));
+}
+
+/// [`Check::PatchFrontRun`](crate::level::checks::Check::PatchFrontRun): `MIN_FRONT_RUN`
+/// residuals of `r` (variance one each) stand out by `sqrt(MIN_FRONT_RUN) r` sigmas.
+#[test]
+fn check_patch_front_run() {
+    let params = LevelParams::default();
+    let k = params.front_end_sigmas;
+    let (lo, hi) = around(k / (MIN_FRONT_RUN as f64).sqrt());
+    let run = |r: f64, len: usize| front_run(std::iter::repeat_n((r, 1.0), len), k);
+    assert_eq!(run(lo, MIN_FRONT_RUN), 0);
+    assert_eq!(run(hi, MIN_FRONT_RUN), MIN_FRONT_RUN);
+    // Shorter runs are single noisy points, however far out.
+    assert_eq!(run(10.0 * k, MIN_FRONT_RUN - 1), 0);
+}
+
+/// [`Check::PatchSplitMisfit`](crate::level::checks::Check::PatchSplitMisfit).
+#[test]
+fn check_patch_split_misfit() {
+    let params = LevelParams::default();
+    let (lo, hi) = around(params.split_misfit);
+    assert!(plane_explained(&wall_fit(lo), 0.01, &params));
+    assert!(!plane_explained(&wall_fit(hi), 0.01, &params));
+}
+
+/// [`Check::PatchSplitF`](crate::level::checks::Check::PatchSplitF): 106 points, two planes of
+/// RSS 1 against one of `1 + 3 F / 100`.
+#[test]
+fn check_patch_split_f() {
+    let params = LevelParams::default();
+    let (lo, hi) = around(params.split_f);
+    let rss1 = |f: f64| 1.0 + 3.0 * f / 100.0;
+    assert!(!two_planes(rss1(lo), 1.0, 106, &params));
+    assert!(two_planes(rss1(hi), 1.0, 106, &params));
+}

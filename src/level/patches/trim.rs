@@ -32,10 +32,9 @@ pub(super) fn trim_edge_rows(
     if hi < lo + 2 {
         return None;
     }
-    let s = sigma.max(params.min_sigma);
     // A plane the noise explains has no row standing off it worth the test: a floor line
     // taken in at a wall's foot leaves the whole patch's fit about half as scattered again.
-    if all_fit.misfit_ratio(s) <= params.split_misfit {
+    if plane_explained(all_fit, sigma, params) {
         return None;
     }
     let rc = grid.row_col();
@@ -67,7 +66,8 @@ pub(super) fn trim_edge_rows(
     if last >= first + 3 && rows.stands_off(last, first, last) {
         last -= 1;
     }
-    if (first, last) == (lo, hi) || !rows.rest_holds(first, last) {
+    let counts: Vec<usize> = (first..=last).map(|r| per_row[r].n).collect();
+    if (first, last) == (lo, hi) || !trimmed_rows_hold(&counts, all.n) {
         return None;
     }
     Some(
@@ -132,20 +132,28 @@ impl EdgeRows<'_> {
         });
         let offset = s * s * fit.dn2 / fit.weight;
         let spread = (var / (n * n) + offset + tilt) * fit.misfit_ratio(s).max(1.0);
-        (sum / n).abs() > params.trim_sigmas * spread.sqrt()
+        edge_row_off(sum / n, spread, params)
     }
+}
 
-    /// Whether the rows `first..=last` left after trimming are still a wall over three
-    /// adjacent rows, each holding a fair share ([`MIN_TRIMMED_ROW_SHARE`]) of its points.
-    /// Else the row that stood off may be the true wall and the rest a wall line and the floor
-    /// line at its foot, coplanar, with a few stray points in other rows: trimmed, such a patch
-    /// leveled a pose 28 degrees off at 1 cm noise.
-    fn rest_holds(&self, first: usize, last: usize) -> bool {
-        let held: Vec<usize> = (first..=last)
-            .filter(|&r| self.per_row[r].n as f64 >= MIN_TRIMMED_ROW_SHARE * self.all.n as f64)
-            .collect();
-        held.len() >= 3 && held.windows(2).all(|w| w[1] == w[0] + 1)
-    }
+/// [`Check::PatchEdgeRow`](crate::level::checks::Check::PatchEdgeRow): whether an edge row
+/// whose mean residual from the other rows' plane is `mean`, of variance `spread`, stands off
+/// it by more than `trim_sigmas`.
+pub(crate) fn edge_row_off(mean: f64, spread: f64, params: &LevelParams) -> bool {
+    mean.abs() > params.trim_sigmas * spread.sqrt()
+}
+
+/// [`Check::PatchTrimmedRows`](crate::level::checks::Check::PatchTrimmedRows): whether the
+/// rows left after a trim, with `counts` points each of the patch's `total`, are still a wall
+/// over three adjacent rows, each holding [`MIN_TRIMMED_ROW_SHARE`] of the points. Else the
+/// row that stood off may be the true wall and the rest a wall line and the floor line at its
+/// foot, coplanar, with a few stray points in other rows: trimmed, such a patch leveled a pose
+/// 28 degrees off at 1 cm noise.
+pub(crate) fn trimmed_rows_hold(counts: &[usize], total: usize) -> bool {
+    let held: Vec<usize> = (0..counts.len())
+        .filter(|&r| counts[r] as f64 >= MIN_TRIMMED_ROW_SHARE * total as f64)
+        .collect();
+    held.len() >= 3 && held.windows(2).all(|w| w[1] == w[0] + 1)
 }
 
 /// The members (ascending) without the runs of points at either end of their rows that stand
@@ -160,8 +168,8 @@ impl EdgeRows<'_> {
 /// concave corner join the same way. A true plane's residuals take no side, so the test is the
 /// sum of the residuals towards the scanner over the first `m` points of the run (`m` from
 /// [`MIN_FRONT_RUN`] to half the run), over that sum's standard deviation (each point's
-/// `sigma |d . n|` in quadrature), above `front_end_sigmas`. [`make_patch`] applies it to the
-/// plane it has fitted and fits again without the runs that go. Over 129,600 protocol poses at
+/// `sigma |d . n|` in quadrature), above `front_end_sigmas`. [`Growth::make_patch`] applies it
+/// to the plane it has fitted and fits again without the runs that go. Over 129,600 protocol poses at
 /// 5-10 cm (two seed sets, nine plans), poses reported ok and more than 5 degrees off fell from
 /// 14 to 4 and those beyond 3 sigmas from 157 to 110, with 0.24 points more leveled; at 1 cm,
 /// 0.04 points more.

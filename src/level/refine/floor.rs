@@ -74,53 +74,52 @@ impl<'a> LevelModel<'a> {
     }
 }
 
-/// The floor and ceiling planes to assign from: the ones given, else the densest height below
-/// (floor) and above (ceiling) the scanner in the level frame, where at least
+/// The floor and ceiling planes to assign from in frame `f`: the ones `given` unless `fresh`,
+/// else the densest height among the usable (`ok`) points below (floor) and above (ceiling)
+/// the scanner in the level frame, where at least
 /// `min_level_points` points lie within the tolerance of one height ([`densest_window`]),
 /// refitted in rounds ([`refit_rounds`]) and kept when level within `refine_max_tilt_deg` of
 /// up, explaining its points and clear of the scanner (sect. 5.3 takes floors and ceilings as
 /// the level constraints).
-#[allow(clippy::too_many_arguments)]
 pub(crate) fn find_levels(
-    grid: &PoseGrid,
-    lv: &Leveled,
+    f: &Frame,
     ok: &[bool],
-    levelish: &[bool],
     given: &[PlaneFit],
     fresh: bool,
-    up: &Vector3<f64>,
-    params: &LevelParams,
-    s: f64,
-    sigma_up: f64,
 ) -> Vec<PlaneFit> {
-    let below = |f: &PlaneFit| f.centroid.coords.dot(up) < 0.0;
+    let (grid, params, up, s) = (f.grid, f.params, &f.up, f.s);
+    let below = |l: &PlaneFit| l.centroid.coords.dot(up) < 0.0;
     let mut out: Vec<PlaneFit> = Vec::new();
     for floor in [true, false] {
         if !fresh {
             // Later passes carry what the first found, and look for nothing new.
-            if let Some(f) = given.iter().find(|f| below(f) == floor) {
-                out.push(*f);
+            if let Some(l) = given.iter().find(|l| below(l) == floor) {
+                out.push(*l);
             }
             continue;
         }
-        let zs = level_candidates(lv, ok, floor);
+        let zs = level_candidates(&f.lv, ok, floor);
         if zs.len() < params.min_level_points {
             continue;
         }
-        let half = window_half(params, s, sigma_up);
+        let half = window_half(params, s, f.sigma_up);
         let Some(window) = densest_window(&zs, half, params.min_level_points) else {
             continue;
         };
         // The window holds wall points too (a wall's foot, or a band of wall at one height
         // in a frame degrees off): the plane through most of its points, rather than through
         // all of them, starts the rounds.
-        let stepping: Vec<usize> = window.iter().copied().filter(|&i| levelish[i]).collect();
+        let stepping: Vec<usize> = window
+            .iter()
+            .copied()
+            .filter(|&i| f.steps.levelish[i])
+            .collect();
         let cos = params.refine_level_cos();
         let level = |n: &Vector3<f64>| n.dot(up).abs() >= cos;
         let members = sampled_plane(grid, &window, &stepping, level, s, params).unwrap_or(window);
-        if let Some(f) = refit_rounds(grid, &zs, members, params, s) {
-            if checks::refined_level(&f, up, s, params) {
-                out.push(f);
+        if let Some(fit) = refit_rounds(grid, &zs, members, params, s) {
+            if checks::refined_level(&fit, up, s, params) {
+                out.push(fit);
             }
         }
     }
@@ -190,7 +189,7 @@ fn refit_rounds(
     s: f64,
 ) -> Option<PlaneFit> {
     for round in 0..LEVEL_ROUNDS {
-        if members.len() < params.min_level_points || !two_rows_support(grid, &members) {
+        if !level_support(grid, &members, params) {
             return None;
         }
         let f = fit_members(grid, &members, s)?;
@@ -225,22 +224,19 @@ pub(crate) fn extreme_height(lv: &Leveled, lowest: bool) -> Option<f64> {
     (*m < -MIN_LEVEL_DISTANCE).then_some(sign * *m)
 }
 
-/// The points within `refine_k` of their vertical tolerance (range noise along the vertical,
-/// and an error of up `sigma_up` at their horizontal distance) above `height` (`above`) or
-/// below it.
+/// The points of frame `f` within `refine_k` of their vertical tolerance (range noise along the
+/// vertical, and an error of up `sigma_up` at their horizontal distance) above `height`
+/// (`above`) or below it.
 pub(crate) fn level_band<'a>(
-    lv: &'a Leveled,
+    f: &'a Frame,
     height: f64,
     above: bool,
-    sigma_up: f64,
-    k: f64,
-    s: f64,
-    params: &'a LevelParams,
 ) -> impl Iterator<Item = usize> + 'a {
-    lv.q.iter().enumerate().filter_map(move |(i, q)| {
+    let (s, k) = (f.s, f.k);
+    f.lv.q.iter().enumerate().filter_map(move |(i, q)| {
         let (q, d) = q.as_ref()?;
-        let lever = q.xy().norm() * sigma_up;
-        let band = k * (s * s * d.z * d.z + lever * lever).sqrt() + params.flat_margin;
+        let lever = q.xy().norm() * f.sigma_up;
+        let band = k * (s * s * d.z * d.z + lever * lever).sqrt() + f.params.flat_margin;
         let into = if above { q.z - height } else { height - q.z };
         (into < band).then_some(i)
     })

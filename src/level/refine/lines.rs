@@ -4,16 +4,13 @@
 
 use super::*;
 
-/// What [`level_lines`] works on: the grid in the provisional level frame.
+/// What [`level_lines`] works on: the pass's frame, the points that step like the surface
+/// sought, and those already taken.
 pub(crate) struct LineContext<'a> {
-    pub(crate) grid: &'a PoseGrid,
-    pub(crate) lv: &'a Leveled,
+    pub(crate) f: &'a Frame<'a>,
     pub(crate) levelish: &'a [bool],
     /// Points already in a wall or level model.
     pub(crate) taken: &'a [bool],
-    pub(crate) up: &'a Vector3<f64>,
-    pub(crate) s: f64,
-    pub(crate) sigma_up: f64,
 }
 
 /// Floor or ceiling evidence found by [`level_lines`].
@@ -41,27 +38,23 @@ pub(crate) enum LevelEvidence {
 /// are one plane (its lever arm is the distance between the lines) when their points fit one
 /// within `refine_level_misfit`; in a plane with a full line, a line of as few as
 /// [`PLANE_LINE_MIN_POINTS`] counts.
-pub(crate) fn level_lines(
-    ctx: &LineContext,
-    kind: SurfaceKind,
-    params: &LevelParams,
-) -> LevelEvidence {
-    let (grid, s) = (ctx.grid, ctx.s);
+pub(crate) fn level_lines(ctx: &LineContext, kind: SurfaceKind) -> LevelEvidence {
+    let (grid, params, s) = (ctx.f.grid, ctx.f.params, ctx.f.s);
     let zs = line_candidates(ctx, kind == SurfaceKind::Floor);
     let min_points = params.level_line_min_points.max(3);
     if zs.len() < min_points {
         return LevelEvidence::None;
     }
-    let half = window_half(params, s, ctx.sigma_up);
+    let half = window_half(params, s, ctx.f.sigma_up);
     let Some(height) = outermost_height(&zs, half, min_points) else {
         return LevelEvidence::None;
     };
     let short = PLANE_LINE_MIN_POINTS.min(min_points);
-    let found: Vec<(LevelLine, Vec<usize>)> = rows_at_height(ctx, &zs, height, params)
+    let found: Vec<(LevelLine, Vec<usize>)> = rows_at_height(ctx, &zs, height)
         .into_iter()
-        .filter_map(|row| fit_line(grid, row, ctx.up, Some(ctx.sigma_up), s, params, short))
+        .filter_map(|row| fit_line(grid, row, &ctx.f.up, Some(ctx.f.sigma_up), s, params, short))
         .collect();
-    lines_evidence(ctx, found, min_points, params)
+    lines_evidence(ctx, found, min_points)
 }
 
 /// The candidates of [`level_lines`]: the points stepping like a level surface not yet in a
@@ -71,6 +64,7 @@ pub(crate) fn level_lines(
 fn line_candidates(ctx: &LineContext, floor: bool) -> Vec<(f64, usize)> {
     let key = |z: f64| if floor { z } else { -z };
     let mut zs: Vec<(f64, usize)> = ctx
+        .f
         .lv
         .q
         .iter()
@@ -100,20 +94,16 @@ fn outermost_height(zs: &[(f64, usize)], half: f64, min_points: usize) -> Option
 /// Per scan (grid row), the candidates `zs` within their own vertical tolerance of `height`:
 /// `refine_k` standard deviations of the range noise along the vertical and an error of up
 /// `sigma_up` at their horizontal distance, plus `flat_margin`.
-fn rows_at_height(
-    ctx: &LineContext,
-    zs: &[(f64, usize)],
-    height: f64,
-    params: &LevelParams,
-) -> Vec<Vec<usize>> {
-    let (s, k) = (ctx.s, params.refine_k);
-    let mut rows: Vec<Vec<usize>> = vec![Vec::new(); ctx.grid.rows()];
-    let rc = ctx.grid.row_col();
+fn rows_at_height(ctx: &LineContext, zs: &[(f64, usize)], height: f64) -> Vec<Vec<usize>> {
+    let f = ctx.f;
+    let (params, s, k) = (f.params, f.s, f.params.refine_k);
+    let mut rows: Vec<Vec<usize>> = vec![Vec::new(); f.grid.rows()];
+    let rc = f.grid.row_col();
     for &(z, i) in zs {
-        let Some((q, d)) = ctx.lv.q[i].as_ref() else {
+        let Some((q, d)) = f.lv.q[i].as_ref() else {
             continue;
         };
-        let lever = q.xy().norm() * ctx.sigma_up;
+        let lever = q.xy().norm() * f.sigma_up;
         let sd = (s * s * d.z * d.z + params.min_sigma * params.min_sigma + lever * lever).sqrt();
         if (z - height).abs() <= k * sd + params.flat_margin {
             rows[rc.row(i)].push(i);
@@ -130,16 +120,15 @@ fn lines_evidence(
     ctx: &LineContext,
     found: Vec<(LevelLine, Vec<usize>)>,
     min_points: usize,
-    params: &LevelParams,
 ) -> LevelEvidence {
-    let (grid, s) = (ctx.grid, ctx.s);
+    let (grid, params, s) = (ctx.f.grid, ctx.f.params, ctx.f.s);
     let full = |(l, _): &(LevelLine, Vec<usize>)| l.n >= min_points;
     // Short lines count only in a plane with a full one; without short lines, the full lines
     // alone are tried below.
     let full_lines = found.iter().filter(|l| full(l)).count();
     if full_lines > 0 && full_lines < found.len() && one_plane(grid, &found, s, params) {
-        if let Some(plane) = lines_plane(grid, &found, s)
-            .and_then(|(fit, members)| level_plane(ctx, fit, members, params))
+        if let Some(plane) =
+            lines_plane(grid, &found, s).and_then(|(fit, members)| level_plane(ctx.f, fit, members))
         {
             return plane;
         }
@@ -158,15 +147,22 @@ fn lines_evidence(
         let Some((fit, members)) = lines_plane(grid, &found, s) else {
             return LevelEvidence::None;
         };
-        let misfit = fit.misfit_ratio(s);
-        if let Some(plane) = level_plane(ctx, fit, members, params) {
+        let skew = skew_lines(&fit, s);
+        if let Some(plane) = level_plane(ctx.f, fit, members) {
             return plane;
         }
-        if misfit > LINES_PLANE_MISFIT {
+        if skew {
             return LevelEvidence::None;
         }
     }
     LevelEvidence::Lines(found.into_iter().map(|(l, _)| l).collect())
+}
+
+/// [`Check::LinesPlaneMisfit`](checks::Check::LinesPlaneMisfit): whether several scans'
+/// lines are skew, the plane `fit` through their points misfitting beyond `LINES_PLANE_MISFIT`
+/// at noise `s`.
+pub(crate) fn skew_lines(fit: &PlaneFit, s: f64) -> bool {
+    fit.misfit_ratio(s) > LINES_PLANE_MISFIT
 }
 
 /// The plane through level lines' points, with those points (ascending).
@@ -183,14 +179,9 @@ pub(crate) fn lines_plane(
 /// The plane `fit` through level lines' points `members` ([`lines_plane`]) as the floor or
 /// ceiling, when it fits them: within `refine_level_misfit` of the noise,
 /// near up, clear of the scanner, and with nothing seen through it.
-pub(crate) fn level_plane(
-    ctx: &LineContext,
-    fit: PlaneFit,
-    members: Vec<usize>,
-    params: &LevelParams,
-) -> Option<LevelEvidence> {
-    let s = ctx.s;
-    (checks::refined_level(&fit, ctx.up, s, params) && opaque(ctx.grid, &fit, s, params))
+pub(crate) fn level_plane(f: &Frame, fit: PlaneFit, members: Vec<usize>) -> Option<LevelEvidence> {
+    let (params, s) = (f.params, f.s);
+    (checks::refined_level(&fit, &f.up, s, params) && opaque(f.grid, &fit, s, params))
         .then_some(LevelEvidence::Plane(fit, members))
 }
 
@@ -295,18 +286,13 @@ pub(crate) fn fit_line(
             })
             .collect();
         if kept.len() == idx.len() || round + 1 == LINE_ROUNDS {
-            if kept.len() < min_points {
+            // Points still going after the last round: no line. (All kept, they are the
+            // `min_points` or more checked above.)
+            if kept.len() < idx.len() {
                 return None;
             }
-            let chi2: f64 = pts
-                .iter()
-                .map(|(p, d)| {
-                    let (a, b) = z2(p, d);
-                    a + b
-                })
-                .sum();
-            let dof = (2 * pts.len()).saturating_sub(4).max(1) as f64;
-            if kept.len() < idx.len() || chi2 / dof > params.level_line_misfit {
+            let chi2: f64 = pts.iter().map(|(p, d)| z2(p, d)).map(|(a, b)| a + b).sum();
+            if line_misfits(chi2, pts.len(), params) {
                 return None;
             }
             // A floor line is level in the provisional frame, within that frame's
@@ -324,6 +310,14 @@ pub(crate) fn fit_line(
         idx = kept;
     }
     None
+}
+
+/// [`Check::LineMisfit`](checks::Check::LineMisfit): whether a line's `points` misfit it, their
+/// chi-square about it (two residuals each, four parameters) beyond `level_line_misfit` per
+/// degree of freedom.
+pub(crate) fn line_misfits(chi2: f64, points: usize, params: &LevelParams) -> bool {
+    let dof = (2 * points).saturating_sub(4).max(1) as f64;
+    chi2 / dof > params.level_line_misfit
 }
 
 /// Floor and ceiling lines found without a level frame, for a start where neither the walls

@@ -28,7 +28,7 @@ use crate::geometry::Attitude;
 use nalgebra::{Matrix2, Point3, Rotation3, Vector2, Vector3};
 
 mod floor;
-mod lines;
+pub(crate) mod lines;
 mod ransac;
 mod steps;
 mod support;
@@ -105,7 +105,7 @@ struct Line {
 }
 
 /// Every valid grid point in the provisional level frame: position and ray direction.
-struct Leveled {
+pub(crate) struct Leveled {
     q: Vec<Option<(Vector3<f64>, Vector3<f64>)>>,
 }
 
@@ -122,34 +122,6 @@ impl Leveled {
                 .collect(),
         }
     }
-}
-
-/// Squared distance of a leveled point `q` (ray direction `d`) from a wall's vertical plane,
-/// in variances: its range noise along the wall's normal, and the error in up
-/// (`sigma_up` \[rad\]) at its height above the wall's pivot; `None` when it exceeds `k2`.
-fn line_z2(
-    l: &Line,
-    q: &Vector3<f64>,
-    d: &Vector3<f64>,
-    s: f64,
-    min_sigma: f64,
-    sigma_up: f64,
-    k2: f64,
-) -> Option<f64> {
-    let dist = l.normal.x * q.x + l.normal.y * q.y - l.offset;
-    let along = l.normal.x * d.x + l.normal.y * d.y;
-    let lever = (q.z - l.z) * sigma_up;
-    let (num, den) = (
-        dist * dist,
-        s * s * along * along + min_sigma * min_sigma + lever * lever,
-    );
-    // Most lines are far from a point: tell so without the division when the margin is clear
-    // (a relative 1e-12 dwarfs the division's rounding, so the answer is the division's).
-    if num > k2 * den * (1.0 + 1e-12) {
-        return None;
-    }
-    let z = num / den;
-    (z.is_nan() || z <= k2).then_some(z)
 }
 
 fn line_of(fit: &PlaneFit, level_from_robot: &Rotation3<f64>) -> Option<Line> {
@@ -200,9 +172,11 @@ pub(crate) fn refine(
             k: params.refine_k,
             sigma_up,
         };
-        let level_ok = flat_points(grid, &f.lv, s, params.min_sigma, sigma_up, f.k);
+        let level_ok = flat_points(&f);
         if params.level_surfaces {
-            level_fits = levels_in(&f, &level_ok, &level_fits, pass == 0);
+            // The first pass looks for the floor and ceiling afresh in its level frame (the
+            // region-grown ones can have run up a wall's foot); later passes carry them.
+            level_fits = find_levels(&f, &level_ok, &level_fits, pass == 0);
         }
         // 2. Points assigned to the floor and ceiling, then to walls; 3. the models refitted.
         let (level_members, near_level) = assign_levels(&f, &level_fits, &level_ok);
@@ -236,26 +210,8 @@ pub(crate) fn refine(
     result
 }
 
-/// The floor and ceiling planes of a pass ([`find_levels`]): the first pass (`fresh`) looks
-/// for them in its level frame (the region-grown ones can have run up a wall's foot); later
-/// passes start from what it found (`given`).
-fn levels_in(f: &Frame, level_ok: &[bool], given: &[PlaneFit], fresh: bool) -> Vec<PlaneFit> {
-    find_levels(
-        f.grid,
-        &f.lv,
-        level_ok,
-        &f.steps.levelish,
-        given,
-        fresh,
-        &f.up,
-        f.params,
-        f.s,
-        f.sigma_up,
-    )
-}
-
 /// One pass's provisional level frame and the tolerances of assigning points in it.
-struct Frame<'a> {
+pub(crate) struct Frame<'a> {
     grid: &'a PoseGrid,
     params: &'a LevelParams,
     steps: &'a LevelSteps,
@@ -272,6 +228,30 @@ struct Frame<'a> {
     sigma_up: f64,
 }
 
+impl Frame<'_> {
+    /// Squared distance of a leveled point `q` (ray direction `d`) from a wall's vertical
+    /// plane, in variances: its range noise along the wall's normal, and the error in up
+    /// (`sigma_up`) at its height above the wall's pivot; `None` when beyond `k` sigmas.
+    fn line_z2(&self, l: &Line, q: &Vector3<f64>, d: &Vector3<f64>) -> Option<f64> {
+        let (s, min_sigma, k2) = (self.s, self.params.min_sigma, self.k * self.k);
+        let dist = l.normal.x * q.x + l.normal.y * q.y - l.offset;
+        let along = l.normal.x * d.x + l.normal.y * d.y;
+        let lever = (q.z - l.z) * self.sigma_up;
+        let (num, den) = (
+            dist * dist,
+            s * s * along * along + min_sigma * min_sigma + lever * lever,
+        );
+        // Most lines are far from a point: tell so without the division when the margin is
+        // clear (a relative 1e-12 dwarfs the division's rounding, so the answer is the
+        // division's).
+        if num > k2 * den * (1.0 + 1e-12) {
+            return None;
+        }
+        let z = num / den;
+        (z.is_nan() || z <= k2).then_some(z)
+    }
+}
+
 /// The floor's and ceiling's members (points in reach of one level model only, and flat to a
 /// neighbour), and the band around them that walls may not take.
 fn assign_levels(
@@ -279,17 +259,16 @@ fn assign_levels(
     level_fits: &[PlaneFit],
     level_ok: &[bool],
 ) -> (Vec<Vec<usize>>, Vec<bool>) {
-    let (grid, params, steps, lv, up, s, k, sigma_up) =
-        (f.grid, f.params, f.steps, &f.lv, f.up, f.s, f.k, f.sigma_up);
+    let (grid, params, lv, up, s, k) = (f.grid, f.params, &f.lv, f.up, f.s, f.k);
     let mut level_members: Vec<Vec<usize>> = vec![Vec::new(); level_fits.len()];
     let mut near_level = vec![false; grid.points.len()];
-    let level_models: Vec<LevelModel> = level_fits.iter().map(|f| LevelModel::new(f, s)).collect();
+    let level_models: Vec<LevelModel> = level_fits.iter().map(|l| LevelModel::new(l, s)).collect();
     for (i, g) in grid.points.iter().enumerate() {
         let Some(g) = g else { continue };
         let mut reach = 0;
         let mut which = 0;
-        for (m, f) in level_models.iter().enumerate() {
-            let (d, sd) = f.distance_sd(g, s, params.min_sigma);
+        for (m, model) in level_models.iter().enumerate() {
+            let (d, sd) = model.distance_sd(g, s, params.min_sigma);
             if d <= k * sd {
                 reach += 1;
                 which = m;
@@ -306,9 +285,9 @@ fn assign_levels(
     // them holds a wall's foot and the floor just in front of it, which no vertical plane
     // tells apart at high noise. If no floor is in view, this only trims the lowest wall
     // points.
-    if !level_fits.iter().any(|f| f.centroid.coords.dot(&up) < 0.0) {
+    if !level_fits.iter().any(|l| l.centroid.coords.dot(&up) < 0.0) {
         if let Some(low) = extreme_height(lv, true) {
-            for i in level_band(lv, low, true, sigma_up, k, s, params) {
+            for i in level_band(f, low, true) {
                 near_level[i] = true;
             }
         }
@@ -318,10 +297,10 @@ fn assign_levels(
     // the ceiling just beyond it (traced at 1 cm: a wall's plane through that corner, 7
     // degrees off vertical, leveled a pose 7 degrees off with a sigma of 1.4). Without such
     // steps the highest points are the tops of walls, which keep them.
-    if !level_fits.iter().any(|f| f.centroid.coords.dot(&up) > 0.0) {
+    if !level_fits.iter().any(|l| l.centroid.coords.dot(&up) > 0.0) {
         if let Some(high) = extreme_height(lv, false) {
-            let band: Vec<usize> = level_band(lv, high, false, sigma_up, k, s, params).collect();
-            if band.iter().filter(|&&i| steps.ceiling[i]).count() >= CEILING_BAND_MIN_STEPS {
+            let band: Vec<usize> = level_band(f, high, false).collect();
+            if steps_as_ceiling(&band, &f.steps.ceiling) {
                 for i in band {
                     near_level[i] = true;
                 }
@@ -329,6 +308,13 @@ fn assign_levels(
         }
     }
     (level_members, near_level)
+}
+
+/// [`Check::CeilingBandSteps`](checks::Check::CeilingBandSteps): whether the highest points
+/// `band` stand for a ceiling: `CEILING_BAND_MIN_STEPS` of them step as a ceiling does
+/// (`ceiling`, per grid point).
+pub(crate) fn steps_as_ceiling(band: &[usize], ceiling: &[bool]) -> bool {
+    band.iter().filter(|&&i| ceiling[i]).count() >= CEILING_BAND_MIN_STEPS
 }
 
 /// Points assigned to walls: the walls' lines (`wall_fits` in this frame, merged, and with
@@ -349,28 +335,19 @@ fn assign_walls(
     discover: bool,
     seed_width: usize,
 ) -> WallAssignment {
-    let (grid, params, steps, lv, level_from_robot, s, k, sigma_up) = (
-        f.grid,
-        f.params,
-        f.steps,
-        &f.lv,
-        f.level_from_robot,
-        f.s,
-        f.k,
-        f.sigma_up,
-    );
+    let (grid, lv) = (f.grid, &f.lv);
     // Walls: merge those that are one wall, then assign by horizontal distance.
     let mut lines: Vec<Line> = wall_fits
         .iter()
-        .filter_map(|f| line_of(f, &level_from_robot))
+        .filter_map(|w| line_of(w, &f.level_from_robot))
         .collect();
     let candidate: Vec<bool> = (0..grid.points.len())
-        .map(|i| lv.q[i].is_some() && !near_level[i] && !steps.levelish[i])
+        .map(|i| lv.q[i].is_some() && !near_level[i] && !f.steps.levelish[i])
         .collect();
     if discover {
-        lines.extend(discover_lines(grid, lv, &candidate, seed_width, params, s));
+        lines.extend(discover_lines(f, &candidate, seed_width));
     }
-    merge_lines(&mut lines, params, s);
+    merge_lines(&mut lines, f.params, f.s);
     let cos_similar = SIMILAR_LINES_DEG.to_radians().cos();
     let mut wall_members: Vec<Vec<usize>> = vec![Vec::new(); lines.len()];
     // Candidates within reach of a line (the floor and ceiling lines below keep off them).
@@ -384,7 +361,7 @@ fn assign_walls(
         let mut best: Option<(f64, usize)> = None;
         let mut second: Option<(f64, usize)> = None;
         for (m, l) in lines.iter().enumerate() {
-            let Some(z) = line_z2(l, q, d, s, params.min_sigma, sigma_up, k * k) else {
+            let Some(z) = f.line_z2(l, q, d) else {
                 continue;
             };
             if best.is_none_or(|b| z < b.0) {
@@ -421,12 +398,9 @@ fn models_of(
 ) -> (Vec<Model>, usize) {
     let (grid, params, up, s, sigma, k, sigma_up) =
         (f.grid, f.params, f.up, f.s, f.sigma, f.k, f.sigma_up);
-    let min_rows = params.refine_min_rows.max(2);
     let mut models: Vec<Model> = Vec::new();
     for members in wall_members {
-        if members.len() < params.min_patch_points
-            || rows_supported(grid, &members, WALL_ROW_SHARE) < min_rows
-        {
+        if !spans_wall_rows(grid, &members, params) {
             continue;
         }
         let Some(fit) = fit_members(grid, &members, sigma) else {
@@ -445,7 +419,7 @@ fn models_of(
     let walls_found = models.len();
     for (f, members) in level_fits.iter().zip(level_members) {
         let members = without_standing_rows(grid, members, s, params);
-        if members.len() < params.min_level_points || !two_rows_support(grid, &members) {
+        if !level_support(grid, &members, params) {
             continue;
         }
         let Some(fit) = fit_members(grid, &members, sigma) else {
@@ -469,6 +443,14 @@ fn models_of(
     (models, walls_found)
 }
 
+/// [`Check::RefinedWallRows`](checks::Check::RefinedWallRows): whether a re-segmented wall's
+/// `members` are a wall: `min_patch_points` of them, with `WALL_ROW_SHARE` of them in each of
+/// `refine_min_rows` scans (at least two).
+pub(crate) fn spans_wall_rows(grid: &PoseGrid, members: &[usize], params: &LevelParams) -> bool {
+    members.len() >= params.min_patch_points
+        && rows_supported(grid, members, WALL_ROW_SHARE) >= params.refine_min_rows.max(2)
+}
+
 /// Floor and ceiling lines where no level model was found (`level_lines`): each added to
 /// `models` when several scans' lines make one plane, else returned as lines.
 fn level_line_evidence(
@@ -476,8 +458,7 @@ fn level_line_evidence(
     walls: &WallAssignment,
     models: &mut Vec<Model>,
 ) -> Vec<LevelLine> {
-    let (grid, params, steps, lv, up, s, k, sigma_up) =
-        (f.grid, f.params, f.steps, &f.lv, f.up, f.s, f.k, f.sigma_up);
+    let (grid, params, steps, lv) = (f.grid, f.params, f.steps, &f.lv);
     let (lines, candidate, in_reach) = (&walls.lines, &walls.candidate, &walls.in_reach);
     let mut flat_lines: Vec<LevelLine> = Vec::new();
     if params.level_surfaces && params.level_lines {
@@ -498,29 +479,24 @@ fn level_line_evidence(
             taken[i] = if candidate[i] {
                 in_reach[i]
             } else {
-                lines
-                    .iter()
-                    .any(|l| line_z2(l, q, d, s, params.min_sigma, sigma_up, k * k).is_some())
+                lines.iter().any(|l| f.line_z2(l, q, d).is_some())
             };
         }
         for kind in [SurfaceKind::Floor, SurfaceKind::Ceiling] {
             if models.iter().any(|m| m.kind == kind) {
                 continue;
             }
-            let ctx = LineContext {
-                grid,
-                lv,
-                levelish: if kind == SurfaceKind::Floor {
-                    &steps.floor_line
-                } else {
-                    &steps.ceiling
-                },
-                taken: &taken,
-                up: &up,
-                s,
-                sigma_up,
+            let levelish = if kind == SurfaceKind::Floor {
+                &steps.floor_line
+            } else {
+                &steps.ceiling
             };
-            match level_lines(&ctx, kind, params) {
+            let ctx = LineContext {
+                f,
+                levelish,
+                taken: &taken,
+            };
+            match level_lines(&ctx, kind) {
                 LevelEvidence::None => {}
                 LevelEvidence::Lines(found) => flat_lines.extend(found),
                 LevelEvidence::Plane(fit, members) => models.push(Model { kind, fit, members }),

@@ -28,7 +28,7 @@ pub fn level_start(
     let min_z = MAX_TILT_DEG.to_radians().cos();
     let members = sampled_plane(grid, &idx, &idx, |n| n.z.abs() >= min_z, s, params)?;
     let members = without_standing_rows(grid, members, s, params);
-    if members.len() < params.min_level_points || !two_rows_support(grid, &members) {
+    if !level_support(grid, &members, params) {
         return None;
     }
     let fit = fit_members(grid, &members, sigma)?;
@@ -71,12 +71,10 @@ pub(crate) fn sampled_plane(
         let beyond = normal.dot(&(g.p - p0)).abs() - params.flat_margin;
         beyond <= 0.0 || beyond * beyond <= k2 * (s * s * g.dir.dot(normal).powi(2) + floor2)
     };
-    let inliers = |p0: Point3<f64>, normal: Vector3<f64>| {
-        idx.iter().copied().filter(move |&i| {
-            grid.points[i]
-                .as_ref()
-                .is_some_and(|g| on_plane(g, &p0, &normal))
-        })
+    let on = |i: usize, p0: &Point3<f64>, normal: &Vector3<f64>| {
+        grid.points[i]
+            .as_ref()
+            .is_some_and(|g| on_plane(g, p0, normal))
     };
     // Counted per hypothesis (most lose by far, and are given up early); only the best one's
     // points are gathered.
@@ -101,17 +99,17 @@ pub(crate) fn sampled_plane(
         if !accept(&normal) || !clear_of_scanner(&normal, &pa.p) {
             continue;
         }
-        let on = |i: usize| {
-            grid.points[i]
-                .as_ref()
-                .is_some_and(|g| on_plane(g, &pa.p, &normal))
-        };
-        if let Some(count) = count_beating(idx, on, best.map(|b| b.0)) {
+        if let Some(count) = count_beating(idx, |i| on(i, &pa.p, &normal), best.map(|b| b.0)) {
             best = Some((count, pa.p, normal));
         }
     }
     let (_, p0, normal) = best?;
-    Some(inliers(p0, normal).collect())
+    Some(
+        idx.iter()
+            .copied()
+            .filter(|&i| on(i, &p0, &normal))
+            .collect(),
+    )
 }
 
 /// How many of `idx` satisfy `on`, when that beats `best` (more than it; anything beats

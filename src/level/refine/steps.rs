@@ -117,14 +117,9 @@ pub(crate) fn every_row_neighbour<T: Copy>(
 /// floor plane's tolerance, but the wall point above it rises steeply; on a floor the scans
 /// step far outwards at one height. The vertical noise of grazing floor hits is small, so
 /// the test stays sharp at high range noise, unlike steps in range.
-pub(crate) fn flat_points(
-    grid: &PoseGrid,
-    lv: &Leveled,
-    s: f64,
-    min_sigma: f64,
-    sigma_up: f64,
-    k: f64,
-) -> Vec<bool> {
+pub(crate) fn flat_points(f: &Frame) -> Vec<bool> {
+    let (grid, lv, s, min_sigma, sigma_up, k) =
+        (f.grid, &f.lv, f.s, f.params.min_sigma, f.sigma_up, f.k);
     let cols = grid.cols;
     let rows = grid.rows();
     // Some(true) flat, Some(false) steep, None neither or no neighbour.

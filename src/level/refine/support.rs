@@ -76,10 +76,13 @@ pub(crate) fn supported_rows(per_row: &[usize], share: f64) -> usize {
     per_row.iter().filter(|&&n| n as f64 >= least).count()
 }
 
-/// A level plane from one scan line is that scan's own plane (a line on the floor leaves the
-/// plane free to turn about it): at least two rows must each hold a fifth of the points.
-pub(crate) fn two_rows_support(grid: &PoseGrid, members: &[usize]) -> bool {
-    rows_supported(grid, members, LEVEL_ROW_SHARE) >= 2
+/// Whether a re-segmented floor's or ceiling's `members` can make a level plane
+/// ([`Check::LevelMinPoints`](crate::level::checks::Check::LevelMinPoints)): at least
+/// `min_level_points` of them, over two rows that each hold a fifth of them (a level plane from
+/// one scan line is that scan's own plane: a line on the floor leaves it free to turn about
+/// the line).
+pub(crate) fn level_support(grid: &PoseGrid, members: &[usize], params: &LevelParams) -> bool {
+    members.len() >= params.min_level_points && rows_supported(grid, members, LEVEL_ROW_SHARE) >= 2
 }
 
 /// Whether a level plane spans three scans. Two scan lines that meet are coplanar whatever

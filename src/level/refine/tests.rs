@@ -41,19 +41,33 @@ fn floor_evidence(grid: &PoseGrid) -> LevelEvidence {
 
 /// [`level_lines`]' floor in the robot frame taken as level, up known within `sigma_up`.
 fn floor_evidence_within(grid: &PoseGrid, sigma_up: f64) -> LevelEvidence {
-    let lv = Leveled::new(grid, &Rotation3::identity());
     let all = vec![true; grid.points.len()];
     let none = vec![false; grid.points.len()];
-    let ctx = LineContext {
+    let params = LevelParams::default();
+    let steps = LevelSteps {
+        levelish: all.clone(),
+        floor: all.clone(),
+        ceiling: all.clone(),
+        floor_line: all.clone(),
+    };
+    let f = Frame {
         grid,
-        lv: &lv,
-        levelish: &all,
-        taken: &none,
-        up: &Vector3::z(),
+        params: &params,
+        steps: &steps,
+        lv: Leveled::new(grid, &Rotation3::identity()),
+        level_from_robot: Rotation3::identity(),
+        up: Vector3::z(),
         s: 0.01,
+        sigma: 0.01,
+        k: params.refine_k,
         sigma_up,
     };
-    level_lines(&ctx, SurfaceKind::Floor, &LevelParams::default())
+    let ctx = LineContext {
+        f: &f,
+        levelish: &all,
+        taken: &none,
+    };
+    level_lines(&ctx, SurfaceKind::Floor)
 }
 
 /// Two scans' floor lines stand only when their points fit one plane. From a loose start

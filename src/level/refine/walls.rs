@@ -9,14 +9,8 @@ use super::*;
 /// This is the classic line extraction of a planar scan (e.g. Nguyen et al. 2005, "A
 /// comparison of line extraction algorithms using 2D laser rangefinder"), applied to each
 /// leveled scan; lines of different scans on one wall are merged afterwards.
-pub(crate) fn discover_lines(
-    grid: &PoseGrid,
-    lv: &Leveled,
-    candidate: &[bool],
-    width: usize,
-    params: &LevelParams,
-    s: f64,
-) -> Vec<Line> {
+pub(crate) fn discover_lines(f: &Frame, candidate: &[bool], width: usize) -> Vec<Line> {
+    let (grid, lv, params, s) = (f.grid, &f.lv, f.params, f.s);
     let cols = grid.cols;
     let min_points = params.min_patch_points.max(width);
     let k = params.refine_k;
