@@ -174,7 +174,10 @@ pub(crate) fn initial_placement(
             } else {
                 (1, 0)
             };
-            if eig.eigenvalues[large] <= 0.0 {
+            // A line needs two places: points spread along it by less than their noise (the
+            // rays along the hinge axis meet one spot in every scan) leave its azimuth free.
+            let noise = points.iter().map(|p| p.sigma * p.sigma).sum::<f64>();
+            if eig.eigenvalues[large] <= noise {
                 return None;
             }
             let normal = eig.eigenvectors.column(small).into_owned();

@@ -462,3 +462,22 @@ fn a_floor_at_the_scanners_height_is_refused() {
     let fooled = refine(&pts, &Vector3::z(), &no_guard).unwrap();
     assert!(fooled.floor.unwrap().abs() < 0.1, "{:?}", fooled.floor);
 }
+
+/// A wall met only by the rays along the hinge axis (the same point in every scan, whatever
+/// the elevation) cannot place its line: it is left out instead of pulling up with a line of
+/// arbitrary azimuth (a case the property test above drew).
+#[test]
+fn a_wall_seen_at_one_spot_only_is_left_out() {
+    let plan = box_plan(6.0, 4.0, 2.5, true);
+    let truth = pose(1.507, 1.804, 2.015, 1.943 * DEG, -15.741 * DEG);
+    let pts = points(&plan, &truth, 5, 0.0, 2);
+    let walls_at_one_spot = pts.iter().filter(|p| p.surface == Surface::Wall(1)).count();
+    assert_eq!(
+        walls_at_one_spot, 5,
+        "the fixture: one hinge-axis ray per scan"
+    );
+    let sol = refine_level_start(&pts);
+    assert!(sol.surfaces.iter().all(|s| s.surface != Surface::Wall(1)));
+    let att = Attitude::new(sol.attitude[0], sol.attitude[1]);
+    assert!(att.max_abs_error(&truth.attitude()) < 1e-8);
+}
