@@ -46,6 +46,26 @@ impl Default for CorrelativeParams {
     }
 }
 
+/// `v.round() as i64` without the libm call (`round` is not inlined without SSE4.1, and the
+/// search rounds every used point under every heading): below 2^52 the fraction `v - trunc v`
+/// is exact, so comparing it with one half rounds half away from zero exactly as `round`;
+/// beyond, and for NaN, `v` is already integral and the cast is the same.
+#[inline]
+fn round_i64(v: f64) -> i64 {
+    if !(v.abs() < 4_503_599_627_370_496.0) {
+        return v as i64;
+    }
+    let t = v as i64;
+    let frac = v - t as f64;
+    if frac >= 0.5 {
+        t + 1
+    } else if frac <= -0.5 {
+        t - 1
+    } else {
+        t
+    }
+}
+
 /// How far (in cells, per axis) a reference point's Gaussian reaches in the fine table.
 const REACH: i64 = 2;
 
@@ -63,6 +83,9 @@ pub struct CorrelativeScratch {
     cells: Vec<(i64, i64)>,
     headings: Vec<f64>,
     candidates: Vec<(f32, usize, i64, i64)>,
+    /// The low-resolution blocks' first offsets and, per heading, their bounds.
+    offsets: Vec<(i64, i64)>,
+    sums: Vec<f32>,
     /// While a candidate is refined: the most its points from each one on can still add.
     rest: Vec<f32>,
     /// One point's Gaussian over its (2 REACH + 1)² neighbourhood, and its maxima along rows
@@ -105,8 +128,8 @@ impl Table {
 
     fn cell_of(&self, p: &Point2<f64>, res: f64) -> (i64, i64) {
         (
-            ((p.x - self.origin.x) / res).round() as i64,
-            ((p.y - self.origin.y) / res).round() as i64,
+            round_i64((p.x - self.origin.x) / res),
+            round_i64((p.y - self.origin.y) / res),
         )
     }
 
@@ -236,16 +259,41 @@ impl Table {
         }
     }
 
-    #[inline]
-    fn score(&self, table: &[f32], cells: &[(i64, i64)], ox: i64, oy: i64) -> f32 {
-        let mut s = 0f32;
+    /// The score of every offset of `offsets` (ascending in y, then x), point by point: each
+    /// offset's sum adds the points in the same order as a sum per offset would, and a point
+    /// outside the table adds nothing, so the sums are those of one `score` per offset. A
+    /// point whose offsets all stay inside the table needs no bounds test per offset.
+    fn score_offsets(
+        &self,
+        table: &[f32],
+        cells: &[(i64, i64)],
+        offsets: &[(i64, i64)],
+        sums: &mut Vec<f32>,
+    ) {
+        sums.clear();
+        sums.resize(offsets.len(), 0.0);
+        let (Some(first), Some(last)) = (offsets.first(), offsets.last()) else {
+            return;
+        };
+        let (lo, hi) = (first.0.min(last.0), first.0.max(last.0));
+        let (bottom, top) = (first.1, last.1);
         for &(cx, cy) in cells {
-            let (x, y) = (cx + ox, cy + oy);
-            if x >= 0 && y >= 0 && x < self.width && y < self.height {
-                s += table[(y * self.width + x) as usize];
+            if cx + hi < 0 || cy + top < 0 || cx + lo >= self.width || cy + bottom >= self.height
+            {
+                continue;
+            }
+            if cx + lo >= 0 && cy + bottom >= 0 && cx + hi < self.width && cy + top < self.height
+            {
+                let base = cy * self.width + cx;
+                for (sum, &(ox, oy)) in sums.iter_mut().zip(offsets) {
+                    *sum += table[(base + oy * self.width + ox) as usize];
+                }
+            } else {
+                for (sum, &(ox, oy)) in sums.iter_mut().zip(offsets) {
+                    *sum += self.value(table, (cx, cy), ox, oy);
+                }
             }
         }
-        s
     }
 
     /// `score`, or `None` once the partial sum plus what the remaining points can add at most
@@ -345,6 +393,11 @@ fn search(
     s.cells.clear();
     s.headings.clear();
     s.candidates.clear();
+    // The low-resolution blocks' first offsets, rows (y) outer.
+    s.offsets.clear();
+    let starts = || (-w..=w).step_by(factor as usize);
+    s.offsets
+        .extend(starts().flat_map(|oy| starts().map(move |ox| (ox, oy))));
     for k in -kt..=kt {
         let theta = guess.theta + k as f64 * params.step_theta;
         let pose = Pose2::new(guess.x, guess.y, theta);
@@ -355,16 +408,13 @@ fn search(
                 .map(|p| table.cell_of(&pose.transform_point(p), res)),
         );
         let cells = &s.cells[h * n..];
-        let mut oy = -w;
-        while oy <= w {
-            let mut ox = -w;
-            while ox <= w {
-                s.candidates
-                    .push((table.score(&s.coarse, cells, ox, oy), h, ox, oy));
-                ox += factor;
-            }
-            oy += factor;
-        }
+        table.score_offsets(&s.coarse, cells, &s.offsets, &mut s.sums);
+        s.candidates.extend(
+            s.sums
+                .iter()
+                .zip(&s.offsets)
+                .map(|(&bound, &(ox, oy))| (bound, h, ox, oy)),
+        );
         s.headings.push(theta);
     }
     // Best bound first; ties go to the candidate nearer the guess (smaller offsets).
@@ -407,6 +457,20 @@ fn search(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn round_i64_equals_round() {
+        let mut v = -3.0f64;
+        while v <= 3.0 {
+            for x in [v, v.next_up(), v.next_down(), v * 1e9, v * 1e17] {
+                assert_eq!(round_i64(x), x.round() as i64, "{x}");
+            }
+            v += 0.125;
+        }
+        for x in [f64::NAN, f64::INFINITY, f64::NEG_INFINITY, 1e300, -1e300] {
+            assert_eq!(round_i64(x), x.round() as i64);
+        }
+    }
 
     #[test]
     fn stamped_tables_equal_whole_table_passes_and_clear_to_zero() {

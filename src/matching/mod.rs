@@ -2,7 +2,8 @@
 //! against a growing map (metascan).
 //!
 //! - [`solve`]: the exact closed-form least-squares motion for both metrics (Censi 2008).
-//! - [`reference`](mod@reference): match targets: a scan with line normals and a kd-tree.
+//! - [`reference`](mod@reference): match targets: a scan with line normals and a search grid.
+//! - `grid`: exact nearest-neighbour search in a hashed uniform grid (ICP's association).
 //! - [`icp`](mod@icp): the ICP loop with trimming (Chetverikov et al. 2002) and a robust kernel.
 //! - [`correlative`]: the coarse correlative search (Olson 2009) that widens the basin.
 //! - [`map`]: the bounded voxel map for metascan matching.
@@ -16,6 +17,7 @@
 //! All of it is pure: points and poses in, poses and reports out.
 
 pub mod correlative;
+pub(crate) mod grid;
 pub mod covariance;
 pub(crate) mod degeneracy;
 pub mod icp;
