@@ -11,6 +11,7 @@
 
 use crate::geometry::Pose2;
 use nalgebra::Point2;
+use std::cmp::Reverse;
 
 /// Settings of the coarse search. Units in brackets.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -83,9 +84,13 @@ pub struct CorrelativeScratch {
     cells: Vec<(i64, i64)>,
     headings: Vec<f64>,
     candidates: Vec<(f32, usize, i64, i64)>,
-    /// The low-resolution blocks' first offsets and, per heading, their bounds.
+    /// The low-resolution blocks' first offsets; one block's fine offsets; the sums of the
+    /// offsets being scored.
     offsets: Vec<(i64, i64)>,
+    block: Vec<(i64, i64)>,
     sums: Vec<f32>,
+    /// The candidates' ranks (bound, nearness to the guess, index), as the heap's buffer.
+    ranked: Vec<(i32, Reverse<i64>, Reverse<usize>)>,
     /// While a candidate is refined: the most its points from each one on can still add.
     rest: Vec<f32>,
     /// One point's Gaussian over its (2 REACH + 1)² neighbourhood, and its maxima along rows
@@ -259,10 +264,33 @@ impl Table {
         }
     }
 
-    /// The score of every offset of `offsets` (ascending in y, then x), point by point: each
-    /// offset's sum adds the points in the same order as a sum per offset would, and a point
-    /// outside the table adds nothing, so the sums are those of one `score` per offset. A
-    /// point whose offsets all stay inside the table needs no bounds test per offset.
+    /// Adds one point's values at every offset of `offsets` (rows of y, x ascending in each)
+    /// to `sums`; a point outside the table adds nothing. A point whose offsets all stay
+    /// inside the table needs no bounds test per offset.
+    #[inline]
+    fn add_point(&self, table: &[f32], (cx, cy): (i64, i64), offsets: &[(i64, i64)], sums: &mut [f32]) {
+        let (Some(first), Some(last)) = (offsets.first(), offsets.last()) else {
+            return;
+        };
+        let (lo, hi) = (first.0.min(last.0), first.0.max(last.0));
+        let (bottom, top) = (first.1, last.1);
+        if cx + hi < 0 || cy + top < 0 || cx + lo >= self.width || cy + bottom >= self.height {
+            return;
+        }
+        if cx + lo >= 0 && cy + bottom >= 0 && cx + hi < self.width && cy + top < self.height {
+            let base = cy * self.width + cx;
+            for (sum, &(ox, oy)) in sums.iter_mut().zip(offsets) {
+                *sum += table[(base + oy * self.width + ox) as usize];
+            }
+        } else {
+            for (sum, &(ox, oy)) in sums.iter_mut().zip(offsets) {
+                *sum += self.value(table, (cx, cy), ox, oy);
+            }
+        }
+    }
+
+    /// The score of every offset of `offsets`, point by point: each offset's sum adds the
+    /// points in the same order as a sum per offset would, so the sums are the same floats.
     fn score_offsets(
         &self,
         table: &[f32],
@@ -272,52 +300,36 @@ impl Table {
     ) {
         sums.clear();
         sums.resize(offsets.len(), 0.0);
-        let (Some(first), Some(last)) = (offsets.first(), offsets.last()) else {
-            return;
-        };
-        let (lo, hi) = (first.0.min(last.0), first.0.max(last.0));
-        let (bottom, top) = (first.1, last.1);
-        for &(cx, cy) in cells {
-            if cx + hi < 0 || cy + top < 0 || cx + lo >= self.width || cy + bottom >= self.height
-            {
-                continue;
-            }
-            if cx + lo >= 0 && cy + bottom >= 0 && cx + hi < self.width && cy + top < self.height
-            {
-                let base = cy * self.width + cx;
-                for (sum, &(ox, oy)) in sums.iter_mut().zip(offsets) {
-                    *sum += table[(base + oy * self.width + ox) as usize];
-                }
-            } else {
-                for (sum, &(ox, oy)) in sums.iter_mut().zip(offsets) {
-                    *sum += self.value(table, (cx, cy), ox, oy);
-                }
-            }
+        for &cell in cells {
+            self.add_point(table, cell, offsets, sums);
         }
     }
 
-    /// `score`, or `None` once the partial sum plus what the remaining points can add at most
-    /// (`rest`) shows it cannot exceed `best`. The bound is widened by far more than the
-    /// rounding of either sum, so a score that would beat `best` is never cut short.
-    #[inline]
-    fn score_above(
+    /// `score_offsets` over one block's offsets, or `false` once the partial sums plus what
+    /// the remaining points can add at most (`rest`) show that none can exceed `best`. The
+    /// bound is widened by far more than the rounding of either sum, so a score that would
+    /// beat `best` is never cut short.
+    fn score_block(
         &self,
         table: &[f32],
         cells: &[(i64, i64)],
-        ox: i64,
-        oy: i64,
-        rest: &[f32],
-        best: f32,
-    ) -> Option<f32> {
+        block: &[(i64, i64)],
+        (rest, best): (&[f32], f32),
+        sums: &mut Vec<f32>,
+    ) -> bool {
         const CHECK_EVERY: usize = 16;
-        let mut s = 0f32;
+        sums.clear();
+        sums.resize(block.len(), 0.0);
         for (i, &cell) in cells.iter().enumerate() {
-            s += self.value(table, cell, ox, oy);
-            if (i + 1) % CHECK_EVERY == 0 && (s + rest[i + 1]) * (1.0 + 1e-4) + 1e-6 < best {
-                return None;
+            self.add_point(table, cell, block, sums);
+            if (i + 1) % CHECK_EVERY == 0 {
+                let most = sums.iter().copied().fold(f32::NEG_INFINITY, f32::max);
+                if (most + rest[i + 1]) * (1.0 + 1e-4) + 1e-6 < best {
+                    return false;
+                }
             }
         }
-        Some(s)
+        true
     }
 }
 
@@ -417,16 +429,18 @@ fn search(
         );
         s.headings.push(theta);
     }
-    // Best bound first; ties go to the candidate nearer the guess (smaller offsets).
-    s.candidates.sort_by(|a, b| {
-        b.0.total_cmp(&a.0).then_with(|| {
-            let da = a.2.abs() + a.3.abs() + (a.1 as i64 - kt).abs();
-            let db = b.2.abs() + b.3.abs() + (b.1 as i64 - kt).abs();
-            da.cmp(&db)
-        })
-    });
+    // Best bound first; ties go to the candidate nearer the guess (smaller offsets), then to
+    // the earlier one. Popped from a heap: the search usually stops after a few candidates,
+    // so sorting all of them would be wasted.
+    let mut heap = std::collections::BinaryHeap::from(std::mem::take(&mut s.ranked));
+    heap.clear();
+    heap.extend(s.candidates.iter().enumerate().map(|(i, c)| {
+        let near = c.2.abs() + c.3.abs() + (c.1 as i64 - kt).abs();
+        (total_order_key(c.0), Reverse(near), Reverse(i))
+    }));
     let mut best: (f32, Pose2) = (f32::NEG_INFINITY, guess);
-    for &(bound, h, ox0, oy0) in &s.candidates {
+    while let Some((_, _, Reverse(i))) = heap.pop() {
+        let (bound, h, ox0, oy0) = s.candidates[i];
         if bound <= best.0 {
             break;
         }
@@ -437,26 +451,47 @@ fn search(
         for i in (0..n).rev() {
             s.rest[i] = s.rest[i + 1] + table.block_bound(&s.coarse, cells[i], ox0, oy0, factor);
         }
+        s.block.clear();
         for oy in oy0..(oy0 + factor).min(w + 1) {
-            for ox in ox0..(ox0 + factor).min(w + 1) {
-                let Some(score) = table.score_above(&s.fine, cells, ox, oy, &s.rest, best.0) else {
-                    continue;
-                };
-                if score > best.0 {
-                    best = (
-                        score,
-                        Pose2::new(guess.x + ox as f64 * res, guess.y + oy as f64 * res, theta),
-                    );
-                }
+            s.block.extend((ox0..(ox0 + factor).min(w + 1)).map(|ox| (ox, oy)));
+        }
+        let bound = (&s.rest[..], best.0);
+        if !table.score_block(&s.fine, cells, &s.block, bound, &mut s.sums) {
+            continue;
+        }
+        // In the block's order, as offset after offset: the first of equal scores wins.
+        for (&score, &(ox, oy)) in s.sums.iter().zip(&s.block) {
+            if score > best.0 {
+                best = (
+                    score,
+                    Pose2::new(guess.x + ox as f64 * res, guess.y + oy as f64 * res, theta),
+                );
             }
         }
     }
+    s.ranked = heap.into_vec();
     best
+}
+
+/// An integer that orders as `f32::total_cmp` orders its floats.
+fn total_order_key(v: f32) -> i32 {
+    let bits = v.to_bits() as i32;
+    bits ^ (((bits >> 31) as u32) >> 1) as i32
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn total_order_key_orders_as_total_cmp() {
+        let v = [f32::NEG_INFINITY, -2.5, -0.0, 0.0, 1e-30, 0.5, 1.0, 90.0, f32::INFINITY];
+        for a in v {
+            for b in v {
+                assert_eq!(total_order_key(a).cmp(&total_order_key(b)), a.total_cmp(&b));
+            }
+        }
+    }
 
     #[test]
     fn round_i64_equals_round() {

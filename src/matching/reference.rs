@@ -139,7 +139,7 @@ impl ScanReference {
     }
 
     pub fn with_lines(points: Vec<Point2<f64>>, lines: Vec<Option<Line>>) -> Self {
-        let mut grid = PointGrid::default();
+        let mut grid = PointGrid::new(0.5);
         for (i, p) in points.iter().enumerate() {
             grid.insert(*p, i as u32);
         }
