@@ -12,7 +12,8 @@
 //!   Zhang, Kaess and Singh 2016, in [`solve`]) and whether a match slid where the scan lets it.
 //! - [`params`]: the matcher's settings.
 //! - [`report`]: what each scan's match reports.
-//! - [`matcher`]: a run of scans, one at a time, with fallback to odometry.
+//! - [`matcher`]: a run of scans, one at a time, with fallback to odometry (its `align`: one
+//!   match, the coarse search, the odometry prior or anchor, and the checks).
 //!
 //! All of it is pure: points and poses in, poses and reports out.
 
