@@ -193,15 +193,18 @@ impl PointGrid {
         // Offsets of q inside its cell, from its low and its high edge.
         let (fx, fy) = (q.x - kx as f64 * c, q.y - ky as f64 * c);
         let (gx, gy) = (c - fx, c - fy);
-        let mut best: Option<Hit> = None;
-        let mut bound2 = max_d2;
+        // A point qualifies when its squared distance is below `limit`: at first just above
+        // `max_d2` (so a point at exactly the bound counts), then the best so far (so the first
+        // of equally near points stays).
+        let mut limit = max_d2.next_up();
+        let mut best = END;
         let mut cursor = TileCursor {
             key: (i32::MIN, i32::MIN),
             tile: END,
         };
         for ring in 0..MAX_RINGS {
             let edges = (fx, fy, gx, gy);
-            self.search_ring(q, (kx, ky), ring, edges, (&mut best, &mut bound2), &mut cursor);
+            self.search_ring(q, (kx, ky), ring, edges, (&mut best, &mut limit), &mut cursor);
             // Every point outside the block of rings 0..=ring lies at least this far from q
             // (less a margin for the rounding of the cell keys: below 1e-10 m within `FAR`).
             let r = ring as f64 * c;
@@ -210,8 +213,15 @@ impl PointGrid {
                 && kx + ring >= self.hi.0
                 && ky - ring <= self.lo.1
                 && ky + ring >= self.hi.1;
-            if covered || (reach > 0.0 && reach * reach > bound2) {
-                return best;
+            if covered || (reach > 0.0 && reach * reach >= limit) {
+                return (best != END).then(|| {
+                    let (point, item) = self.points[best as usize];
+                    Hit {
+                        item,
+                        point,
+                        dist2: limit,
+                    }
+                });
             }
         }
         self.scan_all(q, max_d2)
@@ -235,14 +245,15 @@ impl PointGrid {
     }
 
     /// Visits the cells at Chebyshev distance `ring` from `(kx, ky)` that could hold a point
-    /// within `bound2`, keeping the nearest (and shrinking `bound2` to it).
+    /// below `limit`, keeping the nearest (`best`, an index into `points`, with `limit` its
+    /// squared distance once found).
     fn search_ring(
         &self,
         q: &Point2<f64>,
         (kx, ky): (i32, i32),
         ring: i32,
         (fx, fy, gx, gy): (f64, f64, f64, f64),
-        (best, bound2): (&mut Option<Hit>, &mut f64),
+        (best, limit): (&mut u32, &mut f64),
         cursor: &mut TileCursor,
     ) {
         let c = self.cell;
@@ -256,33 +267,27 @@ impl PointGrid {
             let ey = gap(dy, fy, gy);
             let ey2 = ey * ey;
             let y = ky + dy;
-            if ey2 > *bound2 || y < self.lo.1 || y > self.hi.1 {
+            if ey2 >= *limit || y < self.lo.1 || y > self.hi.1 {
                 continue;
             }
-            let edge = dy == -ring || dy == ring;
-            let step = if edge || ring == 0 {
-                1
-            } else {
-                2 * ring as usize
-            };
-            for dx in (-ring..=ring).step_by(step) {
+            // Inner rows of a ring have only its two end cells.
+            let inner = dy != -ring && dy != ring;
+            let mut dx = -ring;
+            while dx <= ring {
                 let ex = gap(dx, fx, gx);
                 let x = kx + dx;
-                if ex * ex + ey2 > *bound2 || x < self.lo.0 || x > self.hi.0 {
+                dx += if inner { 2 * ring.max(1) } else { 1 };
+                if ex * ex + ey2 >= *limit || x < self.lo.0 || x > self.hi.0 {
                     continue;
                 }
                 let mut at = self.head((x, y), cursor);
                 while at != END {
-                    let (p, item) = self.points[at as usize];
+                    let p = self.points[at as usize].0;
                     let (ddx, ddy) = (p.x - q.x, p.y - q.y);
                     let d2 = ddx * ddx + ddy * ddy;
-                    if d2 <= *bound2 && best.is_none_or(|b| d2 < b.dist2) {
-                        *best = Some(Hit {
-                            item,
-                            point: p,
-                            dist2: d2,
-                        });
-                        *bound2 = d2;
+                    if d2 < *limit {
+                        *best = at;
+                        *limit = d2;
                     }
                     at = self.next[at as usize];
                 }
