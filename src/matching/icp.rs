@@ -356,7 +356,7 @@ fn associate(
 #[derive(Default)]
 struct Trimming {
     /// (residual, index) of each pair: sorting these moves 16 bytes per swap, not a pair.
-    order: Vec<(f64, u32)>,
+    order: Vec<(u64, u32)>,
     sorted: Vec<Pair>,
     /// `ξ^λ` for every overlap `count / n` from the first kept, for the last `n` seen (pair
     /// counts repeat from iteration to iteration near convergence; the same `powf`, so the
@@ -375,9 +375,14 @@ impl Trimming {
             return n;
         }
         self.order.clear();
-        self.order
-            .extend(pairs.iter().enumerate().map(|(i, p)| (p.residual, i as u32)));
-        self.order.sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
+        // Residuals are never negative: their bits order as `total_cmp` orders them.
+        self.order.extend(
+            pairs
+                .iter()
+                .enumerate()
+                .map(|(i, p)| (p.residual.to_bits(), i as u32)),
+        );
+        self.order.sort_unstable_by_key(|k| k.0);
         self.sorted.clear();
         self.sorted
             .extend(self.order.iter().map(|&(_, i)| pairs[i as usize]));
