@@ -86,8 +86,8 @@ pub struct CorrelativeScratch {
     candidates: Vec<(f32, usize, i64, i64)>,
     /// The low-resolution blocks' first offsets; one block's fine offsets; the sums of the
     /// offsets being scored.
-    offsets: Vec<(i64, i64)>,
-    block: Vec<(i64, i64)>,
+    offsets: Offsets,
+    block: Offsets,
     sums: Vec<f32>,
     /// The candidates' ranks (bound, nearness to the guess, index), as the heap's buffer.
     ranked: Vec<(i32, Reverse<i64>, Reverse<usize>)>,
@@ -106,6 +106,31 @@ struct Table {
     origin: Point2<f64>,
     width: i64,
     height: i64,
+}
+
+/// Translation offsets (in cells) scored together: rows of y, x ascending in each.
+#[derive(Clone, Debug, Default)]
+struct Offsets {
+    xy: Vec<(i64, i64)>,
+    /// `oy * width + ox`: each offset's step in the table's cell array.
+    linear: Vec<i64>,
+    /// Smallest and largest x, then y.
+    extent: (i64, i64, i64, i64),
+}
+
+impl Offsets {
+    fn set(&mut self, xy: impl Iterator<Item = (i64, i64)>, width: i64) {
+        self.xy.clear();
+        self.xy.extend(xy);
+        self.linear.clear();
+        self.linear
+            .extend(self.xy.iter().map(|&(ox, oy)| oy * width + ox));
+        let (first, last) = (self.xy.first(), self.xy.last());
+        self.extent = match (first, last) {
+            (Some(f), Some(l)) => (f.0.min(l.0), f.0.max(l.0), f.1, l.1),
+            _ => (0, -1, 0, -1),
+        };
+    }
 }
 
 impl Table {
@@ -264,26 +289,22 @@ impl Table {
         }
     }
 
-    /// Adds one point's values at every offset of `offsets` (rows of y, x ascending in each)
-    /// to `sums`; a point outside the table adds nothing. A point whose offsets all stay
-    /// inside the table needs no bounds test per offset.
+    /// Adds one point's values at every offset of `offsets` to `sums`; a point outside the
+    /// table adds nothing. A point whose offsets all stay inside the table needs no bounds
+    /// test per offset.
     #[inline]
-    fn add_point(&self, table: &[f32], (cx, cy): (i64, i64), offsets: &[(i64, i64)], sums: &mut [f32]) {
-        let (Some(first), Some(last)) = (offsets.first(), offsets.last()) else {
-            return;
-        };
-        let (lo, hi) = (first.0.min(last.0), first.0.max(last.0));
-        let (bottom, top) = (first.1, last.1);
+    fn add_point(&self, table: &[f32], (cx, cy): (i64, i64), offsets: &Offsets, sums: &mut [f32]) {
+        let (lo, hi, bottom, top) = offsets.extent;
         if cx + hi < 0 || cy + top < 0 || cx + lo >= self.width || cy + bottom >= self.height {
             return;
         }
         if cx + lo >= 0 && cy + bottom >= 0 && cx + hi < self.width && cy + top < self.height {
             let base = cy * self.width + cx;
-            for (sum, &(ox, oy)) in sums.iter_mut().zip(offsets) {
-                *sum += table[(base + oy * self.width + ox) as usize];
+            for (sum, &d) in sums.iter_mut().zip(&offsets.linear) {
+                *sum += table[(base + d) as usize];
             }
         } else {
-            for (sum, &(ox, oy)) in sums.iter_mut().zip(offsets) {
+            for (sum, &(ox, oy)) in sums.iter_mut().zip(&offsets.xy) {
                 *sum += self.value(table, (cx, cy), ox, oy);
             }
         }
@@ -295,11 +316,11 @@ impl Table {
         &self,
         table: &[f32],
         cells: &[(i64, i64)],
-        offsets: &[(i64, i64)],
+        offsets: &Offsets,
         sums: &mut Vec<f32>,
     ) {
         sums.clear();
-        sums.resize(offsets.len(), 0.0);
+        sums.resize(offsets.xy.len(), 0.0);
         for &cell in cells {
             self.add_point(table, cell, offsets, sums);
         }
@@ -313,17 +334,22 @@ impl Table {
         &self,
         table: &[f32],
         cells: &[(i64, i64)],
-        block: &[(i64, i64)],
+        block: &Offsets,
         (rest, best): (&[f32], f32),
         sums: &mut Vec<f32>,
     ) -> bool {
         const CHECK_EVERY: usize = 16;
         sums.clear();
-        sums.resize(block.len(), 0.0);
+        sums.resize(block.xy.len(), 0.0);
         for (i, &cell) in cells.iter().enumerate() {
             self.add_point(table, cell, block, sums);
             if (i + 1) % CHECK_EVERY == 0 {
-                let most = sums.iter().copied().fold(f32::NEG_INFINITY, f32::max);
+                let mut most = f32::NEG_INFINITY;
+                for &v in sums.iter() {
+                    if v > most {
+                        most = v;
+                    }
+                }
                 if (most + rest[i + 1]) * (1.0 + 1e-4) + 1e-6 < best {
                     return false;
                 }
@@ -406,10 +432,9 @@ fn search(
     s.headings.clear();
     s.candidates.clear();
     // The low-resolution blocks' first offsets, rows (y) outer.
-    s.offsets.clear();
     let starts = || (-w..=w).step_by(factor as usize);
-    s.offsets
-        .extend(starts().flat_map(|oy| starts().map(move |ox| (ox, oy))));
+    let xy = starts().flat_map(|oy| starts().map(move |ox| (ox, oy)));
+    s.offsets.set(xy, table.width);
     for k in -kt..=kt {
         let theta = guess.theta + k as f64 * params.step_theta;
         let pose = Pose2::new(guess.x, guess.y, theta);
@@ -424,7 +449,7 @@ fn search(
         s.candidates.extend(
             s.sums
                 .iter()
-                .zip(&s.offsets)
+                .zip(&s.offsets.xy)
                 .map(|(&bound, &(ox, oy))| (bound, h, ox, oy)),
         );
         s.headings.push(theta);
@@ -451,16 +476,15 @@ fn search(
         for i in (0..n).rev() {
             s.rest[i] = s.rest[i + 1] + table.block_bound(&s.coarse, cells[i], ox0, oy0, factor);
         }
-        s.block.clear();
-        for oy in oy0..(oy0 + factor).min(w + 1) {
-            s.block.extend((ox0..(ox0 + factor).min(w + 1)).map(|ox| (ox, oy)));
-        }
+        let xs = move || ox0..(ox0 + factor).min(w + 1);
+        let xy = (oy0..(oy0 + factor).min(w + 1)).flat_map(|oy| xs().map(move |ox| (ox, oy)));
+        s.block.set(xy, table.width);
         let bound = (&s.rest[..], best.0);
         if !table.score_block(&s.fine, cells, &s.block, bound, &mut s.sums) {
             continue;
         }
         // In the block's order, as offset after offset: the first of equal scores wins.
-        for (&score, &(ox, oy)) in s.sums.iter().zip(&s.block) {
+        for (&score, &(ox, oy)) in s.sums.iter().zip(&s.block.xy) {
             if score > best.0 {
                 best = (
                     score,
