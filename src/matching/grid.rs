@@ -44,7 +44,7 @@ const FAR: f64 = 1e5;
 /// No point: an empty cell's head, a chain's end, a tile not allocated.
 const END: u32 = u32::MAX;
 
-/// Tile keys are small integers: one multiply spreads them over the hash's bits (both ends:
+/// Tile and voxel keys are small integers: one multiply spreads them over the hash's bits (both ends:
 /// the table takes its bucket from the low bits and its tag from the high ones). SipHash,
 /// the standard default, guards against chosen keys, which costs several times more here.
 #[derive(Default)]
@@ -64,6 +64,10 @@ impl Hasher for CellHasher {
 
     fn write_i32(&mut self, v: i32) {
         self.0 = (self.0 << 32 | self.0 >> 32) ^ u64::from(v as u32);
+    }
+
+    fn write_i64(&mut self, v: i64) {
+        self.0 = self.0.wrapping_mul(0x9E37_79B9_7F4A_7C15).rotate_left(29) ^ v as u64;
     }
 }
 

@@ -7,9 +7,10 @@
 //! length of the run.
 
 use super::reference::{Line, Neighbour, Target};
-use super::grid::{PointGrid, floor_i64};
+use super::grid::{CellHasher, PointGrid, floor_i64};
 use nalgebra::{Point2, Vector2};
 use std::collections::HashMap;
+use std::hash::BuildHasherDefault;
 
 /// Metascan map settings.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -41,7 +42,8 @@ struct Voxel {
 /// A voxel map of world-frame points with normals, searchable through a grid.
 pub struct VoxelMap {
     params: MapParams,
-    index: HashMap<(i64, i64), u32>,
+    /// Voxel key -> slot; keys are small integers, hashed by one multiply (`CellHasher`).
+    index: HashMap<(i64, i64), u32, BuildHasherDefault<CellHasher>>,
     voxels: Vec<Voxel>,
     /// Each voxel's first point, found by `nearest_within`.
     grid: PointGrid,
@@ -51,7 +53,7 @@ impl VoxelMap {
     pub fn new(params: MapParams) -> Self {
         Self {
             params,
-            index: HashMap::new(),
+            index: HashMap::default(),
             voxels: Vec::new(),
             grid: PointGrid::default(),
         }
