@@ -73,6 +73,10 @@ impl Matcher {
                 let Some(start) = coarse_search(guess) else {
                     return (first.and_then(|r| self.check(r)), false);
                 };
+                // The search kept the guess itself: ICP from there is the first run again.
+                if same_pose(&start, &guess) {
+                    return (first.and_then(|r| self.check(r)), true);
+                }
                 let second = run(start);
                 let better = match (&first, &second) {
                     (Ok(a), Ok(b)) => {
@@ -149,6 +153,13 @@ impl Matcher {
         }
         Ok(r)
     }
+}
+
+/// Whether two poses are the same to the bit (so ICP from either gives the same result).
+fn same_pose(a: &Pose2, b: &Pose2) -> bool {
+    a.x.to_bits() == b.x.to_bits()
+        && a.y.to_bits() == b.y.to_bits()
+        && a.theta.to_bits() == b.theta.to_bits()
 }
 
 /// Which of two ICP results to trust: more inliers, then the smaller residual.
