@@ -5,7 +5,7 @@
 //! corner the centred window straddles two walls, so the one-sided windows are tried as well
 //! and the flattest fit wins.
 
-use super::grid::{PointGrid, SCAN_CELL};
+use super::grid::{PointGrid, scan_cell};
 use super::solve::symmetric_eigen_2x2;
 use nalgebra::{Matrix2, Point2, Vector2};
 
@@ -139,7 +139,7 @@ impl ScanReference {
     }
 
     pub fn with_lines(points: Vec<Point2<f64>>, lines: Vec<Option<Line>>) -> Self {
-        let mut grid = PointGrid::new(SCAN_CELL);
+        let mut grid = PointGrid::new(scan_cell(&points));
         for (i, p) in points.iter().enumerate() {
             grid.insert(*p, i as u32);
         }
