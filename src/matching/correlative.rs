@@ -517,7 +517,17 @@ mod tests {
 
     #[test]
     fn total_order_key_orders_as_total_cmp() {
-        let v = [f32::NEG_INFINITY, -2.5, -0.0, 0.0, 1e-30, 0.5, 1.0, 90.0, f32::INFINITY];
+        let v = [
+            f32::NEG_INFINITY,
+            -2.5,
+            -0.0,
+            0.0,
+            1e-30,
+            0.5,
+            1.0,
+            90.0,
+            f32::INFINITY,
+        ];
         for a in v {
             for b in v {
                 assert_eq!(total_order_key(a).cmp(&total_order_key(b)), a.total_cmp(&b));

@@ -39,7 +39,9 @@ pub(crate) fn scan_cell(points: &[Point2<f64>]) -> f64 {
     if points.len() < 2 {
         return SCAN_CELL;
     }
-    let span = (last.y.atan2(last.x) - first.y.atan2(first.x)).abs().to_degrees();
+    let span = (last.y.atan2(last.x) - first.y.atan2(first.x))
+        .abs()
+        .to_degrees();
     let step = span / (points.len() - 1) as f64;
     if step.is_finite() {
         (SCAN_CELL * step).clamp(0.125, SCAN_CELL)
@@ -167,7 +169,10 @@ impl PointGrid {
     }
 
     fn key(&self, p: &Point2<f64>) -> (i32, i32) {
-        (floor_i32(p.x * self.inv_cell), floor_i32(p.y * self.inv_cell))
+        (
+            floor_i32(p.x * self.inv_cell),
+            floor_i32(p.y * self.inv_cell),
+        )
     }
 
     fn slot((x, y): (i32, i32)) -> usize {
@@ -229,7 +234,14 @@ impl PointGrid {
         };
         for ring in 0..MAX_RINGS {
             let edges = (fx, fy, gx, gy);
-            self.search_ring(q, (kx, ky), ring, edges, (&mut best, &mut limit), &mut cursor);
+            self.search_ring(
+                q,
+                (kx, ky),
+                ring,
+                edges,
+                (&mut best, &mut limit),
+                &mut cursor,
+            );
             // Every point outside the block of rings 0..=ring lies at least this far from q
             // (less a margin for the rounding of the cell keys: below 1e-10 m within `FAR`).
             let r = ring as f64 * c;
@@ -351,7 +363,11 @@ mod tests {
             let q = Point2::new(8.0 * t.sin(), 5.0 * (0.7 * t).cos());
             for max_d2 in [0.01, 0.25, f64::INFINITY] {
                 let got = grid.nearest_within(&q, max_d2).map(|h| (h.item, h.dist2));
-                assert_eq!(got, brute(&points, &q, max_d2), "query {q:?} within {max_d2}");
+                assert_eq!(
+                    got,
+                    brute(&points, &q, max_d2),
+                    "query {q:?} within {max_d2}"
+                );
             }
         }
     }
@@ -373,6 +389,9 @@ mod tests {
     #[test]
     fn empty_grid_finds_nothing() {
         let grid = PointGrid::default();
-        assert!(grid.nearest_within(&Point2::origin(), f64::INFINITY).is_none());
+        assert!(
+            grid.nearest_within(&Point2::origin(), f64::INFINITY)
+                .is_none()
+        );
     }
 }

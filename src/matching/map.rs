@@ -6,8 +6,8 @@
 //! costs nothing extra, and the cost per scan depends on the size of the place, not on the
 //! length of the run.
 
-use super::reference::{Line, Neighbour, Target};
 use super::grid::{CellHasher, PointGrid, floor_i64};
+use super::reference::{Line, Neighbour, Target};
 use nalgebra::{Point2, Vector2};
 use std::collections::HashMap;
 use std::hash::BuildHasherDefault;

@@ -18,9 +18,9 @@
 //! All of it is pure: points and poses in, poses and reports out.
 
 pub mod correlative;
-pub(crate) mod grid;
 pub mod covariance;
 pub(crate) mod degeneracy;
+pub(crate) mod grid;
 pub mod icp;
 pub mod map;
 pub mod matcher;

@@ -2,12 +2,12 @@
 //! first or as a second try (per `Coarse`), the odometry as a prior or as the anchor of the
 //! directions the scan leaves free, and the checks that decide whether a result is trusted.
 
+use super::{Coarse, FallbackReason, Matcher};
+use crate::geometry::Pose2;
 use crate::matching::correlative::correlative_search_with;
 use crate::matching::degeneracy::{remap_around, slides_as_the_scan_does};
 use crate::matching::icp::{IcpParams, IcpResult, icp_remapped, icp_with_prior};
 use crate::matching::reference::{ScanReference, Target};
-use super::{Coarse, FallbackReason, Matcher};
-use crate::geometry::Pose2;
 use nalgebra::Point2;
 
 impl Matcher {
@@ -166,4 +166,3 @@ fn same_pose(a: &Pose2, b: &Pose2) -> bool {
 fn quality(r: &IcpResult) -> (usize, std::cmp::Reverse<u64>) {
     (r.inliers, std::cmp::Reverse(r.residual.to_bits()))
 }
-
