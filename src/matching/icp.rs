@@ -1,7 +1,7 @@
 //! Iterative closest point: point-to-point (Besl & McKay 1992) and point-to-line (Censi 2008),
 //! with trimmed correspondences (Chetverikov et al. 2002) and a robust kernel.
 //!
-//! Each iteration: data association through the target's kd-tree (`associate`), trimming to
+//! Each iteration: data association through the target's grid (`associate`), trimming to
 //! the overlap that minimises the FTrICP objective (`trim`), robust weights, and the exact
 //! closed-form solve of `solve.rs` from the original source points (so no error accumulates
 //! over iterations). It stops when the pose changes by less than the thresholds.

@@ -1,4 +1,4 @@
-//! What a scan is matched against: points with line normals and a kd-tree over them.
+//! What a scan is matched against: points with line normals and a search grid over them.
 //!
 //! Normals come from the reference scan's own neighbours in ray order (Censi 2008 uses the
 //! segment through the two nearest points; a small line fit is steadier under noise). Near a
