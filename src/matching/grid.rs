@@ -81,12 +81,12 @@ impl Hasher for CellHasher {
 
     fn write(&mut self, bytes: &[u8]) {
         for &b in bytes {
-            self.0 = (self.0 << 8 | self.0 >> 56) ^ u64::from(b);
+            self.0 = self.0.rotate_left(8) ^ u64::from(b);
         }
     }
 
     fn write_i32(&mut self, v: i32) {
-        self.0 = (self.0 << 32 | self.0 >> 32) ^ u64::from(v as u32);
+        self.0 = self.0.rotate_left(32) ^ u64::from(v as u32);
     }
 
     fn write_i64(&mut self, v: i64) {
@@ -109,11 +109,25 @@ fn floor_i32(v: f64) -> i32 {
 /// the same.
 #[inline]
 pub(crate) fn floor_i64(v: f64) -> i64 {
-    if !(v.abs() < 4_503_599_627_370_496.0) {
+    if v.is_nan() || v.abs() >= 4_503_599_627_370_496.0 {
         return v as i64;
     }
     let t = v as i64;
     if (t as f64) > v { t - 1 } else { t }
+}
+
+/// The next float above `x` (`f64::next_up`, which needs Rust 1.86): a bound `d2 <= x` is
+/// `d2 < just_above(x)`.
+fn just_above(x: f64) -> f64 {
+    if x.is_nan() || x == f64::INFINITY {
+        x
+    } else if x == 0.0 {
+        f64::from_bits(1)
+    } else if x > 0.0 {
+        f64::from_bits(x.to_bits() + 1)
+    } else {
+        f64::from_bits(x.to_bits() - 1)
+    }
 }
 
 /// What a query found: the item stored with the point, the point, its squared distance.
@@ -226,7 +240,7 @@ impl PointGrid {
         // A point qualifies when its squared distance is below `limit`: at first just above
         // `max_d2` (so a point at exactly the bound counts), then the best so far (so the first
         // of equally near points stays).
-        let mut limit = max_d2.next_up();
+        let mut limit = just_above(max_d2);
         let mut best = END;
         let mut cursor = TileCursor {
             key: (i32::MIN, i32::MIN),
@@ -376,7 +390,7 @@ mod tests {
     fn floor_i64_equals_floor() {
         let mut v = -3.0f64;
         while v <= 3.0 {
-            for x in [v, v.next_up(), v.next_down(), v * 1e9, v * 1e17] {
+            for x in [v, v + 1e-12, v - 1e-12, v * 1e9, v * 1e17] {
                 assert_eq!(floor_i64(x), x.floor() as i64, "{x}");
             }
             v += 0.125;
@@ -384,6 +398,18 @@ mod tests {
         for x in [f64::NAN, f64::INFINITY, f64::NEG_INFINITY, 1e300, -1e300] {
             assert_eq!(floor_i64(x), x.floor() as i64);
         }
+    }
+
+    #[test]
+    fn just_above_is_the_next_float() {
+        assert_eq!(just_above(1.0), 1.0 + f64::EPSILON);
+        assert_eq!(just_above(-1.0), -1.0 + f64::EPSILON / 2.0);
+        assert_eq!(just_above(0.0), f64::from_bits(1));
+        assert_eq!(just_above(-0.0), f64::from_bits(1));
+        assert_eq!(just_above(f64::NEG_INFINITY), f64::MIN);
+        assert_eq!(just_above(f64::MAX), f64::INFINITY);
+        assert_eq!(just_above(f64::INFINITY), f64::INFINITY);
+        assert!(just_above(f64::NAN).is_nan());
     }
 
     #[test]
