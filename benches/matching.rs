@@ -2,7 +2,7 @@
 //!
 //! - `plicp_match`: one point-to-line ICP of a 181-ray scan against the previous one (the
 //!   reference already built), from the odometry guess; `pairwise_step` adds building the
-//!   reference (line fits and kd-tree), i.e. the whole per-scan cost of pairwise matching.
+//!   reference (line fits and search grid), i.e. the whole per-scan cost of pairwise matching.
 //! - `coarse_search`: the coarse correlative search of a scan against the previous one from a
 //!   guess 20 cm and 5 degrees off, in buffers kept between calls (as the matcher keeps them).
 //! - `run_40_pairwise` / `run_40_metascan`: a whole 40-scan run through the `Matcher`.

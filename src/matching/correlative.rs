@@ -11,6 +11,7 @@
 
 use crate::geometry::Pose2;
 use nalgebra::Point2;
+use std::cmp::Reverse;
 
 /// Settings of the coarse search. Units in brackets.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -46,6 +47,26 @@ impl Default for CorrelativeParams {
     }
 }
 
+/// `v.round() as i64` without the libm call (`round` is not inlined without SSE4.1, and the
+/// search rounds every used point under every heading): below 2^52 the fraction `v - trunc v`
+/// is exact, so comparing it with one half rounds half away from zero exactly as `round`;
+/// beyond, and for NaN, `v` is already integral and the cast is the same.
+#[inline]
+fn round_i64(v: f64) -> i64 {
+    if v.is_nan() || v.abs() >= 4_503_599_627_370_496.0 {
+        return v as i64;
+    }
+    let t = v as i64;
+    let frac = v - t as f64;
+    if frac >= 0.5 {
+        t + 1
+    } else if frac <= -0.5 {
+        t - 1
+    } else {
+        t
+    }
+}
+
 /// How far (in cells, per axis) a reference point's Gaussian reaches in the fine table.
 const REACH: i64 = 2;
 
@@ -63,6 +84,13 @@ pub struct CorrelativeScratch {
     cells: Vec<(i64, i64)>,
     headings: Vec<f64>,
     candidates: Vec<(f32, usize, i64, i64)>,
+    /// The low-resolution blocks' first offsets; one block's fine offsets; the sums of the
+    /// offsets being scored.
+    offsets: Offsets,
+    block: Offsets,
+    sums: Vec<f32>,
+    /// The candidates' ranks (bound, nearness to the guess, index), as the heap's buffer.
+    ranked: Vec<(i32, Reverse<i64>, Reverse<usize>)>,
     /// While a candidate is refined: the most its points from each one on can still add.
     rest: Vec<f32>,
     /// One point's Gaussian over its (2 REACH + 1)² neighbourhood, and its maxima along rows
@@ -78,6 +106,31 @@ struct Table {
     origin: Point2<f64>,
     width: i64,
     height: i64,
+}
+
+/// Translation offsets (in cells) scored together: rows of y, x ascending in each.
+#[derive(Clone, Debug, Default)]
+struct Offsets {
+    xy: Vec<(i64, i64)>,
+    /// `oy * width + ox`: each offset's step in the table's cell array.
+    linear: Vec<i64>,
+    /// Smallest and largest x, then y.
+    extent: (i64, i64, i64, i64),
+}
+
+impl Offsets {
+    fn set(&mut self, xy: impl Iterator<Item = (i64, i64)>, width: i64) {
+        self.xy.clear();
+        self.xy.extend(xy);
+        self.linear.clear();
+        self.linear
+            .extend(self.xy.iter().map(|&(ox, oy)| oy * width + ox));
+        let (first, last) = (self.xy.first(), self.xy.last());
+        self.extent = match (first, last) {
+            (Some(f), Some(l)) => (f.0.min(l.0), f.0.max(l.0), f.1, l.1),
+            _ => (0, -1, 0, -1),
+        };
+    }
 }
 
 impl Table {
@@ -105,8 +158,8 @@ impl Table {
 
     fn cell_of(&self, p: &Point2<f64>, res: f64) -> (i64, i64) {
         (
-            ((p.x - self.origin.x) / res).round() as i64,
-            ((p.y - self.origin.y) / res).round() as i64,
+            round_i64((p.x - self.origin.x) / res),
+            round_i64((p.y - self.origin.y) / res),
         )
     }
 
@@ -236,40 +289,73 @@ impl Table {
         }
     }
 
+    /// Adds one point's values at every offset of `offsets` to `sums`; a point outside the
+    /// table adds nothing. A point whose offsets all stay inside the table needs no bounds
+    /// test per offset.
     #[inline]
-    fn score(&self, table: &[f32], cells: &[(i64, i64)], ox: i64, oy: i64) -> f32 {
-        let mut s = 0f32;
-        for &(cx, cy) in cells {
-            let (x, y) = (cx + ox, cy + oy);
-            if x >= 0 && y >= 0 && x < self.width && y < self.height {
-                s += table[(y * self.width + x) as usize];
+    fn add_point(&self, table: &[f32], (cx, cy): (i64, i64), offsets: &Offsets, sums: &mut [f32]) {
+        let (lo, hi, bottom, top) = offsets.extent;
+        if cx + hi < 0 || cy + top < 0 || cx + lo >= self.width || cy + bottom >= self.height {
+            return;
+        }
+        if cx + lo >= 0 && cy + bottom >= 0 && cx + hi < self.width && cy + top < self.height {
+            let base = cy * self.width + cx;
+            for (sum, &d) in sums.iter_mut().zip(&offsets.linear) {
+                *sum += table[(base + d) as usize];
+            }
+        } else {
+            for (sum, &(ox, oy)) in sums.iter_mut().zip(&offsets.xy) {
+                *sum += self.value(table, (cx, cy), ox, oy);
             }
         }
-        s
     }
 
-    /// `score`, or `None` once the partial sum plus what the remaining points can add at most
-    /// (`rest`) shows it cannot exceed `best`. The bound is widened by far more than the
-    /// rounding of either sum, so a score that would beat `best` is never cut short.
-    #[inline]
-    fn score_above(
+    /// The score of every offset of `offsets`, point by point: each offset's sum adds the
+    /// points in the same order as a sum per offset would, so the sums are the same floats.
+    fn score_offsets(
         &self,
         table: &[f32],
         cells: &[(i64, i64)],
-        ox: i64,
-        oy: i64,
-        rest: &[f32],
-        best: f32,
-    ) -> Option<f32> {
+        offsets: &Offsets,
+        sums: &mut Vec<f32>,
+    ) {
+        sums.clear();
+        sums.resize(offsets.xy.len(), 0.0);
+        for &cell in cells {
+            self.add_point(table, cell, offsets, sums);
+        }
+    }
+
+    /// `score_offsets` over one block's offsets, or `false` once the partial sums plus what
+    /// the remaining points can add at most (`rest`) show that none can exceed `best`. The
+    /// bound is widened by far more than the rounding of either sum, so a score that would
+    /// beat `best` is never cut short.
+    fn score_block(
+        &self,
+        table: &[f32],
+        cells: &[(i64, i64)],
+        block: &Offsets,
+        (rest, best): (&[f32], f32),
+        sums: &mut Vec<f32>,
+    ) -> bool {
         const CHECK_EVERY: usize = 16;
-        let mut s = 0f32;
+        sums.clear();
+        sums.resize(block.xy.len(), 0.0);
         for (i, &cell) in cells.iter().enumerate() {
-            s += self.value(table, cell, ox, oy);
-            if (i + 1) % CHECK_EVERY == 0 && (s + rest[i + 1]) * (1.0 + 1e-4) + 1e-6 < best {
-                return None;
+            self.add_point(table, cell, block, sums);
+            if (i + 1) % CHECK_EVERY == 0 {
+                let mut most = f32::NEG_INFINITY;
+                for &v in sums.iter() {
+                    if v > most {
+                        most = v;
+                    }
+                }
+                if (most + rest[i + 1]) * (1.0 + 1e-4) + 1e-6 < best {
+                    return false;
+                }
             }
         }
-        Some(s)
+        true
     }
 }
 
@@ -345,38 +431,42 @@ fn search(
     s.cells.clear();
     s.headings.clear();
     s.candidates.clear();
+    // The low-resolution blocks' first offsets, rows (y) outer.
+    let starts = || (-w..=w).step_by(factor as usize);
+    let xy = starts().flat_map(|oy| starts().map(move |ox| (ox, oy)));
+    s.offsets.set(xy, table.width);
     for k in -kt..=kt {
         let theta = guess.theta + k as f64 * params.step_theta;
         let pose = Pose2::new(guess.x, guess.y, theta);
+        let rotation = pose.theta.sin_cos();
         let h = s.headings.len();
         s.cells.extend(
             s.used
                 .iter()
-                .map(|p| table.cell_of(&pose.transform_point(p), res)),
+                .map(|p| table.cell_of(&transformed(&pose, rotation, p), res)),
         );
         let cells = &s.cells[h * n..];
-        let mut oy = -w;
-        while oy <= w {
-            let mut ox = -w;
-            while ox <= w {
-                s.candidates
-                    .push((table.score(&s.coarse, cells, ox, oy), h, ox, oy));
-                ox += factor;
-            }
-            oy += factor;
-        }
+        table.score_offsets(&s.coarse, cells, &s.offsets, &mut s.sums);
+        s.candidates.extend(
+            s.sums
+                .iter()
+                .zip(&s.offsets.xy)
+                .map(|(&bound, &(ox, oy))| (bound, h, ox, oy)),
+        );
         s.headings.push(theta);
     }
-    // Best bound first; ties go to the candidate nearer the guess (smaller offsets).
-    s.candidates.sort_by(|a, b| {
-        b.0.total_cmp(&a.0).then_with(|| {
-            let da = a.2.abs() + a.3.abs() + (a.1 as i64 - kt).abs();
-            let db = b.2.abs() + b.3.abs() + (b.1 as i64 - kt).abs();
-            da.cmp(&db)
-        })
-    });
+    // Best bound first; ties go to the candidate nearer the guess (smaller offsets), then to
+    // the earlier one. Popped from a heap: the search usually stops after a few candidates,
+    // so sorting all of them would be wasted.
+    let mut heap = std::collections::BinaryHeap::from(std::mem::take(&mut s.ranked));
+    heap.clear();
+    heap.extend(s.candidates.iter().enumerate().map(|(i, c)| {
+        let near = c.2.abs() + c.3.abs() + (c.1 as i64 - kt).abs();
+        (total_order_key(c.0), Reverse(near), Reverse(i))
+    }));
     let mut best: (f32, Pose2) = (f32::NEG_INFINITY, guess);
-    for &(bound, h, ox0, oy0) in &s.candidates {
+    while let Some((_, _, Reverse(i))) = heap.pop() {
+        let (bound, h, ox0, oy0) = s.candidates[i];
         if bound <= best.0 {
             break;
         }
@@ -387,26 +477,77 @@ fn search(
         for i in (0..n).rev() {
             s.rest[i] = s.rest[i + 1] + table.block_bound(&s.coarse, cells[i], ox0, oy0, factor);
         }
-        for oy in oy0..(oy0 + factor).min(w + 1) {
-            for ox in ox0..(ox0 + factor).min(w + 1) {
-                let Some(score) = table.score_above(&s.fine, cells, ox, oy, &s.rest, best.0) else {
-                    continue;
-                };
-                if score > best.0 {
-                    best = (
-                        score,
-                        Pose2::new(guess.x + ox as f64 * res, guess.y + oy as f64 * res, theta),
-                    );
-                }
+        let xs = move || ox0..(ox0 + factor).min(w + 1);
+        let xy = (oy0..(oy0 + factor).min(w + 1)).flat_map(|oy| xs().map(move |ox| (ox, oy)));
+        s.block.set(xy, table.width);
+        let bound = (&s.rest[..], best.0);
+        if !table.score_block(&s.fine, cells, &s.block, bound, &mut s.sums) {
+            continue;
+        }
+        // In the block's order, as offset after offset: the first of equal scores wins.
+        for (&score, &(ox, oy)) in s.sums.iter().zip(&s.block.xy) {
+            if score > best.0 {
+                best = (
+                    score,
+                    Pose2::new(guess.x + ox as f64 * res, guess.y + oy as f64 * res, theta),
+                );
             }
         }
     }
+    s.ranked = heap.into_vec();
     best
+}
+
+/// `pose.transform_point(p)` with the heading's `sin_cos` taken once for all the points (the
+/// same arithmetic, so the same result to the bit).
+#[inline]
+fn transformed(pose: &Pose2, (s, c): (f64, f64), p: &Point2<f64>) -> Point2<f64> {
+    Point2::new(pose.x + c * p.x - s * p.y, pose.y + s * p.x + c * p.y)
+}
+
+/// An integer that orders as `f32::total_cmp` orders its floats.
+fn total_order_key(v: f32) -> i32 {
+    let bits = v.to_bits() as i32;
+    bits ^ (((bits >> 31) as u32) >> 1) as i32
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn total_order_key_orders_as_total_cmp() {
+        let v = [
+            f32::NEG_INFINITY,
+            -2.5,
+            -0.0,
+            0.0,
+            1e-30,
+            0.5,
+            1.0,
+            90.0,
+            f32::INFINITY,
+        ];
+        for a in v {
+            for b in v {
+                assert_eq!(total_order_key(a).cmp(&total_order_key(b)), a.total_cmp(&b));
+            }
+        }
+    }
+
+    #[test]
+    fn round_i64_equals_round() {
+        let mut v = -3.0f64;
+        while v <= 3.0 {
+            for x in [v, v + 1e-12, v - 1e-12, v * 1e9, v * 1e17] {
+                assert_eq!(round_i64(x), x.round() as i64, "{x}");
+            }
+            v += 0.125;
+        }
+        for x in [f64::NAN, f64::INFINITY, f64::NEG_INFINITY, 1e300, -1e300] {
+            assert_eq!(round_i64(x), x.round() as i64);
+        }
+    }
 
     #[test]
     fn stamped_tables_equal_whole_table_passes_and_clear_to_zero() {

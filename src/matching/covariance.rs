@@ -74,12 +74,10 @@ pub(crate) fn inflation(params: &CovarianceParams, rms: f64, rays_per_degree: f6
 /// consecutive points (robot frame, ray order). The median ignores the gaps of dropped rays.
 /// 0 with fewer than two points.
 pub fn rays_per_degree(points: &[Point2<f64>]) -> f64 {
-    let mut gaps: Vec<f64> = points
+    let bearings: Vec<f64> = points.iter().map(|p| p.y.atan2(p.x)).collect();
+    let mut gaps: Vec<f64> = bearings
         .windows(2)
-        .map(|w| {
-            let d = w[1].y.atan2(w[1].x) - w[0].y.atan2(w[0].x);
-            crate::geometry::wrap_angle(d).abs()
-        })
+        .map(|w| crate::geometry::wrap_angle(w[1] - w[0]).abs())
         .filter(|g| *g > 0.0)
         .collect();
     if gaps.is_empty() {

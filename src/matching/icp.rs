@@ -1,7 +1,7 @@
 //! Iterative closest point: point-to-point (Besl & McKay 1992) and point-to-line (Censi 2008),
 //! with trimmed correspondences (Chetverikov et al. 2002) and a robust kernel.
 //!
-//! Each iteration: data association through the target's kd-tree (`associate`), trimming to
+//! Each iteration: data association through the target's grid (`associate`), trimming to
 //! the overlap that minimises the FTrICP objective (`trim`), robust weights, and the exact
 //! closed-form solve of `solve.rs` from the original source points (so no error accumulates
 //! over iterations). It stops when the pose changes by less than the thresholds.
@@ -129,6 +129,7 @@ impl IcpResult {
     }
 }
 
+#[derive(Clone, Copy)]
 struct Pair {
     p: Point2<f64>,
     q: Point2<f64>,
@@ -198,6 +199,7 @@ fn icp_solving(
     }
     let mut pose = guess;
     let mut pairs: Vec<Pair> = Vec::with_capacity(source.len());
+    let mut trimming = Trimming::default();
     let mut result = IcpResult::before_any_iteration(pose);
     // The pose the last kept pairs were associated at: their residuals and Jacobians are there.
     let mut associated_at = pose;
@@ -212,11 +214,12 @@ fn icp_solving(
             .iter()
             .filter(|p| p.residual <= params.kernel_scale)
             .count();
-        let kept = trim(&mut pairs, params);
+        let kept = trimming.trim(&mut pairs, params);
         let kept_pairs = &pairs[..kept];
         let mut solver = RigidSolver::new();
+        let rotation = pose.theta.sin_cos();
         for pair in kept_pairs {
-            let w = weight(pair.residual, params) * incidence_weight(pair, &pose, params);
+            let w = weight(pair.residual, params) * incidence_weight(pair, rotation, params);
             match (params.metric, pair.line) {
                 (Metric::PointToLine, Some((n, anchor))) => solver.add_line(n, &pair.p, &anchor, w),
                 _ => solver.add_point(&pair.p, &pair.q, w),
@@ -292,8 +295,8 @@ fn sandwich(
     let (s, c) = pose.theta.sin_cos();
     let mut acc = Sandwich::default();
     for pair in kept {
-        let w = weight(pair.residual, params) * incidence_weight(pair, pose, params);
-        let moved = pose.transform_point(&pair.p);
+        let w = weight(pair.residual, params) * incidence_weight(pair, (s, c), params);
+        let moved = moved_by(pose, (s, c), &pair.p);
         let lever = Vector2::new(-s * pair.p.x - c * pair.p.y, c * pair.p.x - s * pair.p.y);
         let mut row =
             |n: Vector2<f64>, r: f64| acc.add(Vector3::new(n.x, n.y, n.dot(&lever)), r, w);
@@ -312,6 +315,13 @@ fn sandwich(
     }
 }
 
+/// `pose.transform_point(p)` with the pose's `sin_cos` computed once by the caller for all
+/// its points (the same arithmetic, so the same result to the bit).
+#[inline]
+fn moved_by(pose: &Pose2, (s, c): (f64, f64), p: &Point2<f64>) -> Point2<f64> {
+    Point2::new(pose.x + c * p.x - s * p.y, pose.y + s * p.x + c * p.y)
+}
+
 /// Nearest target point for every source point under `pose`, within the association distance.
 fn associate(
     source: &[Point2<f64>],
@@ -322,14 +332,12 @@ fn associate(
 ) {
     pairs.clear();
     let max_d2 = params.max_correspondence_distance.powi(2);
+    let rotation = pose.theta.sin_cos();
     for p in source {
-        let moved = pose.transform_point(p);
-        let Some(nb) = target.nearest(&moved) else {
+        let moved = moved_by(pose, rotation, p);
+        let Some(nb) = target.nearest_within(&moved, max_d2) else {
             continue;
         };
-        if nb.dist2 > max_d2 {
-            continue;
-        }
         let line = nb.line.map(|l| (l.normal, l.anchor));
         let residual = match (params.metric, line) {
             (Metric::PointToLine, Some((n, anchor))) => n.dot(&(moved - anchor)).abs(),
@@ -344,33 +352,69 @@ fn associate(
     }
 }
 
-/// Sorts pairs by residual and returns how many to keep: the overlap ξ >= `min_overlap` that
-/// minimises `e(ξ) / ξ^λ`, e being the mean squared residual of the best ξ·N pairs
-/// (Chetverikov et al. 2002, "FTrICP").
-fn trim(pairs: &mut [Pair], params: &IcpParams) -> usize {
-    let n = pairs.len();
-    if params.min_overlap >= 1.0 {
-        return n;
-    }
-    pairs.sort_unstable_by(|a, b| a.residual.total_cmp(&b.residual));
-    let first = ((params.min_overlap * n as f64).ceil() as usize).clamp(1, n);
-    let mut sum = 0.0;
-    let mut best = (f64::INFINITY, n);
-    for (k, pair) in pairs.iter().enumerate() {
-        sum += pair.residual * pair.residual;
-        let count = k + 1;
-        if count < first {
-            continue;
+/// Buffers of `trim`, kept over one ICP run's iterations.
+#[derive(Default)]
+struct Trimming {
+    /// (residual, index) of each pair: sorting these moves 16 bytes per swap, not a pair.
+    order: Vec<(u64, u32)>,
+    sorted: Vec<Pair>,
+    /// `ξ^λ` for every overlap `count / n` from the first kept, for the last `n` seen (pair
+    /// counts repeat from iteration to iteration near convergence; the same `powf`, so the
+    /// same values).
+    powers: Vec<f64>,
+    powers_of: Option<(usize, usize, u64)>,
+}
+
+impl Trimming {
+    /// Sorts pairs by residual and returns how many to keep: the overlap ξ >= `min_overlap`
+    /// that minimises `e(ξ) / ξ^λ`, e being the mean squared residual of the best ξ·N pairs
+    /// (Chetverikov et al. 2002, "FTrICP").
+    fn trim(&mut self, pairs: &mut Vec<Pair>, params: &IcpParams) -> usize {
+        let n = pairs.len();
+        if params.min_overlap >= 1.0 {
+            return n;
         }
-        let xi = count as f64 / n as f64;
-        // A floor on e keeps noise-free data from preferring the smallest overlap.
-        let e = (sum / count as f64).max(1e-12);
-        let psi = e / xi.powf(params.overlap_lambda);
-        if psi < best.0 {
-            best = (psi, count);
+        self.order.clear();
+        // Residuals are never negative: their bits order as `total_cmp` orders them.
+        self.order.extend(
+            pairs
+                .iter()
+                .enumerate()
+                .map(|(i, p)| (p.residual.to_bits(), i as u32)),
+        );
+        self.order.sort_unstable_by_key(|k| k.0);
+        self.sorted.clear();
+        self.sorted
+            .extend(self.order.iter().map(|&(_, i)| pairs[i as usize]));
+        std::mem::swap(pairs, &mut self.sorted);
+        let first = ((params.min_overlap * n as f64).ceil() as usize).clamp(1, n);
+        let lambda = params.overlap_lambda;
+        let key = Some((n, first, lambda.to_bits()));
+        if self.powers_of != key {
+            self.powers.clear();
+            self.powers.extend((1..=n).map(|count| {
+                let xi = count as f64 / n as f64;
+                if count < first { 0.0 } else { xi.powf(lambda) }
+            }));
+            self.powers_of = key;
         }
+        let mut sum = 0.0;
+        let mut best = (f64::INFINITY, n);
+        for (k, pair) in pairs.iter().enumerate() {
+            sum += pair.residual * pair.residual;
+            let count = k + 1;
+            if count < first {
+                continue;
+            }
+            // A floor on e keeps noise-free data from preferring the smallest overlap.
+            let e = (sum / count as f64).max(1e-12);
+            let psi = e / self.powers[k];
+            if psi < best.0 {
+                best = (psi, count);
+            }
+        }
+        best.1
     }
-    best.1
 }
 
 /// Range noise acts along the ray, so a point-to-line residual carries only its component
@@ -378,7 +422,7 @@ fn trim(pairs: &mut [Pair], params: &IcpParams) -> usize {
 /// (Censi 2007, "An accurate closed-form estimate of ICP's covariance", sect. III) trusts
 /// grazing points more. The floor keeps the weight finite and hedges against the larger
 /// sampling error of the reference line along grazing rays.
-fn incidence_weight(pair: &Pair, pose: &Pose2, params: &IcpParams) -> f64 {
+fn incidence_weight(pair: &Pair, (s, c): (f64, f64), params: &IcpParams) -> f64 {
     let (Metric::PointToLine, Some((n, _)), Some(floor)) =
         (params.metric, pair.line, params.incidence_floor)
     else {
@@ -388,7 +432,6 @@ fn incidence_weight(pair: &Pair, pose: &Pose2, params: &IcpParams) -> f64 {
     if norm == 0.0 {
         return 1.0;
     }
-    let (s, c) = pose.theta.sin_cos();
     let ray = Vector2::new(c * pair.p.x - s * pair.p.y, s * pair.p.x + c * pair.p.y) / norm;
     let cos = n.dot(&ray);
     1.0 / (cos * cos + floor)
@@ -441,13 +484,16 @@ mod tests {
     fn trimming_drops_gross_outliers_only() {
         let mut pairs: Vec<Pair> = (0..90).map(|i| pair(0.01 + 1e-4 * i as f64)).collect();
         pairs.extend((0..10).map(|_| pair(0.4)));
-        let kept = trim(&mut pairs, &IcpParams::default());
+        let kept = Trimming::default().trim(&mut pairs, &IcpParams::default());
         assert_eq!(kept, 90);
     }
 
     #[test]
     fn trimming_keeps_everything_when_residuals_are_even() {
         let mut pairs: Vec<Pair> = (0..100).map(|_| pair(0.01)).collect();
-        assert_eq!(trim(&mut pairs, &IcpParams::default()), 100);
+        assert_eq!(
+            Trimming::default().trim(&mut pairs, &IcpParams::default()),
+            100
+        );
     }
 }

@@ -2,14 +2,15 @@
 //!
 //! Kept bounded as KISS-ICP keeps its map (Vizzo et al. 2023): points fall into voxels, each
 //! voxel holds a running mean of its points and of their normals, and only a new voxel adds a
-//! point to the kd-tree (inserted incrementally, never rebuilt). Revisiting a place therefore
+//! point to the search grid (inserted incrementally, never rebuilt). Revisiting a place therefore
 //! costs nothing extra, and the cost per scan depends on the size of the place, not on the
 //! length of the run.
 
+use super::grid::{CellHasher, PointGrid, floor_i64};
 use super::reference::{Line, Neighbour, Target};
-use kiddo::{MutableKdTree, SquaredEuclidean};
 use nalgebra::{Point2, Vector2};
 use std::collections::HashMap;
+use std::hash::BuildHasherDefault;
 
 /// Metascan map settings.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -38,21 +39,23 @@ struct Voxel {
     normal_count: u32,
 }
 
-/// A voxel map of world-frame points with normals, searchable through a kd-tree.
+/// A voxel map of world-frame points with normals, searchable through a grid.
 pub struct VoxelMap {
     params: MapParams,
-    index: HashMap<(i64, i64), u32>,
+    /// Voxel key -> slot; keys are small integers, hashed by one multiply (`CellHasher`).
+    index: HashMap<(i64, i64), u32, BuildHasherDefault<CellHasher>>,
     voxels: Vec<Voxel>,
-    tree: MutableKdTree<f64, 2>,
+    /// Each voxel's first point, found by `nearest_within`.
+    grid: PointGrid,
 }
 
 impl VoxelMap {
     pub fn new(params: MapParams) -> Self {
         Self {
             params,
-            index: HashMap::new(),
+            index: HashMap::default(),
             voxels: Vec::new(),
-            tree: MutableKdTree::default(),
+            grid: PointGrid::default(),
         }
     }
 
@@ -73,7 +76,7 @@ impl VoxelMap {
             let line = lines.get(i).copied().flatten();
             let p = line.map_or(*raw, |l| l.anchor);
             let normal = line.map(|l| l.normal);
-            let key = ((p.x / v).floor() as i64, (p.y / v).floor() as i64);
+            let key = (floor_i64(p.x / v), floor_i64(p.y / v));
             match self.index.get(&key) {
                 Some(&slot) => {
                     let voxel = &mut self.voxels[slot as usize];
@@ -89,11 +92,12 @@ impl VoxelMap {
                 }
                 None => {
                     let slot = self.voxels.len() as u32;
-                    // The tree holds the voxel's first point; the mean moves less than a voxel,
+                    // The grid holds the voxel's first point; the mean moves less than a voxel,
                     // which only makes the neighbour search approximate by that much.
-                    if self.tree.add(&[p.x, p.y], slot).is_err() {
+                    if !(p.x.is_finite() && p.y.is_finite()) {
                         continue;
                     }
+                    self.grid.insert(p, slot);
                     self.index.insert(key, slot);
                     self.voxels.push(Voxel {
                         sum: p.coords,
@@ -116,15 +120,12 @@ impl VoxelMap {
 }
 
 impl Target for VoxelMap {
-    fn nearest(&self, p: &Point2<f64>) -> Option<Neighbour> {
-        if self.voxels.is_empty() {
-            return None;
-        }
-        let hit = self
-            .tree
-            .query(&[p.x, p.y])
-            .nearest_one::<SquaredEuclidean<f64>>()
-            .execute();
+    fn nearest_within(&self, p: &Point2<f64>, max_d2: f64) -> Option<Neighbour> {
+        // The nearest first point decides the voxel; its mean lies in the same voxel, at most
+        // a voxel's diagonal away, so a first point farther than that beyond the radius has
+        // its mean outside the radius too.
+        let reach = max_d2.sqrt() + self.params.voxel_size * std::f64::consts::SQRT_2;
+        let hit = self.grid.nearest_within(p, reach * reach * (1.0 + 1e-9))?;
         let voxel = self.voxels.get(hit.item as usize)?;
         let mean = Point2::from(voxel.sum / voxel.count as f64);
         // Normals that disagree (two sides of a thin wall, a corner) cancel out: keep the
@@ -136,10 +137,11 @@ impl Target for VoxelMap {
                 normal: n.normalize(),
                 anchor: mean,
             });
-        Some(Neighbour {
+        let dist2 = (mean - p).norm_squared();
+        (dist2 <= max_d2).then_some(Neighbour {
             point: mean,
             line,
-            dist2: (mean - p).norm_squared(),
+            dist2,
         })
     }
 

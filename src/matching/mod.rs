@@ -2,7 +2,8 @@
 //! against a growing map (metascan).
 //!
 //! - [`solve`]: the exact closed-form least-squares motion for both metrics (Censi 2008).
-//! - [`reference`](mod@reference): match targets: a scan with line normals and a kd-tree.
+//! - [`reference`](mod@reference): match targets: a scan with line normals and a search grid.
+//! - `grid`: exact nearest-neighbour search in a hashed uniform grid (ICP's association).
 //! - [`icp`](mod@icp): the ICP loop with trimming (Chetverikov et al. 2002) and a robust kernel.
 //! - [`correlative`]: the coarse correlative search (Olson 2009) that widens the basin.
 //! - [`map`]: the bounded voxel map for metascan matching.
@@ -11,13 +12,15 @@
 //!   Zhang, Kaess and Singh 2016, in [`solve`]) and whether a match slid where the scan lets it.
 //! - [`params`]: the matcher's settings.
 //! - [`report`]: what each scan's match reports.
-//! - [`matcher`]: a run of scans, one at a time, with fallback to odometry.
+//! - [`matcher`]: a run of scans, one at a time, with fallback to odometry (its `align`: one
+//!   match, the coarse search, the odometry prior or anchor, and the checks).
 //!
 //! All of it is pure: points and poses in, poses and reports out.
 
 pub mod correlative;
 pub mod covariance;
 pub(crate) mod degeneracy;
+pub(crate) mod grid;
 pub mod icp;
 pub mod map;
 pub mod matcher;

@@ -1,12 +1,12 @@
-//! What a scan is matched against: points with line normals and a kd-tree over them.
+//! What a scan is matched against: points with line normals and a search grid over them.
 //!
 //! Normals come from the reference scan's own neighbours in ray order (Censi 2008 uses the
 //! segment through the two nearest points; a small line fit is steadier under noise). Near a
 //! corner the centred window straddles two walls, so the one-sided windows are tried as well
 //! and the flattest fit wins.
 
+use super::grid::{PointGrid, scan_cell};
 use super::solve::symmetric_eigen_2x2;
-use kiddo::{ImmutableKdTree, SquaredEuclidean};
 use nalgebra::{Matrix2, Point2, Vector2};
 
 /// The nearest reference point to a query.
@@ -22,7 +22,12 @@ pub struct Neighbour {
 
 /// Anything a scan can be matched against: one scan (pairwise) or the map (metascan).
 pub trait Target {
-    fn nearest(&self, p: &Point2<f64>) -> Option<Neighbour>;
+    /// The nearest reference point to `p` when it lies within `sqrt(max_d2)`, else `None`
+    /// (the same as `nearest(p)` filtered by its distance, found without looking farther).
+    fn nearest_within(&self, p: &Point2<f64>, max_d2: f64) -> Option<Neighbour>;
+    fn nearest(&self, p: &Point2<f64>) -> Option<Neighbour> {
+        self.nearest_within(p, f64::INFINITY)
+    }
     /// Number of points (0 means nothing to match against).
     fn len(&self) -> usize;
     fn is_empty(&self) -> bool {
@@ -119,11 +124,11 @@ fn line_fit(pts: &[Point2<f64>]) -> Option<(Vector2<f64>, f64, Point2<f64>)> {
     Some((normal, thickness, Point2::from(mean)))
 }
 
-/// One scan as a match target: its points, their local lines and a kd-tree.
+/// One scan as a match target: its points, their local lines and a grid over them.
 pub struct ScanReference {
     points: Vec<Point2<f64>>,
     lines: Vec<Option<Line>>,
-    tree: Option<ImmutableKdTree<f64, 2>>,
+    grid: PointGrid,
 }
 
 impl ScanReference {
@@ -134,16 +139,14 @@ impl ScanReference {
     }
 
     pub fn with_lines(points: Vec<Point2<f64>>, lines: Vec<Option<Line>>) -> Self {
-        let coords: Vec<[f64; 2]> = points.iter().map(|p| [p.x, p.y]).collect();
-        let tree = if coords.is_empty() {
-            None
-        } else {
-            ImmutableKdTree::new_from_slice(&coords).ok()
-        };
+        let mut grid = PointGrid::new(scan_cell(&points));
+        for (i, p) in points.iter().enumerate() {
+            grid.insert(*p, i as u32);
+        }
         Self {
             points,
             lines,
-            tree,
+            grid,
         }
     }
 
@@ -157,17 +160,13 @@ impl ScanReference {
 }
 
 impl Target for ScanReference {
-    fn nearest(&self, p: &Point2<f64>) -> Option<Neighbour> {
-        let tree = self.tree.as_ref()?;
-        let hit = tree
-            .query(&[p.x, p.y])
-            .nearest_one::<SquaredEuclidean<f64>>()
-            .execute();
+    fn nearest_within(&self, p: &Point2<f64>, max_d2: f64) -> Option<Neighbour> {
+        let hit = self.grid.nearest_within(p, max_d2)?;
         let i = hit.item as usize;
         Some(Neighbour {
             point: self.points[i],
             line: self.lines[i],
-            dist2: hit.distance,
+            dist2: hit.dist2,
         })
     }
 
