@@ -70,7 +70,7 @@ fn final_estimate(
     let groups = patch_groups(&est.patches, start, params, est.range_sigma);
     let all = grid_points(grid, scans, est.range_sigma, params.min_sigma);
     let mut labels = initial_labels(grid, &all, &groups);
-    let neighbours = vertical_neighbours(grid, &all.0);
+    let neighbours = neighbourhoods(grid, &all.0, params.ml.relabel_window);
     let mut sol = fit(&all, &labels, &start.up, params)?;
     let first = sol.attitude;
     for _ in 0..params.ml.relabel_passes {
@@ -126,20 +126,28 @@ fn fit(
     refine(&points, up, &ml).ok()
 }
 
-/// Per valid point (grid indices `index`, ascending), the points at its bearing in the scans
-/// below and above it.
-fn vertical_neighbours(grid: &PoseGrid, index: &[usize]) -> Vec<[Option<usize>; 2]> {
+/// Per valid point (grid indices `index`, ascending), the valid points of its own and the
+/// adjacent scans within `window` bearings of it, itself excluded: where a vertical surface
+/// standing over it shows.
+fn neighbourhoods(grid: &PoseGrid, index: &[usize], window: usize) -> Vec<Vec<usize>> {
     let mut at = vec![None; grid.points.len()];
     for (k, &i) in index.iter().enumerate() {
         at[i] = Some(k);
     }
-    let n = grid.points.len();
+    let rows = grid.points.len() / grid.cols.max(1);
     index
         .iter()
         .map(|&i| {
-            let below = i.checked_sub(grid.cols).and_then(|j| at[j]);
-            let above = (i + grid.cols < n).then(|| at[i + grid.cols]).flatten();
-            [below, above]
+            let (row, col) = (i / grid.cols, i % grid.cols);
+            let mut near = Vec::new();
+            for r in row.saturating_sub(1)..(row + 2).min(rows) {
+                for c in col.saturating_sub(window)..(col + window + 1).min(grid.cols) {
+                    if (r, c) != (row, col) {
+                        near.extend(at[r * grid.cols + c]);
+                    }
+                }
+            }
+            near
         })
         .collect()
 }

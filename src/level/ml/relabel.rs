@@ -31,7 +31,7 @@ struct Fitted {
 /// below `min_incidence` stay out, as the fit leaves them out.
 pub(crate) fn relabel(
     points: &[LabelledPoint],
-    neighbours: &[[Option<usize>; 2]],
+    neighbours: &[Vec<usize>],
     labels: &[Option<Surface>],
     sol: &MlSolution,
     k: f64,
@@ -42,11 +42,14 @@ pub(crate) fn relabel(
     let fitted = fitted_surfaces(points, labels, sol, &rot, margin);
     let mut next = assign(points, &fitted, &rot, k, min_incidence);
     for (i, l) in next.iter_mut().enumerate() {
-        if matches!(l, Some(Surface::Floor | Surface::Ceiling))
-            && neighbours[i]
-                .iter()
-                .flatten()
-                .any(|&j| stacked(&points[i], &points[j], &rot, k))
+        let level = match (*l, sol.floor, sol.ceiling) {
+            (Some(Surface::Floor), Some(h), _) => (1.0, h),
+            (Some(Surface::Ceiling), _, Some(h)) => (-1.0, h),
+            _ => continue,
+        };
+        if neighbours[i]
+            .iter()
+            .any(|&j| stands_over(&points[i], &points[j], &rot, k, level))
         {
             *l = None;
         }
@@ -54,13 +57,23 @@ pub(crate) fn relabel(
     next
 }
 
-/// Whether `q` (a point of an adjacent scan at the same bearing) stands above or below `p`
-/// as on a vertical surface: horizontally within `k` sigmas of the pair's horizontal noise,
-/// vertically apart by more than `k` of its vertical noise. Such a `p` is a wall's foot (or
-/// top), or a floor point within the noise of one, whether or not the model has that wall:
-/// traced at 10 cm noise, 5-20% of the floor's points were hits on a wall the model lacked
-/// within 9 cm of the floor, and their pull put the pose 3-7 sigmas off.
-fn stacked(p: &LabelledPoint, q: &LabelledPoint, rot: &Rotations, k: f64) -> bool {
+/// Whether `q` (a point near `p` in the grid) stands over `p`, a point of the level plane
+/// `(side, height)` (side 1 for the floor, -1 for the ceiling), as on a vertical surface:
+/// horizontally within `k` sigmas of the pair's horizontal noise, and off the plane, on its
+/// room side, by more than `k` of `q`'s own vertical noise. Such a `p` is within the noise of
+/// a wall's foot (or top) whether or not the model has that wall: traced at 10 cm noise,
+/// 5-20% of the floor's points were hits on a wall the model lacked within 9 cm of the floor,
+/// and their pull put the pose 3-7 sigmas off. Judging `q` against the fitted plane rather
+/// than against `p` (whose own vertical noise at a steep ray is a third of the range noise)
+/// catches the feet near the scanner, where adjacent scans stand only 10-20 cm apart on the
+/// wall.
+fn stands_over(
+    p: &LabelledPoint,
+    q: &LabelledPoint,
+    rot: &Rotations,
+    k: f64,
+    (side, height): (f64, f64),
+) -> bool {
     let level = |p: &LabelledPoint| {
         (
             rot.level_from_robot * (p.origin.coords + p.dir * p.range),
@@ -69,15 +82,10 @@ fn stacked(p: &LabelledPoint, q: &LabelledPoint, rot: &Rotations, k: f64) -> boo
     };
     let ((a, da), (b, db)) = (level(p), level(q));
     let h2 = |d: &nalgebra::Vector3<f64>, s: f64| (d.x * d.x + d.y * d.y) * s * s;
-    let (var_h, var_v) = (
-        h2(&da, p.sigma) + h2(&db, q.sigma),
-        (da.z * p.sigma).powi(2) + (db.z * q.sigma).powi(2),
-    );
-    let (dh2, dz2) = (
-        (a.x - b.x).powi(2) + (a.y - b.y).powi(2),
-        (a.z - b.z).powi(2),
-    );
-    dh2 <= k * k * var_h && dz2 > k * k * var_v
+    let var_h = h2(&da, p.sigma) + h2(&db, q.sigma);
+    let dh2 = (a.x - b.x).powi(2) + (a.y - b.y).powi(2);
+    let off = (b.z - height) * side;
+    dh2 <= k * k * var_h && off > 0.0 && off * off > k * k * (db.z * q.sigma).powi(2)
 }
 
 /// Each point to the one fitted surface that predicts its range within `k` sigmas, `None`
