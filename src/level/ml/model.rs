@@ -128,12 +128,8 @@ pub(crate) fn plane_rho(
     (plane.normal.dot(&lq) - plane.offset) * scale
 }
 
-/// `|n . L u|` of `point` on its plane: the share of its range noise along the normal.
-pub(crate) fn incidence(point: &LabelledPoint, placement: &Placement, rot: &Rotations) -> f64 {
-    incidence_on(point, &placement.normal(point.surface), rot)
-}
-
-/// [`incidence`] on a plane of normal `n`.
+/// `|n . L u|` of `point` on a plane of normal `n`: the share of its range noise along the
+/// normal.
 pub(crate) fn incidence_on(point: &LabelledPoint, n: &Vector3<f64>, rot: &Rotations) -> f64 {
     n.dot(&(rot.level_from_robot * point.dir)).abs()
 }
@@ -159,6 +155,7 @@ pub(crate) fn range_rho(point: &LabelledPoint, plane: &Plane, rot: &Rotations) -
 }
 
 /// The residual of `point` on its surface at `placement`, under the attitude `rot`.
+#[cfg(test)]
 pub(crate) fn linearize(
     point: &LabelledPoint,
     placement: &Placement,
@@ -167,7 +164,7 @@ pub(crate) fn linearize(
     linearize_on(point, &Plane::at(placement, point.surface), rot)
 }
 
-/// [`linearize`] on the surface's plane at the state.
+/// The residual of `point` and its derivatives on its surface's plane at the state.
 pub(crate) fn linearize_on(point: &LabelledPoint, plane: &Plane, rot: &Rotations) -> Linearized {
     linearize_predicted(point, plane, rot, predict(point, plane, rot))
 }
