@@ -57,6 +57,30 @@ impl Placement {
     }
 }
 
+/// A surface's plane at one state: what every residual on it needs, computed once per state
+/// rather than per point (a wall's normal takes a sine and a cosine).
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Plane {
+    pub normal: Vector3<f64>,
+    /// The wall's tangent `(-n_y, n_x, 0)` in the level frame; `None` for the floor or ceiling.
+    pub tangent: Option<Vector3<f64>>,
+    pub offset: f64,
+}
+
+impl Plane {
+    pub fn at(placement: &Placement, surface: Surface) -> Self {
+        let n = placement.normal(surface);
+        Plane {
+            normal: n,
+            tangent: match surface {
+                Surface::Wall(_) => Some(Vector3::new(-n.y, n.x, 0.0)),
+                Surface::Floor | Surface::Ceiling => None,
+            },
+            offset: placement.offset,
+        }
+    }
+}
+
 /// One point's normalised residual and its derivatives: by `(theta_x, theta_y)` and by its
 /// surface's `(offset, azimuth)` (the azimuth's is zero for the floor and ceiling).
 #[derive(Clone, Copy, Debug)]
@@ -74,41 +98,46 @@ pub(crate) struct Linearized {
 /// range residual's.
 pub(crate) fn linearize_plane(
     point: &LabelledPoint,
-    placement: &Placement,
+    plane: &Plane,
     rot: &Rotations,
     incidence: f64,
 ) -> Linearized {
-    let n = placement.normal(point.surface);
+    let n = &plane.normal;
     let q = point.origin.coords + point.dir * point.range;
     let lq = rot.level_from_robot * q;
     let scale = 1.0 / (point.sigma * incidence.max(MIN_INCIDENCE));
-    let azimuth = match point.surface {
-        Surface::Wall(_) => Vector3::new(-n.y, n.x, 0.0).dot(&lq),
-        Surface::Floor | Surface::Ceiling => 0.0,
-    };
+    let azimuth = plane.tangent.map_or(0.0, |t| t.dot(&lq));
     Linearized {
-        rho: (n.dot(&lq) - placement.offset) * scale,
+        rho: (n.dot(&lq) - plane.offset) * scale,
         by_attitude: Vector2::new(n.dot(&(rot.by_theta[0] * q)), n.dot(&(rot.by_theta[1] * q)))
             * scale,
         by_placement: Vector2::new(-1.0, azimuth) * scale,
     }
 }
 
-/// `|n . L u|` of `point` on its plane: the share of its range noise along the normal.
-pub(crate) fn incidence(point: &LabelledPoint, placement: &Placement, rot: &Rotations) -> f64 {
-    placement
-        .normal(point.surface)
-        .dot(&(rot.level_from_robot * point.dir))
-        .abs()
+/// [`linearize_plane`]'s residual alone (the cost of a trial step needs no derivatives).
+pub(crate) fn plane_rho(
+    point: &LabelledPoint,
+    plane: &Plane,
+    rot: &Rotations,
+    incidence: f64,
+) -> f64 {
+    let q = point.origin.coords + point.dir * point.range;
+    let lq = rot.level_from_robot * q;
+    let scale = 1.0 / (point.sigma * incidence.max(MIN_INCIDENCE));
+    (plane.normal.dot(&lq) - plane.offset) * scale
 }
 
-/// The residual of `point` on its surface at `placement`, under the attitude `rot`.
-pub(crate) fn linearize(
-    point: &LabelledPoint,
-    placement: &Placement,
-    rot: &Rotations,
-) -> Linearized {
-    let n = placement.normal(point.surface);
+/// `|n . L u|` of `point` on a plane of normal `n`: the share of its range noise along the
+/// normal.
+pub(crate) fn incidence_on(point: &LabelledPoint, n: &Vector3<f64>, rot: &Rotations) -> f64 {
+    n.dot(&(rot.level_from_robot * point.dir)).abs()
+}
+
+/// The range `r^` the model predicts for `point` on `plane` and the divisor `b = n . L u` it
+/// took (kept from zero by [`MIN_INCIDENCE`]).
+pub(crate) fn predict(point: &LabelledPoint, plane: &Plane, rot: &Rotations) -> (f64, f64) {
+    let n = &plane.normal;
     let lu = rot.level_from_robot * point.dir;
     let lo = rot.level_from_robot * point.origin.coords;
     let raw = n.dot(&lu);
@@ -117,20 +146,46 @@ pub(crate) fn linearize(
     } else {
         raw
     };
-    let predicted = (placement.offset - n.dot(&lo)) / b;
+    ((plane.offset - n.dot(&lo)) / b, b)
+}
+
+/// [`linearize_on`]'s residual alone.
+pub(crate) fn range_rho(point: &LabelledPoint, plane: &Plane, rot: &Rotations) -> f64 {
+    (point.range - predict(point, plane, rot).0) / point.sigma
+}
+
+/// The residual of `point` on its surface at `placement`, under the attitude `rot`.
+#[cfg(test)]
+pub(crate) fn linearize(
+    point: &LabelledPoint,
+    placement: &Placement,
+    rot: &Rotations,
+) -> Linearized {
+    linearize_on(point, &Plane::at(placement, point.surface), rot)
+}
+
+/// The residual of `point` and its derivatives on its surface's plane at the state.
+pub(crate) fn linearize_on(point: &LabelledPoint, plane: &Plane, rot: &Rotations) -> Linearized {
+    linearize_predicted(point, plane, rot, predict(point, plane, rot))
+}
+
+/// [`linearize_on`] given [`predict`]'s `(r^, b)` at the same state.
+pub(crate) fn linearize_predicted(
+    point: &LabelledPoint,
+    plane: &Plane,
+    rot: &Rotations,
+    (predicted, b): (f64, f64),
+) -> Linearized {
+    let n = &plane.normal;
     let q = point.origin.coords + point.dir * predicted;
     // d r^ / d theta = -n . L' q / b; d r^ / d d = 1 / b; d r^ / d a = -t . L q / b.
     let by_attitude = Vector2::new(
         n.dot(&(rot.by_theta[0] * q)) / b,
         n.dot(&(rot.by_theta[1] * q)) / b,
     ) / point.sigma;
-    let azimuth = match point.surface {
-        Surface::Wall(_) => {
-            let t = Vector3::new(-n.y, n.x, 0.0);
-            t.dot(&(rot.level_from_robot * q)) / b
-        }
-        Surface::Floor | Surface::Ceiling => 0.0,
-    };
+    let azimuth = plane
+        .tangent
+        .map_or(0.0, |t| t.dot(&(rot.level_from_robot * q)) / b);
     Linearized {
         rho: (point.range - predicted) / point.sigma,
         by_attitude,

@@ -14,7 +14,7 @@
 //! its members already cover, widened by `margin`, so that a wall's line does not take in the
 //! points of another wall it crosses beyond a corner.
 
-use super::model::{Placement, Rotations, incidence};
+use super::model::{Placement, Plane, Rotations, incidence_on, range_rho};
 use super::{LabelledPoint, MlSolution, Surface};
 use nalgebra::Vector2;
 
@@ -97,16 +97,17 @@ fn assign(
     k: f64,
     min_incidence: f64,
 ) -> Vec<Option<Surface>> {
+    // Each surface's plane once, not per point (a wall's takes a sine and a cosine).
+    let planes: Vec<Plane> = fitted
+        .iter()
+        .map(|f| Plane::at(&f.placement, f.surface))
+        .collect();
     points
         .iter()
         .map(|p| {
             let mut found = None;
-            for f in fitted {
-                let candidate = LabelledPoint {
-                    surface: f.surface,
-                    ..*p
-                };
-                if incidence(&candidate, &f.placement, rot) < min_incidence {
+            for (f, plane) in fitted.iter().zip(&planes) {
+                if incidence_on(p, &plane.normal, rot) < min_incidence {
                     continue;
                 }
                 if let Surface::Wall(_) = f.surface {
@@ -115,7 +116,7 @@ fn assign(
                         continue;
                     }
                 }
-                let rho = super::model::linearize(&candidate, &f.placement, rot).rho;
+                let rho = range_rho(p, plane, rot);
                 if rho.abs() <= k {
                     if found.is_some() {
                         return None;

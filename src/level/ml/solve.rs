@@ -11,7 +11,8 @@
 //! azimuth slot gets a unit diagonal so every block stays 2x2 and invertible.
 
 use super::model::{
-    Linearized, Placement, Rotations, incidence, initial_placement, linearize, linearize_plane,
+    Linearized, Placement, Plane, Rotations, incidence_on, initial_placement, linearize_on,
+    linearize_plane, linearize_predicted, plane_rho, predict, range_rho,
 };
 use super::{LabelledPoint, MlError, MlParams, MlSolution, Surface, SurfaceFit, WallLine};
 use crate::geometry::Attitude;
@@ -39,6 +40,10 @@ struct State<'a> {
     frozen: Option<Vec<f64>>,
     /// Per point: used in the fit (on a kept surface, and not grazing it).
     active: Vec<bool>,
+    /// Per point, for the range residual at the current state: [`predict`]'s `(r^, b)` as
+    /// the cost of that state computed them (NaN for a point not used), so the normal
+    /// equations there need not predict again; empty when not known.
+    predictions: Vec<(f64, f64)>,
 }
 
 /// Refines up from `up0` (robot frame, any length) and the labelled points: the maximum
@@ -145,6 +150,7 @@ impl<'a> State<'a> {
             theta,
             placements,
             frozen: None,
+            predictions: Vec::new(),
             active: slot.iter().map(Option::is_some).collect(),
             slot,
         }
@@ -153,23 +159,43 @@ impl<'a> State<'a> {
     /// Uses the points on a kept surface whose ray meets it at an incidence `|n . L u|` of
     /// at least `min_incidence` at the current state.
     fn activate(&mut self, min_incidence: f64) {
+        self.predictions.clear();
         let rot = Rotations::at(&self.theta);
+        let planes = self.planes(&self.placements);
         self.active = self
             .points
             .iter()
             .zip(&self.slot)
             .map(|(p, s)| {
-                s.is_some_and(|s| incidence(p, &self.placements[s], &rot) >= min_incidence)
+                s.is_some_and(|s| incidence_on(p, &planes[s].normal, &rot) >= min_incidence)
             })
             .collect();
     }
 
+    /// Every surface's plane at `placements`.
+    fn planes(&self, placements: &[Placement]) -> Vec<Plane> {
+        self.surfaces
+            .iter()
+            .zip(placements)
+            .map(|(&s, p)| Plane::at(p, s))
+            .collect()
+    }
+
     /// Point `i`'s residual at a trial state, by the current mode.
-    fn residual(&self, i: usize, placement: &Placement, rot: &Rotations) -> Linearized {
+    fn residual(&self, i: usize, plane: &Plane, rot: &Rotations) -> Linearized {
         let p = &self.points[i];
         match &self.frozen {
-            Some(b) => linearize_plane(p, placement, rot, b[i]),
-            None => linearize(p, placement, rot),
+            Some(b) => linearize_plane(p, plane, rot, b[i]),
+            None => linearize_on(p, plane, rot),
+        }
+    }
+
+    /// [`Self::residual`]'s value alone.
+    fn rho(&self, i: usize, plane: &Plane, rot: &Rotations) -> f64 {
+        let p = &self.points[i];
+        match &self.frozen {
+            Some(b) => plane_rho(p, plane, rot, b[i]),
+            None => range_rho(p, plane, rot),
         }
     }
 
@@ -181,22 +207,44 @@ impl<'a> State<'a> {
         }
         self.activate(min_incidence);
         let rot = Rotations::at(&self.theta);
+        let planes = self.planes(&self.placements);
         let b = self
             .points
             .iter()
             .zip(&self.slot)
-            .map(|(p, s)| s.map_or(1.0, |s| incidence(p, &self.placements[s], &rot)))
+            .map(|(p, s)| s.map_or(1.0, |s| incidence_on(p, &planes[s].normal, &rot)))
             .collect();
         self.frozen = Some(b);
     }
 
-    /// The robust cost at a trial state.
-    fn cost(&self, theta: &Vector2<f64>, placements: &[Placement], k: f64) -> f64 {
+    /// The robust cost at a trial state; for the range residual, each point's prediction
+    /// there into `predictions` (else it is left empty).
+    fn cost(
+        &self,
+        theta: &Vector2<f64>,
+        placements: &[Placement],
+        k: f64,
+        predictions: &mut Vec<(f64, f64)>,
+    ) -> f64 {
         let rot = Rotations::at(theta);
+        let planes = self.planes(placements);
+        predictions.clear();
+        if self.frozen.is_some() {
+            return (0..self.points.len())
+                .filter_map(|i| {
+                    let s = self.slot[i].filter(|_| self.active[i])?;
+                    Some(huber_cost(self.rho(i, &planes[s], &rot), k))
+                })
+                .sum();
+        }
+        predictions.resize(self.points.len(), (f64::NAN, f64::NAN));
         (0..self.points.len())
             .filter_map(|i| {
                 let s = self.slot[i].filter(|_| self.active[i])?;
-                Some(huber_cost(self.residual(i, &placements[s], &rot).rho, k))
+                let p = &self.points[i];
+                let pred = predict(p, &planes[s], &rot);
+                predictions[i] = pred;
+                Some(huber_cost((p.range - pred.0) / p.sigma, k))
             })
             .sum()
     }
@@ -204,6 +252,8 @@ impl<'a> State<'a> {
     /// The weighted normal equations at the current state.
     fn arrow(&self, k: f64) -> Arrow {
         let rot = Rotations::at(&self.theta);
+        let planes = self.planes(&self.placements);
+        let cached = self.frozen.is_none() && self.predictions.len() == self.points.len();
         let mut arrow = Arrow {
             h_aa: Matrix2::zeros(),
             g_a: Vector2::zeros(),
@@ -216,7 +266,10 @@ impl<'a> State<'a> {
             let Some(s) = self.slot[i].filter(|_| self.active[i]) else {
                 continue;
             };
-            let lin = self.residual(i, &self.placements[s], &rot);
+            let lin = match self.predictions.get(i).filter(|_| cached) {
+                Some(&pred) => linearize_predicted(&self.points[i], &planes[s], &rot, pred),
+                None => self.residual(i, &planes[s], &rot),
+            };
             let w = huber_weight(lin.rho, k);
             let (ja, js) = (lin.by_attitude, lin.by_placement);
             arrow.h_aa += ja * ja.transpose() * w;
@@ -241,11 +294,17 @@ impl<'a> State<'a> {
         // The range residual's cost carries over from the step accepted; the plane
         // residual's changes with every freeze.
         let mut kept_cost: Option<f64> = None;
+        let mut trial_predictions = Vec::new();
         for iteration in 1..=params.max_iterations {
             self.freeze(params.min_incidence);
             let mut cost = match kept_cost.filter(|_| self.frozen.is_none()) {
                 Some(c) => c,
-                None => self.cost(&self.theta, &self.placements, k),
+                None => {
+                    let mut predictions = std::mem::take(&mut self.predictions);
+                    let c = self.cost(&self.theta, &self.placements, k, &mut predictions);
+                    self.predictions = predictions;
+                    c
+                }
             };
             let arrow = self.arrow(k);
             let mut accepted = false;
@@ -266,11 +325,12 @@ impl<'a> State<'a> {
                         azimuth: p.azimuth + d.y,
                     })
                     .collect();
-                let trial = self.cost(&theta, &placements, k);
+                let trial = self.cost(&theta, &placements, k, &mut trial_predictions);
                 step_norm = d_theta.norm();
                 if trial <= cost {
                     self.theta = theta;
                     self.placements = placements;
+                    std::mem::swap(&mut self.predictions, &mut trial_predictions);
                     let settled = cost - trial <= 1e-14 * cost.max(1e-300);
                     cost = trial;
                     kept_cost = Some(cost);
@@ -301,14 +361,12 @@ impl<'a> State<'a> {
         let schur = observable_schur(&self.arrow(k)).ok_or(MlError::Unobservable)?;
         let cov = schur.try_inverse().ok_or(MlError::Unobservable)?;
         let rot = Rotations::at(&self.theta);
+        let planes = self.planes(&self.placements);
         let residuals: Vec<Option<f64>> = self
             .points
             .iter()
             .zip(self.slot.iter().zip(&self.active))
-            .map(|(p, (s, &a))| {
-                s.filter(|_| a)
-                    .map(|s| linearize(p, &self.placements[s], &rot).rho)
-            })
+            .map(|(p, (s, &a))| s.filter(|_| a).map(|s| range_rho(p, &planes[s], &rot)))
             .collect();
         let clipped = |r: f64| (r * r).min(k * k);
         let mut surfaces: Vec<SurfaceFit> = self
