@@ -101,8 +101,11 @@ const GAP_SLACK: f64 = 0.05;
 
 /// What the keep test needs of the whole pose, found once for all its scans: the floor's and
 /// ceiling's heights in the level frame and the band about the floor that blocks a point.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Debug)]
 pub(super) struct Surfaces {
+    /// Per grid point: on a wall patch, or inside the span of a wall quad that is vertical in
+    /// the level frame ([`level_wall_mask`]).
+    wall_mask: Vec<bool>,
     /// From ceiling patches (median of members).
     ceiling_z: Option<f64>,
     /// The floor's height for the height test: the floor patches', else the lowest crowd.
@@ -133,12 +136,58 @@ impl Surfaces {
             }
         };
         Surfaces {
+            wall_mask: level_wall_mask(grid, est, level_from_robot),
             ceiling_z: height_of(SurfaceKind::Ceiling),
             ground_z,
             floor_band,
             attitude_sigma: est.sigmas.map_or(0.0, |s| s[0].max(s[1])),
         }
     }
+}
+
+/// Sigmas within which a wall quad's leveled normal must be horizontal for its span to count
+/// as wall \[1\]: its normal's own uncertainty (`PlaneFit::normal_variance_along` the level
+/// frame's up) plus the attitude's. Three, as for every other test on a Gaussian error: a true
+/// wall quad fails it about once in 400. Measured (robust estimator, holdout plans, seed 202, 5
+/// scans at 10 cm): floor and ceiling hits kept 0.87% -> 0.50%, coverage 95.9% -> 95.5%.
+const QUAD_TILT_SIGMAS: f64 = 3.0;
+
+/// The estimate's wall mask (`LevelEstimate::wall_mask`) with only the wall quads that are
+/// vertical in the level frame: a quad is classified in the robot frame before the attitude is
+/// known, and one that straddles a wall's meeting with the ceiling or the floor (its rows on
+/// both, coplanar within the quad test's tolerance at high noise) passes as a wall while its
+/// normal, leveled, is tilted far beyond its own uncertainty; its span would keep those
+/// ceiling and floor hits.
+fn level_wall_mask(
+    grid: &PoseGrid,
+    est: &LevelEstimate,
+    level_from_robot: &Matrix3<f64>,
+) -> Vec<bool> {
+    let up = level_from_robot.row(2).transpose();
+    let sigma = est.range_sigma;
+    let attitude_sigma = est.sigmas.map_or(0.0, |s| s[0].max(s[1]));
+    let mut mask = vec![false; grid.points.len()];
+    for q in est.quads.iter().filter(|q| q.kind == SurfaceKind::Wall) {
+        let tilt = q.fit.normal.dot(&up).abs();
+        let bound =
+            QUAD_TILT_SIGMAS * (q.fit.normal_variance_along(&up, sigma).sqrt() + attitude_sigma);
+        if tilt > bound {
+            continue;
+        }
+        for r in q.row..q.row + q.rows {
+            let start = r * grid.cols + q.col;
+            mask[start..start + q.cols].fill(true);
+        }
+    }
+    let wall_patch: Vec<bool> = est
+        .patches
+        .iter()
+        .map(|p| p.kind == SurfaceKind::Wall)
+        .collect();
+    for (m, &l) in mask.iter_mut().zip(&est.labels) {
+        *m |= l != UNLABELLED && wall_patch[l as usize];
+    }
+    mask
 }
 
 /// Which points of grid row `row` are wall points (before and after gap filling), one per
@@ -155,6 +204,7 @@ pub(super) fn kept_in_row(
     let sigma = est.range_sigma;
     let level = |p: &Point3<f64>| level_from_robot * p.coords;
     let Surfaces {
+        ref wall_mask,
         ceiling_z,
         ground_z,
         floor_band,
@@ -180,7 +230,7 @@ pub(super) fn kept_in_row(
             blocked[c] = true;
             continue;
         }
-        if est.wall_mask.get(i).copied().unwrap_or(false) {
+        if wall_mask.get(i).copied().unwrap_or(false) {
             *slot = true;
             continue;
         }
