@@ -2,8 +2,9 @@
 //! lie on walls, given the pose's estimate. See the module above for the rules.
 
 use super::PseudoLevelParams;
-use crate::level::grid::PoseGrid;
-use crate::level::patches::{UNLABELLED, level_height};
+use crate::level::grid::{PlaneFit, PoseGrid};
+use crate::level::median_of;
+use crate::level::patches::UNLABELLED;
 use crate::level::{LevelEstimate, SurfaceKind, from_total_order_key, total_order_key};
 use nalgebra::{Matrix3, Point3, Vector2};
 
@@ -123,7 +124,7 @@ impl Surfaces {
         params: &PseudoLevelParams,
         level_from_robot: &Matrix3<f64>,
     ) -> Self {
-        let height_of = |kind| level_height(grid, &est.patches, kind, level_from_robot, 1);
+        let height_of = |kind| level_flat_height(grid, est, kind, level_from_robot);
         let floor_z = height_of(SurfaceKind::Floor);
         // The floor's height and the band about it that blocks a point. Without floor
         // patches, only the floor's own hits: a crowd's height is exact to the noise, and a
@@ -188,6 +189,43 @@ fn level_wall_mask(
         *m |= l != UNLABELLED && wall_patch[l as usize];
     }
     mask
+}
+
+/// The height in the level frame of the floor (or ceiling) patches whose leveled normal is
+/// vertical within [`QUAD_TILT_SIGMAS`] of its uncertainty and the attitude's: the median over
+/// all their points, `None` without any. A patch is classified in the robot frame, as a floor
+/// when its plane passes below the scanner; one grown over a wall's foot or top (a wall's
+/// points with the floor's) can pass while tilted by 15-55 degrees once leveled, its points
+/// metres above the floor. Its height would put the floor band where no floor is, and the
+/// floor's hits through. Measured (robust estimator, holdout plans, seed 202, 5 scans at 10
+/// cm): such patches tilted 5-45 sigmas, true floors and ceilings at most 3.2 sigmas.
+fn level_flat_height(
+    grid: &PoseGrid,
+    est: &LevelEstimate,
+    kind: SurfaceKind,
+    level_from_robot: &Matrix3<f64>,
+) -> Option<f64> {
+    let (ex, ey) = (
+        level_from_robot.row(0).transpose(),
+        level_from_robot.row(1).transpose(),
+    );
+    let sigma = est.range_sigma;
+    let attitude_sigma = est.sigmas.map_or(0.0, |s| s[0].max(s[1]));
+    let level_flat = |fit: &PlaneFit| {
+        let tilt = fit.normal.dot(&ex).hypot(fit.normal.dot(&ey));
+        let sd =
+            (fit.normal_variance_along(&ex, sigma) + fit.normal_variance_along(&ey, sigma)).sqrt();
+        tilt <= QUAD_TILT_SIGMAS * (sd + attitude_sigma)
+    };
+    let mut z: Vec<f64> = est
+        .patches
+        .iter()
+        .filter(|p| p.kind == kind && level_flat(&p.fit))
+        .flat_map(|p| p.members.iter())
+        .filter_map(|&i| grid.points[i].as_ref())
+        .map(|g| (level_from_robot * g.p.coords).z)
+        .collect();
+    (!z.is_empty()).then(|| median_of(&mut z))
 }
 
 /// Which points of grid row `row` are wall points (before and after gap filling), one per
