@@ -345,6 +345,111 @@ fn filled_gaps(
 mod tests {
     use super::*;
 
+    use crate::level::grid::GridPoint;
+    use crate::level::patches::Patch;
+    use crate::level::polygons::Polygon;
+    use nalgebra::Vector3;
+
+    /// A fit with the given unit normal, its in-plane spread 1 m^2 along both axes (a normal
+    /// good to about a hundredth of a sigma-normalised radian).
+    fn fit_with_normal(normal: Vector3<f64>) -> PlaneFit {
+        let a = normal
+            .cross(&Vector3::z())
+            .try_normalize(1e-9)
+            .unwrap_or(Vector3::x());
+        let b = normal.cross(&a).normalize();
+        PlaneFit {
+            centroid: Point3::origin(),
+            normal,
+            in_plane: [(1.0, a), (1.0, b)],
+            n: 100,
+            weight: 100.0,
+            dn2: 1.0,
+            residual_ss: 0.0,
+        }
+    }
+
+    /// One row of `n` points at height `z` (robot frame, level pose).
+    fn grid_at(z: f64, n: usize) -> PoseGrid {
+        let points = (0..n)
+            .map(|c| {
+                let p = Point3::new(2.0, c as f64 * 0.1, z);
+                Some(GridPoint {
+                    p,
+                    dir: p.coords.normalize(),
+                    range: p.coords.norm(),
+                })
+            })
+            .collect();
+        PoseGrid {
+            scan_index: vec![0],
+            elevation: vec![0.0],
+            cols: n,
+            points,
+        }
+    }
+
+    fn estimate(grid: &PoseGrid) -> LevelEstimate {
+        LevelEstimate {
+            range_sigma: 0.01,
+            sigmas: Some([1e-3, 1e-3]),
+            labels: vec![UNLABELLED; grid.points.len()],
+            ..LevelEstimate::default()
+        }
+    }
+
+    /// A floor patch counts for the floor's height when level once leveled, and not when its
+    /// leveled normal is tilted beyond its uncertainty (as at 20 degrees).
+    #[test]
+    fn floor_height_only_from_level_patches() {
+        let grid = grid_at(-0.4, 5);
+        let level = Matrix3::identity();
+        // The bound: 3 (sqrt(2) 0.01 + 0.001) rad, 2.6 degrees.
+        for (tilt_deg, expect) in [
+            (0.0, Some(-0.4)),
+            (2.0, Some(-0.4)),
+            (3.2, None),
+            (20.0, None),
+        ] {
+            let t: f64 = f64::to_radians(tilt_deg);
+            let mut est = estimate(&grid);
+            est.patches = vec![Patch {
+                fit: fit_with_normal(Vector3::new(t.sin(), 0.0, t.cos())),
+                kind: SurfaceKind::Floor,
+                members: (0..5).collect(),
+                row_range: (0, 0),
+            }];
+            let got = level_flat_height(&grid, &est, SurfaceKind::Floor, &level);
+            assert_eq!(got, expect, "tilt {tilt_deg} deg");
+        }
+    }
+
+    /// A wall quad's span is wall when its leveled normal is horizontal, and not when tilted
+    /// (as at 30 degrees, one straddling a wall's top and the ceiling).
+    #[test]
+    fn wall_mask_only_from_vertical_quads() {
+        let grid = grid_at(0.5, 6);
+        let level = Matrix3::identity();
+        // The bound: 3 (0.01 + 0.001) rad, 1.9 degrees.
+        for (tilt_deg, expect) in [(0.0, true), (1.5, true), (2.5, false), (30.0, false)] {
+            let t: f64 = f64::to_radians(tilt_deg);
+            let mut est = estimate(&grid);
+            est.quads = vec![Polygon {
+                row: 0,
+                col: 1,
+                rows: 1,
+                cols: 3,
+                corners: [Point3::origin(); 4],
+                area: 1.0,
+                fit: fit_with_normal(Vector3::new(t.cos(), 0.0, t.sin())),
+                kind: SurfaceKind::Wall,
+            }];
+            let mask = level_wall_mask(&grid, &est, &level);
+            let want = [false, expect, expect, expect, false, false];
+            assert_eq!(mask, want, "tilt {tilt_deg} deg");
+        }
+    }
+
     #[test]
     fn lowest_crowd_is_the_floor_under_walls_and_stray_points() {
         let floor = (0..30).map(|k| -0.45 + 0.001 * (k % 7) as f64);
