@@ -3,10 +3,12 @@
 //! floor hits (phantom obstacles) never reach the 2D matcher.
 //!
 //! A point is kept when its ray had a return and it lies on a wall: inside a wall quad's span
-//! or a grown wall patch (the paper's test), or, beyond the paper, when the point in the same
-//! column of an adjacent scan lies nearly straight above or below it after leveling (walls are
-//! vertical; on the floor the same two rays land far apart horizontally at nearly the same
-//! height). That per-point test recovers corners and small features that no quad covers.
+//! or a grown wall patch (the paper's test; a quad only when its normal, leveled, is horizontal
+//! within its uncertainty: one straddling a wall's top or foot is no wall), or, beyond the
+//! paper, when the point in the same column of an adjacent scan lies nearly straight above or
+//! below it after leveling (walls are vertical; on the floor the same two rays land far apart
+//! horizontally at nearly the same height). That per-point test recovers corners and small
+//! features that no quad covers.
 //! Points at the floor's or ceiling's height (from floor/ceiling patches) are never kept. And a
 //! point clearly above the floor (and below the ceiling, or below the scanner when no ceiling
 //! was seen) is kept even when no other scan saw its wall: a far wall that only the highest

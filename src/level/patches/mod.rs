@@ -6,7 +6,7 @@
 use super::grid::{GridPoint, PlaneAccumulator, PlaneFit, PoseGrid};
 use super::polygons::{Polygon, classify, extract_quads_sized};
 use super::{LevelParams, SurfaceKind, median_of, total_order_key};
-use nalgebra::{Matrix3, Point3, Vector3};
+use nalgebra::{Point3, Vector3};
 
 mod fit;
 mod split;
@@ -27,28 +27,6 @@ pub struct Patch {
     pub members: Vec<usize>,
     /// Lowest and highest row it reaches.
     pub row_range: (usize, usize),
-}
-
-/// The height in the level frame (`level_from_robot` applied) of the patches of `kind`: the
-/// median over all their points, or `None` with fewer than `min_points` of them.
-pub(crate) fn level_height(
-    grid: &PoseGrid,
-    patches: &[Patch],
-    kind: SurfaceKind,
-    level_from_robot: &Matrix3<f64>,
-    min_points: usize,
-) -> Option<f64> {
-    let mut z: Vec<f64> = patches
-        .iter()
-        .filter(|p| p.kind == kind)
-        .flat_map(|p| p.members.iter())
-        .filter_map(|&i| grid.points[i].as_ref())
-        .map(|g| (level_from_robot * g.p.coords).z)
-        .collect();
-    if z.len() < min_points.max(1) {
-        return None;
-    }
-    Some(median_of(&mut z))
 }
 
 /// Seed width \[columns\]: the paper's quad width, or wider where the range noise would leave a
