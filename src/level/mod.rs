@@ -295,13 +295,26 @@ fn segmented(
 /// Per grid point, whether it lies on a wall: inside a wall quad's span or a wall patch (of
 /// the segmentation that produced the attitude, sect. 6).
 fn wall_mask(est: &LevelEstimate) -> Vec<bool> {
-    let Some(grid) = &est.grid else {
-        return Vec::new();
-    };
+    est.grid
+        .as_ref()
+        .map_or_else(Vec::new, |grid| wall_mask_where(grid, est, |_| true))
+}
+
+/// [`wall_mask`] over the wall quads `quad_counts` accepts (the pseudo-level scan's keep test
+/// takes only those vertical once leveled); wall patches always count.
+pub(crate) fn wall_mask_where(
+    grid: &PoseGrid,
+    est: &LevelEstimate,
+    quad_counts: impl Fn(&Polygon) -> bool,
+) -> Vec<bool> {
     let mut wall_mask = vec![false; grid.points.len()];
     // A quad's span row by row (`Polygon::span`'s indices): overlapping quads mark most
     // points several times, cheaply as slices.
-    for q in est.quads.iter().filter(|q| q.kind == SurfaceKind::Wall) {
+    for q in est
+        .quads
+        .iter()
+        .filter(|q| q.kind == SurfaceKind::Wall && quad_counts(q))
+    {
         for r in q.row..q.row + q.rows {
             let start = r * grid.cols + q.col;
             wall_mask[start..start + q.cols].fill(true);

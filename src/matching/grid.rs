@@ -96,12 +96,11 @@ impl Hasher for CellHasher {
 
 type TileMap = HashMap<(i32, i32), u32, BuildHasherDefault<CellHasher>>;
 
-/// `floor(v)` as an integer without a libm call (saturating far outside any map; the same
-/// function places points and queries, so the grid stays consistent there too).
+/// [`floor_i64`] saturated to `i32` (far outside any map; the same function places points and
+/// queries, so the grid stays consistent there too).
 #[inline]
 fn floor_i32(v: f64) -> i32 {
-    let t = v as i32;
-    if (t as f64) > v { t - 1 } else { t }
+    floor_i64(v).clamp(i64::from(i32::MIN), i64::from(i32::MAX)) as i32
 }
 
 /// `v.floor() as i64` without the libm call: exact below 2^52 (the cast truncates, and one

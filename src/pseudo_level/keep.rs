@@ -3,9 +3,9 @@
 
 use super::PseudoLevelParams;
 use crate::level::grid::{PlaneFit, PoseGrid};
-use crate::level::median_of;
 use crate::level::patches::UNLABELLED;
 use crate::level::{LevelEstimate, SurfaceKind, from_total_order_key, total_order_key};
+use crate::level::{median_of, wall_mask_where};
 use nalgebra::{Matrix3, Point3, Vector2};
 
 /// Height window of a crowd at the floor's height \[m\]: the floor's hits of one pose, leveled,
@@ -124,7 +124,8 @@ impl Surfaces {
         params: &PseudoLevelParams,
         level_from_robot: &Matrix3<f64>,
     ) -> Self {
-        let height_of = |kind| level_flat_height(grid, est, kind, level_from_robot);
+        let attitude_sigma = est.sigmas.map_or(0.0, |s| s[0].max(s[1]));
+        let height_of = |kind| level_flat_height(grid, est, kind, level_from_robot, attitude_sigma);
         let floor_z = height_of(SurfaceKind::Floor);
         // The floor's height and the band about it that blocks a point. Without floor
         // patches, only the floor's own hits: a crowd's height is exact to the noise, and a
@@ -137,11 +138,11 @@ impl Surfaces {
             }
         };
         Surfaces {
-            wall_mask: level_wall_mask(grid, est, level_from_robot),
+            wall_mask: level_wall_mask(grid, est, level_from_robot, attitude_sigma),
             ceiling_z: height_of(SurfaceKind::Ceiling),
             ground_z,
             floor_band,
-            attitude_sigma: est.sigmas.map_or(0.0, |s| s[0].max(s[1])),
+            attitude_sigma,
         }
     }
 }
@@ -163,32 +164,14 @@ fn level_wall_mask(
     grid: &PoseGrid,
     est: &LevelEstimate,
     level_from_robot: &Matrix3<f64>,
+    attitude_sigma: f64,
 ) -> Vec<bool> {
     let up = level_from_robot.row(2).transpose();
     let sigma = est.range_sigma;
-    let attitude_sigma = est.sigmas.map_or(0.0, |s| s[0].max(s[1]));
-    let mut mask = vec![false; grid.points.len()];
-    for q in est.quads.iter().filter(|q| q.kind == SurfaceKind::Wall) {
+    wall_mask_where(grid, est, |q| {
         let tilt = q.fit.normal.dot(&up).abs();
-        let bound =
-            QUAD_TILT_SIGMAS * (q.fit.normal_variance_along(&up, sigma).sqrt() + attitude_sigma);
-        if tilt > bound {
-            continue;
-        }
-        for r in q.row..q.row + q.rows {
-            let start = r * grid.cols + q.col;
-            mask[start..start + q.cols].fill(true);
-        }
-    }
-    let wall_patch: Vec<bool> = est
-        .patches
-        .iter()
-        .map(|p| p.kind == SurfaceKind::Wall)
-        .collect();
-    for (m, &l) in mask.iter_mut().zip(&est.labels) {
-        *m |= l != UNLABELLED && wall_patch[l as usize];
-    }
-    mask
+        tilt <= QUAD_TILT_SIGMAS * (q.fit.normal_variance_along(&up, sigma).sqrt() + attitude_sigma)
+    })
 }
 
 /// The height in the level frame of the floor (or ceiling) patches whose leveled normal is
@@ -204,13 +187,13 @@ fn level_flat_height(
     est: &LevelEstimate,
     kind: SurfaceKind,
     level_from_robot: &Matrix3<f64>,
+    attitude_sigma: f64,
 ) -> Option<f64> {
     let (ex, ey) = (
         level_from_robot.row(0).transpose(),
         level_from_robot.row(1).transpose(),
     );
     let sigma = est.range_sigma;
-    let attitude_sigma = est.sigmas.map_or(0.0, |s| s[0].max(s[1]));
     let level_flat = |fit: &PlaneFit| {
         let tilt = fit.normal.dot(&ex).hypot(fit.normal.dot(&ey));
         let sd =
@@ -419,7 +402,7 @@ mod tests {
                 members: (0..5).collect(),
                 row_range: (0, 0),
             }];
-            let got = level_flat_height(&grid, &est, SurfaceKind::Floor, &level);
+            let got = level_flat_height(&grid, &est, SurfaceKind::Floor, &level, 1e-3);
             assert_eq!(got, expect, "tilt {tilt_deg} deg");
         }
     }
@@ -444,7 +427,7 @@ mod tests {
                 fit: fit_with_normal(Vector3::new(t.cos(), 0.0, t.sin())),
                 kind: SurfaceKind::Wall,
             }];
-            let mask = level_wall_mask(&grid, &est, &level);
+            let mask = level_wall_mask(&grid, &est, &level, 1e-3);
             let want = [false, expect, expect, expect, false, false];
             assert_eq!(mask, want, "tilt {tilt_deg} deg");
         }
