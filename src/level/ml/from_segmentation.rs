@@ -11,7 +11,7 @@
 //! the leveler's up and sigmas when it passes the same gate. Where the core refuses, the
 //! leveler's answer stands, or the pose fails as before.
 
-use super::relabel::relabel;
+use super::relabel::{Neighbours, relabel};
 use super::{LabelledPoint, MlParams, MlSolution, Surface, refine};
 use crate::geometry::Attitude;
 use crate::level::failure::{attitude_sigmas, within_wall_angle};
@@ -129,27 +129,29 @@ fn fit(
 /// Per valid point (grid indices `index`, ascending), the valid points of its own and the
 /// adjacent scans within `window` bearings of it, itself excluded: where a vertical surface
 /// standing over it shows.
-fn neighbourhoods(grid: &PoseGrid, index: &[usize], window: usize) -> Vec<Vec<usize>> {
+fn neighbourhoods(grid: &PoseGrid, index: &[usize], window: usize) -> Neighbours {
     let mut at = vec![None; grid.points.len()];
     for (k, &i) in index.iter().enumerate() {
         at[i] = Some(k);
     }
     let rows = grid.points.len() / grid.cols.max(1);
-    index
-        .iter()
-        .map(|&i| {
-            let (row, col) = (i / grid.cols, i % grid.cols);
-            let mut near = Vec::new();
-            for r in row.saturating_sub(1)..(row + 2).min(rows) {
-                for c in col.saturating_sub(window)..(col + window + 1).min(grid.cols) {
-                    if (r, c) != (row, col) {
-                        near.extend(at[r * grid.cols + c]);
-                    }
+    let mut out = Neighbours {
+        start: Vec::with_capacity(index.len() + 1),
+        near: Vec::with_capacity(index.len() * (3 * (2 * window + 1) - 1)),
+    };
+    out.start.push(0);
+    for &i in index {
+        let (row, col) = (i / grid.cols, i % grid.cols);
+        for r in row.saturating_sub(1)..(row + 2).min(rows) {
+            for c in col.saturating_sub(window)..(col + window + 1).min(grid.cols) {
+                if (r, c) != (row, col) {
+                    out.near.extend(at[r * grid.cols + c]);
                 }
             }
-            near
-        })
-        .collect()
+        }
+        out.start.push(out.near.len());
+    }
+    out
 }
 
 /// Per valid point of `all` (grid indices ascending), the surface of the group holding it.

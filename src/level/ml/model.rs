@@ -137,16 +137,22 @@ pub(crate) fn incidence_on(point: &LabelledPoint, n: &Vector3<f64>, rot: &Rotati
 /// The range `r^` the model predicts for `point` on `plane` and the divisor `b = n . L u` it
 /// took (kept from zero by [`MIN_INCIDENCE`]).
 pub(crate) fn predict(point: &LabelledPoint, plane: &Plane, rot: &Rotations) -> (f64, f64) {
-    let n = &plane.normal;
     let lu = rot.level_from_robot * point.dir;
     let lo = rot.level_from_robot * point.origin.coords;
-    let raw = n.dot(&lu);
+    predict_level(plane, &lu, &lo)
+}
+
+/// [`predict`] given the ray's direction `lu = L u` and origin `lo = L o` in the level frame
+/// (a caller that tries one ray on several planes levels it once).
+pub(crate) fn predict_level(plane: &Plane, lu: &Vector3<f64>, lo: &Vector3<f64>) -> (f64, f64) {
+    let n = &plane.normal;
+    let raw = n.dot(lu);
     let b = if raw.abs() < MIN_INCIDENCE {
         MIN_INCIDENCE.copysign(raw)
     } else {
         raw
     };
-    ((plane.offset - n.dot(&lo)) / b, b)
+    ((plane.offset - n.dot(lo)) / b, b)
 }
 
 /// [`linearize_on`]'s residual alone.

@@ -14,16 +14,48 @@
 //! its members already cover, widened by `margin`, so that a wall's line does not take in the
 //! points of another wall it crosses beyond a corner.
 
-use super::model::{Placement, Plane, Rotations, incidence_on, range_rho};
+use super::model::{Placement, Plane, Rotations, predict_level};
 use super::{LabelledPoint, MlSolution, Surface};
-use nalgebra::Vector2;
+use nalgebra::{Vector2, Vector3};
+
+/// Per point, the valid points near it in the grid (its own and the adjacent scans), stored
+/// flat: point `i`'s are `near[start[i]..start[i + 1]]`.
+pub(crate) struct Neighbours {
+    pub start: Vec<usize>,
+    pub near: Vec<usize>,
+}
+
+impl Neighbours {
+    fn of(&self, i: usize) -> &[usize] {
+        &self.near[self.start[i]..self.start[i + 1]]
+    }
+}
+
+/// A point leveled with the fitted attitude, once for every surface it is tried on: the
+/// measured point `L (o + u r)`, the ray's direction `L u` and its origin `L o`.
+struct Leveled {
+    q: Vector3<f64>,
+    u: Vector3<f64>,
+    o: Vector3<f64>,
+}
+
+fn leveled(p: &LabelledPoint, rot: &Rotations) -> Leveled {
+    let l = &rot.level_from_robot;
+    Leveled {
+        q: l * (p.origin.coords + p.dir * p.range),
+        u: l * p.dir,
+        o: l * p.origin.coords,
+    }
+}
 
 /// A surface of the fitted model and, for a wall, the stretch of its line it may take points
-/// from (the tangent coordinate `(-sin a, cos a) . (x, y)` in the level frame).
+/// from (the tangent coordinate `(-sin a, cos a) . (x, y)` in the level frame), with the
+/// azimuth's `(sin a, cos a)`.
 struct Fitted {
     surface: Surface,
     placement: Placement,
     stretch: (f64, f64),
+    sin_cos: (f64, f64),
 }
 
 /// New labels for `points` (their `surface` is ignored) under `sol`, given the current labels
@@ -31,7 +63,7 @@ struct Fitted {
 /// below `min_incidence` stay out, as the fit leaves them out.
 pub(crate) fn relabel(
     points: &[LabelledPoint],
-    neighbours: &[Vec<usize>],
+    neighbours: &Neighbours,
     labels: &[Option<Surface>],
     sol: &MlSolution,
     k: f64,
@@ -39,17 +71,20 @@ pub(crate) fn relabel(
     min_incidence: f64,
 ) -> Vec<Option<Surface>> {
     let rot = Rotations::at(&Vector2::new(sol.attitude[0], sol.attitude[1]));
-    let fitted = fitted_surfaces(points, labels, sol, &rot, margin);
-    let mut next = assign(points, &fitted, &rot, k, min_incidence);
+    let level: Vec<Leveled> = points.iter().map(|p| leveled(p, &rot)).collect();
+    let fitted = fitted_surfaces(&level, labels, sol, margin);
+    let mut next = assign(points, &level, &fitted, k, min_incidence);
     for (i, l) in next.iter_mut().enumerate() {
-        let level = match (*l, sol.floor, sol.ceiling) {
+        let level_plane = match (*l, sol.floor, sol.ceiling) {
             (Some(Surface::Floor), Some(h), _) => (1.0, h),
             (Some(Surface::Ceiling), _, Some(h)) => (-1.0, h),
             _ => continue,
         };
-        if neighbours[i]
+        let on = (&points[i], &level[i]);
+        if neighbours
+            .of(i)
             .iter()
-            .any(|&j| stands_over(&points[i], &points[j], &rot, k, level))
+            .any(|&j| stands_over(on, (&points[j], &level[j]), k, level_plane))
         {
             *l = None;
         }
@@ -68,21 +103,14 @@ pub(crate) fn relabel(
 /// catches the feet near the scanner, where adjacent scans stand only 10-20 cm apart on the
 /// wall.
 fn stands_over(
-    p: &LabelledPoint,
-    q: &LabelledPoint,
-    rot: &Rotations,
+    (p, lp): (&LabelledPoint, &Leveled),
+    (q, lq): (&LabelledPoint, &Leveled),
     k: f64,
     (side, height): (f64, f64),
 ) -> bool {
-    let level = |p: &LabelledPoint| {
-        (
-            rot.level_from_robot * (p.origin.coords + p.dir * p.range),
-            rot.level_from_robot * p.dir,
-        )
-    };
-    let ((a, da), (b, db)) = (level(p), level(q));
-    let h2 = |d: &nalgebra::Vector3<f64>, s: f64| (d.x * d.x + d.y * d.y) * s * s;
-    let var_h = h2(&da, p.sigma) + h2(&db, q.sigma);
+    let ((a, da), (b, db)) = ((&lp.q, &lp.u), (&lq.q, &lq.u));
+    let h2 = |d: &Vector3<f64>, s: f64| (d.x * d.x + d.y * d.y) * s * s;
+    let var_h = h2(da, p.sigma) + h2(db, q.sigma);
     let dh2 = (a.x - b.x).powi(2) + (a.y - b.y).powi(2);
     let off = (b.z - height) * side;
     dh2 <= k * k * var_h && off > 0.0 && off * off > k * k * (db.z * q.sigma).powi(2)
@@ -92,8 +120,8 @@ fn stands_over(
 /// when none or several do.
 fn assign(
     points: &[LabelledPoint],
+    level: &[Leveled],
     fitted: &[Fitted],
-    rot: &Rotations,
     k: f64,
     min_incidence: f64,
 ) -> Vec<Option<Surface>> {
@@ -104,19 +132,20 @@ fn assign(
         .collect();
     points
         .iter()
-        .map(|p| {
+        .zip(level)
+        .map(|(p, l)| {
             let mut found = None;
             for (f, plane) in fitted.iter().zip(&planes) {
-                if incidence_on(p, &plane.normal, rot) < min_incidence {
+                if plane.normal.dot(&l.u).abs() < min_incidence {
                     continue;
                 }
                 if let Surface::Wall(_) = f.surface {
-                    let t = tangent(&f.placement, &level_point(p, rot));
+                    let t = tangent(f.sin_cos, &l.q);
                     if t < f.stretch.0 || t > f.stretch.1 {
                         continue;
                     }
                 }
-                let rho = range_rho(p, plane, rot);
+                let rho = (p.range - predict_level(plane, &l.u, &l.o).0) / p.sigma;
                 if rho.abs() <= k {
                     if found.is_some() {
                         return None;
@@ -132,10 +161,9 @@ fn assign(
 /// The model's surfaces with the stretch of each wall: its labelled points' tangent
 /// coordinates, widened by `margin` at both ends.
 fn fitted_surfaces(
-    points: &[LabelledPoint],
+    level: &[Leveled],
     labels: &[Option<Surface>],
     sol: &MlSolution,
-    rot: &Rotations,
     margin: f64,
 ) -> Vec<Fitted> {
     let mut fitted: Vec<Fitted> = sol
@@ -148,15 +176,16 @@ fn fitted_surfaces(
                 azimuth: w.azimuth,
             },
             stretch: (f64::INFINITY, f64::NEG_INFINITY),
+            sin_cos: w.azimuth.sin_cos(),
         })
         .collect();
     for f in &mut fitted {
-        for (p, _) in points
+        for (l, _) in level
             .iter()
             .zip(labels)
             .filter(|(_, l)| **l == Some(f.surface))
         {
-            let t = tangent(&f.placement, &level_point(p, rot));
+            let t = tangent(f.sin_cos, &l.q);
             f.stretch = (f.stretch.0.min(t), f.stretch.1.max(t));
         }
         f.stretch = (f.stretch.0 - margin, f.stretch.1 + margin);
@@ -170,20 +199,14 @@ fn fitted_surfaces(
                     azimuth: 0.0,
                 },
                 stretch: (f64::NEG_INFINITY, f64::INFINITY),
+                sin_cos: (0.0, 1.0),
             });
         }
     }
     fitted
 }
 
-/// The measured point in the level frame, `(x, y)`.
-fn level_point(p: &LabelledPoint, rot: &Rotations) -> Vector2<f64> {
-    let q = rot.level_from_robot * (p.origin.coords + p.dir * p.range);
-    Vector2::new(q.x, q.y)
-}
-
-/// The coordinate along a wall's line of a level-frame `(x, y)`.
-fn tangent(placement: &Placement, q: &Vector2<f64>) -> f64 {
-    let (s, c) = placement.azimuth.sin_cos();
+/// The coordinate along a wall's line, of azimuth's `(sin a, cos a)`, of a level-frame point.
+fn tangent((s, c): (f64, f64), q: &Vector3<f64>) -> f64 {
     -s * q.x + c * q.y
 }

@@ -17,7 +17,6 @@ use super::model::{
 use super::{LabelledPoint, MlError, MlParams, MlSolution, Surface, SurfaceFit, WallLine};
 use crate::geometry::Attitude;
 use nalgebra::{Matrix2, Vector2};
-use std::collections::BTreeMap;
 
 /// The arrow-shaped normal equations at one state.
 struct Arrow {
@@ -84,7 +83,10 @@ pub(crate) fn refine(
         0
     };
     state.frozen = None;
-    state.activate(params.min_incidence);
+    if approach > 0 {
+        // The approach moved the state: which points graze their plane moved with it.
+        state.activate(params.min_incidence);
+    }
     let (iterations, converged) = state.minimise(params, params.huber_k, params.step_tolerance);
     let up = Attitude::new(state.theta.x, state.theta.y).up_in_robot();
     if up.z < params.max_tilt_deg.to_radians().cos() {
@@ -103,6 +105,27 @@ pub(crate) fn refine(
 /// The approach ends when its attitude step is below this \[rad\] (0.06 millidegrees): well
 /// inside the likelihood's basin.
 const APPROACH_TOLERANCE: f64 = 1e-6;
+
+/// The points' indices grouped by surface, the surfaces in their order (a few surfaces, so a
+/// short list searched from the last one found: the points of a surface come in runs).
+fn group_by_surface(points: &[LabelledPoint]) -> Vec<(Surface, Vec<usize>)> {
+    let mut groups: Vec<(Surface, Vec<usize>)> = Vec::new();
+    let mut last = 0;
+    for (i, p) in points.iter().enumerate() {
+        if groups.get(last).is_none_or(|g| g.0 != p.surface) {
+            last = match groups.iter().position(|g| g.0 == p.surface) {
+                Some(j) => j,
+                None => {
+                    groups.push((p.surface, Vec::new()));
+                    groups.len() - 1
+                }
+            };
+        }
+        groups[last].1.push(i);
+    }
+    groups.sort_by_key(|g| g.0);
+    groups
+}
 
 fn huber_cost(rho: f64, k: f64) -> f64 {
     let a = rho.abs();
@@ -123,10 +146,7 @@ impl<'a> State<'a> {
     /// be fitted at the starting attitude) and places each surface.
     fn new(points: &'a [LabelledPoint], theta: Vector2<f64>, params: &MlParams) -> Self {
         let rot = Rotations::at(&theta);
-        let mut groups: BTreeMap<Surface, Vec<usize>> = BTreeMap::new();
-        for (i, p) in points.iter().enumerate() {
-            groups.entry(p.surface).or_default().push(i);
-        }
+        let groups = group_by_surface(points);
         let mut slot = vec![None; points.len()];
         let mut surfaces = Vec::new();
         let mut placements = Vec::new();
@@ -205,14 +225,20 @@ impl<'a> State<'a> {
         if self.frozen.is_none() {
             return;
         }
-        self.activate(min_incidence);
+        self.predictions.clear();
         let rot = Rotations::at(&self.theta);
         let planes = self.planes(&self.placements);
-        let b = self
+        let b: Vec<f64> = self
             .points
             .iter()
             .zip(&self.slot)
             .map(|(p, s)| s.map_or(1.0, |s| incidence_on(p, &planes[s].normal, &rot)))
+            .collect();
+        self.active = self
+            .slot
+            .iter()
+            .zip(&b)
+            .map(|(s, &b)| s.is_some() && b >= min_incidence)
             .collect();
         self.frozen = Some(b);
     }
@@ -362,11 +388,17 @@ impl<'a> State<'a> {
         let cov = schur.try_inverse().ok_or(MlError::Unobservable)?;
         let rot = Rotations::at(&self.theta);
         let planes = self.planes(&self.placements);
-        let residuals: Vec<Option<f64>> = self
-            .points
-            .iter()
-            .zip(self.slot.iter().zip(&self.active))
-            .map(|(p, (s, &a))| s.filter(|_| a).map(|s| range_rho(p, &planes[s], &rot)))
+        // The range residuals at the state, from the predictions its cost made when known.
+        let cached = self.predictions.len() == self.points.len();
+        let residuals: Vec<Option<f64>> = (0..self.points.len())
+            .map(|i| {
+                let s = self.slot[i].filter(|_| self.active[i])?;
+                let p = &self.points[i];
+                Some(match cached {
+                    true => (p.range - self.predictions[i].0) / p.sigma,
+                    false => range_rho(p, &planes[s], &rot),
+                })
+            })
             .collect();
         let clipped = |r: f64| (r * r).min(k * k);
         let mut surfaces: Vec<SurfaceFit> = self
@@ -521,6 +553,23 @@ fn damped_step(arrow: &Arrow, lambda: f64) -> Option<(Vector2<f64>, Vec<Vector2<
 /// Mean and variance of `min(z^2, k^2)` for a standard normal `z` (Simpson's rule on
 /// `[0, k]`): what one point adds to the clipped chi-square when the model is right.
 pub(crate) fn clipped_chi2_moments(k: f64) -> (f64, f64) {
+    // Every refinement asks for the same threshold: the last answer is kept per thread
+    // (2000 exponentials each, a twentieth of a refinement's work).
+    thread_local! {
+        static LAST: std::cell::Cell<Option<(u64, (f64, f64))>> = const { std::cell::Cell::new(None) };
+    }
+    LAST.with(|last| match last.get() {
+        Some((bits, moments)) if bits == k.to_bits() => moments,
+        _ => {
+            let moments = clipped_chi2_moments_of(k);
+            last.set(Some((k.to_bits(), moments)));
+            moments
+        }
+    })
+}
+
+/// [`clipped_chi2_moments`], computed.
+fn clipped_chi2_moments_of(k: f64) -> (f64, f64) {
     let n = 2000;
     let h = k / n as f64;
     let pdf = |z: f64| (-0.5 * z * z).exp() / (2.0 * std::f64::consts::PI).sqrt();
