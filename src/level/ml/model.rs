@@ -7,6 +7,10 @@
 //! range noise along each ray, as the Cramér-Rao bound takes it ([`crate::eval::bound`]).
 //! A wall is a vertical plane, `n = (cos a, sin a, 0)` (a 2D line of the level frame), the
 //! floor and the ceiling are level, `n = (0, 0, 1)`, each at its own height `d`.
+//!
+//! The residuals and derivatives here are the model written plainly, point by point; the
+//! refinement's passes ([`super::evaluate`]) compute the same quantities rearranged, and the
+//! tests hold the two equal.
 
 use super::{LabelledPoint, Surface};
 use crate::geometry::{rot_x, rot_y};
@@ -14,7 +18,7 @@ use nalgebra::{Matrix2, Matrix3, Point3, SymmetricEigen, Vector2, Vector3};
 
 /// Smallest `|n . L u|` a prediction divides by: a ray grazing its plane (the residual's
 /// derivatives grow without bound there; the robust kernel then discounts the point).
-const MIN_INCIDENCE: f64 = 1e-3;
+pub(crate) const MIN_INCIDENCE: f64 = 1e-3;
 
 /// The attitude's rotation and its derivatives by `theta_x` and `theta_y`.
 #[derive(Clone, Debug)]
@@ -84,6 +88,7 @@ impl Plane {
 /// One point's normalised residual and its derivatives: by `(theta_x, theta_y)` and by its
 /// surface's `(offset, azimuth)` (the azimuth's is zero for the floor and ceiling).
 #[derive(Clone, Copy, Debug)]
+#[cfg(test)]
 pub(crate) struct Linearized {
     pub rho: f64,
     pub by_attitude: Vector2<f64>,
@@ -96,6 +101,7 @@ pub(crate) struct Linearized {
 /// the parameters and has no pole where a ray turns parallel to its plane, which a floor ray
 /// near the horizon does under a wrong attitude; at a fixed incidence its magnitude is the
 /// range residual's.
+#[cfg(test)]
 pub(crate) fn linearize_plane(
     point: &LabelledPoint,
     plane: &Plane,
@@ -116,6 +122,7 @@ pub(crate) fn linearize_plane(
 }
 
 /// [`linearize_plane`]'s residual alone (the cost of a trial step needs no derivatives).
+#[cfg(test)]
 pub(crate) fn plane_rho(
     point: &LabelledPoint,
     plane: &Plane,
@@ -130,12 +137,14 @@ pub(crate) fn plane_rho(
 
 /// `|n . L u|` of `point` on a plane of normal `n`: the share of its range noise along the
 /// normal.
+#[cfg(test)]
 pub(crate) fn incidence_on(point: &LabelledPoint, n: &Vector3<f64>, rot: &Rotations) -> f64 {
     n.dot(&(rot.level_from_robot * point.dir)).abs()
 }
 
 /// The range `r^` the model predicts for `point` on `plane` and the divisor `b = n . L u` it
 /// took (kept from zero by [`MIN_INCIDENCE`]).
+#[cfg(test)]
 pub(crate) fn predict(point: &LabelledPoint, plane: &Plane, rot: &Rotations) -> (f64, f64) {
     let lu = rot.level_from_robot * point.dir;
     let lo = rot.level_from_robot * point.origin.coords;
@@ -155,11 +164,6 @@ pub(crate) fn predict_level(plane: &Plane, lu: &Vector3<f64>, lo: &Vector3<f64>)
     ((plane.offset - n.dot(lo)) / b, b)
 }
 
-/// [`linearize_on`]'s residual alone.
-pub(crate) fn range_rho(point: &LabelledPoint, plane: &Plane, rot: &Rotations) -> f64 {
-    (point.range - predict(point, plane, rot).0) / point.sigma
-}
-
 /// The residual of `point` on its surface at `placement`, under the attitude `rot`.
 #[cfg(test)]
 pub(crate) fn linearize(
@@ -171,11 +175,13 @@ pub(crate) fn linearize(
 }
 
 /// The residual of `point` and its derivatives on its surface's plane at the state.
+#[cfg(test)]
 pub(crate) fn linearize_on(point: &LabelledPoint, plane: &Plane, rot: &Rotations) -> Linearized {
     linearize_predicted(point, plane, rot, predict(point, plane, rot))
 }
 
 /// [`linearize_on`] given [`predict`]'s `(r^, b)` at the same state.
+#[cfg(test)]
 pub(crate) fn linearize_predicted(
     point: &LabelledPoint,
     plane: &Plane,

@@ -8,23 +8,14 @@
 //! attitude's covariance with the placements marginalised: the Cramér-Rao bound's
 //! construction (Kay 1993, ch. 3), evaluated at the estimate. Points are weighted by the
 //! Huber kernel (iteratively reweighted least squares); the floor's and ceiling's unused
-//! azimuth slot gets a unit diagonal so every block stays 2x2 and invertible.
+//! azimuth slot gets a unit diagonal so every block stays 2x2 and invertible. The passes over
+//! the points are [`super::evaluate`]'s.
 
-use super::model::{
-    Linearized, Placement, Plane, Rotations, incidence_on, initial_placement, linearize_on,
-    linearize_plane, linearize_predicted, plane_rho, predict, range_rho,
-};
+use super::evaluate::{Arrow, Evaluation, Frame, Ray, Residual, evaluate};
+use super::model::{MIN_INCIDENCE, Placement, Plane, Rotations, initial_placement};
 use super::{LabelledPoint, MlError, MlParams, MlSolution, Surface, SurfaceFit, WallLine};
 use crate::geometry::Attitude;
 use nalgebra::{Matrix2, Vector2};
-
-/// The arrow-shaped normal equations at one state.
-struct Arrow {
-    h_aa: Matrix2<f64>,
-    g_a: Vector2<f64>,
-    /// Per surface: `H_as`, `H_ss`, `g_s`.
-    blocks: Vec<(Matrix2<f64>, Matrix2<f64>, Vector2<f64>)>,
-}
 
 /// The points' grouping by surface and the state being refined.
 struct State<'a> {
@@ -34,15 +25,14 @@ struct State<'a> {
     surfaces: Vec<Surface>,
     theta: Vector2<f64>,
     placements: Vec<Placement>,
-    /// While approaching from far: each point's incidence, frozen for one iteration (the
-    /// plane residual, [`linearize_plane`]); `None` for the range residual.
-    frozen: Option<Vec<f64>>,
-    /// Per point: used in the fit (on a kept surface, and not grazing it).
-    active: Vec<bool>,
-    /// Per point, for the range residual at the current state: [`predict`]'s `(r^, b)` as
-    /// the cost of that state computed them (NaN for a point not used), so the normal
-    /// equations there need not predict again; empty when not known.
-    predictions: Vec<(f64, f64)>,
+    /// The residual being minimised: the plane residual while approaching from far (at the
+    /// incidences frozen in `rays`), then the range residual.
+    residual: Residual,
+    /// The points used (on a kept surface, and not grazing it), in surface order.
+    rays: Vec<Ray>,
+    /// The range residual's pass at the current state with the kernel's threshold, when
+    /// known (the last accepted step's).
+    last: Option<Evaluation>,
 }
 
 /// Refines up from `up0` (robot frame, any length) and the labelled points: the maximum
@@ -67,14 +57,22 @@ pub(crate) fn refine(
     let start = Attitude::from_up(up0);
     let mut state = State::new(points, Vector2::new(start.theta_x, start.theta_y), params);
     let parameters = 2 + 2 * state.surfaces.len();
-    if state.active.iter().filter(|&&a| a).count() <= parameters {
+    if state.slot.iter().filter(|s| s.is_some()).count() <= parameters {
         return Err(MlError::TooFewPoints);
     }
     // From far: least squares on the plane residuals, into the basin; then the likelihood
     // itself, robustly.
-    state.frozen = Some(Vec::new());
-    state.freeze(params.min_incidence);
-    if observable_schur(&state.arrow(f64::INFINITY)).is_none() {
+    state.residual = Residual::Plane;
+    state.take_rays(params.min_incidence);
+    let mut first = Evaluation::default();
+    state.evaluate_at(
+        &state.theta,
+        &state.placements,
+        f64::INFINITY,
+        true,
+        &mut first,
+    );
+    if observable_schur(&first.arrow).is_none() {
         return Err(MlError::Unobservable);
     }
     let approach = if params.approach {
@@ -82,10 +80,10 @@ pub(crate) fn refine(
     } else {
         0
     };
-    state.frozen = None;
+    state.residual = Residual::Range;
     if approach > 0 {
         // The approach moved the state: which points graze their plane moved with it.
-        state.activate(params.min_incidence);
+        state.take_rays(params.min_incidence);
     }
     let (iterations, converged) = state.minimise(params, params.huber_k, params.step_tolerance);
     let up = Attitude::new(state.theta.x, state.theta.y).up_in_robot();
@@ -127,20 +125,6 @@ fn group_by_surface(points: &[LabelledPoint]) -> Vec<(Surface, Vec<usize>)> {
     groups
 }
 
-fn huber_cost(rho: f64, k: f64) -> f64 {
-    let a = rho.abs();
-    if a <= k {
-        0.5 * rho * rho
-    } else {
-        k * a - 0.5 * k * k
-    }
-}
-
-fn huber_weight(rho: f64, k: f64) -> f64 {
-    let a = rho.abs();
-    if a <= k { 1.0 } else { k / a }
-}
-
 impl<'a> State<'a> {
     /// Groups the points by surface (keeping surfaces with enough points whose placement can
     /// be fitted at the starting attitude) and places each surface.
@@ -169,197 +153,130 @@ impl<'a> State<'a> {
             surfaces,
             theta,
             placements,
-            frozen: None,
-            predictions: Vec::new(),
-            active: slot.iter().map(Option::is_some).collect(),
+            residual: Residual::Range,
+            rays: Vec::new(),
+            last: None,
             slot,
         }
     }
 
-    /// Uses the points on a kept surface whose ray meets it at an incidence `|n . L u|` of
-    /// at least `min_incidence` at the current state.
-    fn activate(&mut self, min_incidence: f64) {
-        self.predictions.clear();
-        let rot = Rotations::at(&self.theta);
-        let planes = self.planes(&self.placements);
-        self.active = self
-            .points
-            .iter()
-            .zip(&self.slot)
-            .map(|(p, s)| {
-                s.is_some_and(|s| incidence_on(p, &planes[s].normal, &rot) >= min_incidence)
-            })
-            .collect();
-    }
-
-    /// Every surface's plane at `placements`.
-    fn planes(&self, placements: &[Placement]) -> Vec<Plane> {
+    /// Every surface's plane at `theta` and `placements`, carried into the robot frame.
+    fn frames(&self, theta: &Vector2<f64>, placements: &[Placement]) -> Vec<Frame> {
+        let rot = Rotations::at(theta);
         self.surfaces
             .iter()
             .zip(placements)
-            .map(|(&s, p)| Plane::at(p, s))
+            .map(|(&s, p)| Frame::at(&Plane::at(p, s), &rot))
             .collect()
     }
 
-    /// Point `i`'s residual at a trial state, by the current mode.
-    fn residual(&self, i: usize, plane: &Plane, rot: &Rotations) -> Linearized {
-        let p = &self.points[i];
-        match &self.frozen {
-            Some(b) => linearize_plane(p, plane, rot, b[i]),
-            None => linearize_on(p, plane, rot),
+    /// Takes in the points on a kept surface whose ray meets it at an incidence `|n . L u|`
+    /// of at least `min_incidence` at the current state, in surface order, with that
+    /// incidence frozen for the plane residual.
+    fn take_rays(&mut self, min_incidence: f64) {
+        self.last = None;
+        let frames = self.frames(&self.theta, &self.placements);
+        // Each surface's rays from where its run starts (a counting sort, input order kept).
+        let mut start = vec![0; self.surfaces.len() + 1];
+        for s in self.slot.iter().flatten() {
+            start[s + 1] += 1;
         }
+        for s in 1..start.len() {
+            start[s] += start[s - 1];
+        }
+        let mut sorted = vec![None; start[self.surfaces.len()]];
+        for (index, (p, s)) in self.points.iter().zip(&self.slot).enumerate() {
+            let Some(slot) = *s else {
+                continue;
+            };
+            let incidence = frames[slot].incidence(&p.dir);
+            let at = start[slot];
+            start[slot] += 1;
+            if incidence < min_incidence {
+                continue;
+            }
+            sorted[at] = Some(Ray {
+                index,
+                slot,
+                origin: p.origin.coords,
+                dir: p.dir,
+                range: p.range,
+                sigma: p.sigma,
+                point: p.origin.coords + p.dir * p.range,
+                plane_scale: 1.0 / (p.sigma * incidence.max(MIN_INCIDENCE)),
+            });
+        }
+        self.rays.clear();
+        self.rays.extend(sorted.into_iter().flatten());
     }
 
-    /// [`Self::residual`]'s value alone.
-    fn rho(&self, i: usize, plane: &Plane, rot: &Rotations) -> f64 {
-        let p = &self.points[i];
-        match &self.frozen {
-            Some(b) => plane_rho(p, plane, rot, b[i]),
-            None => range_rho(p, plane, rot),
-        }
-    }
-
-    /// Freezes every point's incidence at the current state, and uses only those not grazing
-    /// their plane (plane mode only).
-    fn freeze(&mut self, min_incidence: f64) {
-        if self.frozen.is_none() {
-            return;
-        }
-        self.predictions.clear();
-        let rot = Rotations::at(&self.theta);
-        let planes = self.planes(&self.placements);
-        let b: Vec<f64> = self
-            .points
-            .iter()
-            .zip(&self.slot)
-            .map(|(p, s)| s.map_or(1.0, |s| incidence_on(p, &planes[s].normal, &rot)))
-            .collect();
-        self.active = self
-            .slot
-            .iter()
-            .zip(&b)
-            .map(|(s, &b)| s.is_some() && b >= min_incidence)
-            .collect();
-        self.frozen = Some(b);
-    }
-
-    /// The robust cost at a trial state; for the range residual, each point's prediction
-    /// there into `predictions` (else it is left empty).
-    fn cost(
+    /// The pass at a trial state with threshold `k` into `out`.
+    fn evaluate_at(
         &self,
         theta: &Vector2<f64>,
         placements: &[Placement],
         k: f64,
-        predictions: &mut Vec<(f64, f64)>,
-    ) -> f64 {
-        let rot = Rotations::at(theta);
-        let planes = self.planes(placements);
-        predictions.clear();
-        if self.frozen.is_some() {
-            return (0..self.points.len())
-                .filter_map(|i| {
-                    let s = self.slot[i].filter(|_| self.active[i])?;
-                    Some(huber_cost(self.rho(i, &planes[s], &rot), k))
-                })
-                .sum();
-        }
-        predictions.resize(self.points.len(), (f64::NAN, f64::NAN));
-        (0..self.points.len())
-            .filter_map(|i| {
-                let s = self.slot[i].filter(|_| self.active[i])?;
-                let p = &self.points[i];
-                let pred = predict(p, &planes[s], &rot);
-                predictions[i] = pred;
-                Some(huber_cost((p.range - pred.0) / p.sigma, k))
-            })
-            .sum()
-    }
-
-    /// The weighted normal equations at the current state.
-    fn arrow(&self, k: f64) -> Arrow {
-        let rot = Rotations::at(&self.theta);
-        let planes = self.planes(&self.placements);
-        let cached = self.frozen.is_none() && self.predictions.len() == self.points.len();
-        let mut arrow = Arrow {
-            h_aa: Matrix2::zeros(),
-            g_a: Vector2::zeros(),
-            blocks: vec![
-                (Matrix2::zeros(), Matrix2::zeros(), Vector2::zeros());
-                self.surfaces.len()
-            ],
-        };
-        for i in 0..self.points.len() {
-            let Some(s) = self.slot[i].filter(|_| self.active[i]) else {
-                continue;
-            };
-            let lin = match self.predictions.get(i).filter(|_| cached) {
-                Some(&pred) => linearize_predicted(&self.points[i], &planes[s], &rot, pred),
-                None => self.residual(i, &planes[s], &rot),
-            };
-            let w = huber_weight(lin.rho, k);
-            let (ja, js) = (lin.by_attitude, lin.by_placement);
-            arrow.h_aa += ja * ja.transpose() * w;
-            arrow.g_a += ja * (lin.rho * w);
-            let block = &mut arrow.blocks[s];
-            block.0 += ja * js.transpose() * w;
-            block.1 += js * js.transpose() * w;
-            block.2 += js * (lin.rho * w);
-        }
-        for (surface, block) in self.surfaces.iter().zip(&mut arrow.blocks) {
-            if !matches!(surface, Surface::Wall(_)) {
-                block.1[(1, 1)] = 1.0;
-            }
-        }
-        arrow
+        with_arrow: bool,
+        out: &mut Evaluation,
+    ) {
+        let frames = self.frames(theta, placements);
+        evaluate(&self.rays, &frames, self.residual, k, with_arrow, out);
     }
 
     /// Runs Levenberg-Marquardt with Huber threshold `k` until the attitude step is below
-    /// `tolerance`: `(iterations, converged)`.
+    /// `tolerance`: `(iterations, converged)`. With the range residual, each trial's pass
+    /// gives its normal equations, which serve the next step when it is accepted; the plane
+    /// residual's change with every freeze of the incidences, so it passes again.
     fn minimise(&mut self, params: &MlParams, k: f64, tolerance: f64) -> (usize, bool) {
         let mut lambda = 1e-6;
-        // The range residual's cost carries over from the step accepted; the plane
-        // residual's changes with every freeze.
-        let mut kept_cost: Option<f64> = None;
-        let mut trial_predictions = Vec::new();
+        let plane = self.residual == Residual::Plane;
+        let step_sigmas2 = params.step_sigmas * params.step_sigmas;
+        let mut current = self.last.take().unwrap_or_default();
+        let mut known = false;
+        let mut trial = Evaluation::default();
+        let mut placements = Vec::with_capacity(self.placements.len());
+        let mut outcome = (params.max_iterations, false);
         for iteration in 1..=params.max_iterations {
-            self.freeze(params.min_incidence);
-            let mut cost = match kept_cost.filter(|_| self.frozen.is_none()) {
-                Some(c) => c,
-                None => {
-                    let mut predictions = std::mem::take(&mut self.predictions);
-                    let c = self.cost(&self.theta, &self.placements, k, &mut predictions);
-                    self.predictions = predictions;
-                    c
-                }
-            };
-            let arrow = self.arrow(k);
+            if plane {
+                self.take_rays(params.min_incidence);
+            }
+            if plane || !known {
+                self.evaluate_at(&self.theta, &self.placements, k, true, &mut current);
+                known = true;
+            }
             let mut accepted = false;
             let mut step_norm = f64::INFINITY;
             // Damp until the cost falls (Marquardt's scaling by the diagonal).
             for _ in 0..12 {
-                let Some((d_theta, d_place)) = damped_step(&arrow, lambda) else {
+                let Some((d_theta, d_place)) = damped_step(&current.arrow, lambda) else {
                     lambda *= 10.0;
                     continue;
                 };
+                if !plane && decrement(&current.arrow, &d_theta, &d_place) < step_sigmas2 {
+                    // The step moves no parameter, nor any combination of them, by as much
+                    // as `step_sigmas` of its sigma: the state is the optimum for every
+                    // purpose, and taking the step would cost a pass for nothing (near the
+                    // optimum the cost's change is rounding, and trials get refused).
+                    return self.keep(iteration, true, current);
+                }
                 let theta = self.theta + d_theta;
-                let placements: Vec<Placement> = self
-                    .placements
-                    .iter()
-                    .zip(&d_place)
-                    .map(|(p, d)| Placement {
-                        offset: p.offset + d.x,
-                        azimuth: p.azimuth + d.y,
-                    })
-                    .collect();
-                let trial = self.cost(&theta, &placements, k, &mut trial_predictions);
+                placements.clear();
+                placements.extend(
+                    self.placements
+                        .iter()
+                        .zip(&d_place)
+                        .map(|(p, d)| Placement {
+                            offset: p.offset + d.x,
+                            azimuth: p.azimuth + d.y,
+                        }),
+                );
+                self.evaluate_at(&theta, &placements, k, !plane, &mut trial);
                 step_norm = d_theta.norm();
-                if trial <= cost {
+                if trial.cost <= current.cost {
                     self.theta = theta;
-                    self.placements = placements;
-                    std::mem::swap(&mut self.predictions, &mut trial_predictions);
-                    let settled = cost - trial <= 1e-14 * cost.max(1e-300);
-                    cost = trial;
-                    kept_cost = Some(cost);
+                    std::mem::swap(&mut self.placements, &mut placements);
+                    let settled = current.cost - trial.cost <= 1e-14 * current.cost.max(1e-300);
+                    std::mem::swap(&mut current, &mut trial);
                     lambda = (lambda / 10.0).max(1e-12);
                     accepted = true;
                     if settled {
@@ -370,10 +287,20 @@ impl<'a> State<'a> {
                 lambda *= 10.0;
             }
             if !accepted || step_norm < tolerance {
-                return (iteration, accepted || step_norm < tolerance);
+                outcome = (iteration, accepted || step_norm < tolerance);
+                break;
             }
         }
-        (params.max_iterations, false)
+        self.keep(outcome.0, outcome.1, current)
+    }
+
+    /// Ends [`Self::minimise`]: keeps the range residual's pass at the final state for the
+    /// solution, and returns `(iterations, converged)`.
+    fn keep(&mut self, iterations: usize, converged: bool, current: Evaluation) -> (usize, bool) {
+        if self.residual == Residual::Range {
+            self.last = Some(current);
+        }
+        (iterations, converged)
     }
 
     /// The estimate at the current state: covariance, residuals and the chi-square test.
@@ -384,22 +311,20 @@ impl<'a> State<'a> {
         converged: bool,
     ) -> Result<MlSolution, MlError> {
         let k = params.huber_k;
-        let schur = observable_schur(&self.arrow(k)).ok_or(MlError::Unobservable)?;
+        let mut at_state = Evaluation::default();
+        let eval = match &self.last {
+            Some(e) => e,
+            None => {
+                self.evaluate_at(&self.theta, &self.placements, k, true, &mut at_state);
+                &at_state
+            }
+        };
+        let schur = observable_schur(&eval.arrow).ok_or(MlError::Unobservable)?;
         let cov = schur.try_inverse().ok_or(MlError::Unobservable)?;
-        let rot = Rotations::at(&self.theta);
-        let planes = self.planes(&self.placements);
-        // The range residuals at the state, from the predictions its cost made when known.
-        let cached = self.predictions.len() == self.points.len();
-        let residuals: Vec<Option<f64>> = (0..self.points.len())
-            .map(|i| {
-                let s = self.slot[i].filter(|_| self.active[i])?;
-                let p = &self.points[i];
-                Some(match cached {
-                    true => (p.range - self.predictions[i].0) / p.sigma,
-                    false => range_rho(p, &planes[s], &rot),
-                })
-            })
-            .collect();
+        let mut residuals: Vec<Option<f64>> = vec![None; self.points.len()];
+        for (ray, predicted) in self.rays.iter().zip(&eval.predicted) {
+            residuals[ray.index] = Some((ray.range - predicted) / ray.sigma);
+        }
         let clipped = |r: f64| (r * r).min(k * k);
         let mut surfaces: Vec<SurfaceFit> = self
             .surfaces
@@ -472,10 +397,6 @@ impl<'a> State<'a> {
     }
 }
 
-/// The pseudo-inverse of a surface's own information: a placement the points leave free (a
-/// wall seen as one vertical line of points has no azimuth) carries no information, and
-/// marginalising it removes none from the attitude, as in the bound (nor does a surface all
-/// of whose points are left out).
 fn pseudo_inverse(m: &Matrix2<f64>) -> Option<Matrix2<f64>> {
     let eig = m.symmetric_eigen();
     let top = eig.eigenvalues.amax();
@@ -548,6 +469,18 @@ fn damped_step(arrow: &Arrow, lambda: f64) -> Option<(Vector2<f64>, Vec<Vector2<
         .chain(d_place.iter().flat_map(|d| d.iter()))
         .all(|v| v.is_finite())
         .then_some((d_theta, d_place))
+}
+
+/// The Newton decrement of the step `(d_theta, d_place)`: `-g . d = d^T (H + lambda D) d`,
+/// the step's squared length in the parameters' own sigmas (at least, in every direction).
+fn decrement(arrow: &Arrow, d_theta: &Vector2<f64>, d_place: &[Vector2<f64>]) -> f64 {
+    let surfaces: f64 = arrow
+        .blocks
+        .iter()
+        .zip(d_place)
+        .map(|((_, _, g_s), d)| g_s.dot(d))
+        .sum();
+    -(arrow.g_a.dot(d_theta) + surfaces)
 }
 
 /// Mean and variance of `min(z^2, k^2)` for a standard normal `z` (Simpson's rule on

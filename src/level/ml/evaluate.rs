@@ -1,0 +1,224 @@
+//! One pass over the used points at a state of the refinement: the robust cost, the
+//! arrow-shaped normal equations ([`Arrow`]) and every point's predicted range, together.
+//!
+//! The model is [`super::model`]'s, rearranged so that a point costs a handful of dot
+//! products: `n . (L x) = (L^T n) . x`, so each surface's normal (and a wall's tangent) is
+//! rotated back into the robot frame once per state, with the attitude's derivatives, rather
+//! than every point being rotated into the level frame ([`Frame`]). The points of one surface
+//! are stored together ([`Ray`], in surface order), so each surface's block of the normal
+//! equations is summed in one run. A trial state's pass gives the normal equations there too:
+//! a step of Levenberg-Marquardt is nearly always accepted (its damping starts at 1e-6), and
+//! then the next step, and the covariance at the end, need no pass of their own.
+
+use super::model::{MIN_INCIDENCE, Plane, Rotations};
+use nalgebra::{Matrix2, Vector2, Vector3};
+
+/// The arrow-shaped normal equations at one state.
+#[derive(Clone, Debug, Default)]
+pub(crate) struct Arrow {
+    pub h_aa: Matrix2<f64>,
+    pub g_a: Vector2<f64>,
+    /// Per surface: `H_as`, `H_ss`, `g_s`.
+    pub blocks: Vec<(Matrix2<f64>, Matrix2<f64>, Vector2<f64>)>,
+}
+
+/// A point the fit uses, as the passes read it.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Ray {
+    /// Its index in the refinement's input.
+    pub index: usize,
+    /// Its surface's index.
+    pub slot: usize,
+    pub origin: Vector3<f64>,
+    pub dir: Vector3<f64>,
+    pub range: f64,
+    pub sigma: f64,
+    /// The measured point `o + u r` (robot frame), which the plane residual places.
+    pub point: Vector3<f64>,
+    /// The plane residual's scale `1 / (sigma max(b, MIN_INCIDENCE))`, for `b` the incidence
+    /// frozen when the ray was taken in ([`super::model::linearize_plane`]).
+    pub plane_scale: f64,
+}
+
+/// Which residual the pass takes (the module [`super::solve`] explains both).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Residual {
+    /// The range residual `(r - r^) / sigma`: the likelihood's.
+    Range,
+    /// The measured point's distance from its plane at a frozen incidence: the approach's.
+    Plane,
+}
+
+/// A surface's plane at one state, carried back into the robot frame: `L^T n` (so that
+/// `n . L x = normal . x`), the attitude's derivatives `(dL/d theta_k)^T n`, and a wall's
+/// tangent `L^T t` (zero for the floor and ceiling, whose azimuth is not a parameter).
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Frame {
+    normal: Vector3<f64>,
+    by_theta: [Vector3<f64>; 2],
+    tangent: Vector3<f64>,
+    offset: f64,
+    /// The floor or ceiling (no azimuth).
+    level: bool,
+}
+
+impl Frame {
+    pub fn at(plane: &Plane, rot: &Rotations) -> Self {
+        let n = &plane.normal;
+        Frame {
+            normal: rot.level_from_robot.tr_mul(n),
+            by_theta: [rot.by_theta[0].tr_mul(n), rot.by_theta[1].tr_mul(n)],
+            tangent: plane
+                .tangent
+                .map_or(Vector3::zeros(), |t| rot.level_from_robot.tr_mul(&t)),
+            offset: plane.offset,
+            level: plane.tangent.is_none(),
+        }
+    }
+
+    /// `|n . L u|` of a ray along `dir`: the share of its range noise along the normal.
+    pub fn incidence(&self, dir: &Vector3<f64>) -> f64 {
+        self.normal.dot(dir).abs()
+    }
+
+    /// The range the model predicts for `ray`, and the divisor `b = n . L u` it took (kept
+    /// from zero by [`MIN_INCIDENCE`]), as [`super::model::predict`].
+    fn predict(&self, ray: &Ray) -> (f64, f64) {
+        let raw = self.normal.dot(&ray.dir);
+        let b = if raw.abs() < MIN_INCIDENCE {
+            MIN_INCIDENCE.copysign(raw)
+        } else {
+            raw
+        };
+        ((self.offset - self.normal.dot(&ray.origin)) / b, b)
+    }
+}
+
+/// What a pass gives: the robust cost, the normal equations (when asked for) and, for the
+/// range residual, each ray's predicted range (in `rays`' order).
+#[derive(Clone, Debug, Default)]
+pub(crate) struct Evaluation {
+    pub cost: f64,
+    pub arrow: Arrow,
+    pub predicted: Vec<f64>,
+}
+
+pub(crate) fn huber_cost(rho: f64, k: f64) -> f64 {
+    let a = rho.abs();
+    if a <= k {
+        0.5 * rho * rho
+    } else {
+        k * a - 0.5 * k * k
+    }
+}
+
+pub(crate) fn huber_weight(rho: f64, k: f64) -> f64 {
+    let a = rho.abs();
+    if a <= k { 1.0 } else { k / a }
+}
+
+/// The pass over `rays` (in surface order) at the state whose surfaces are `frames`, with
+/// Huber threshold `k`, into `out`; the normal equations only `with_arrow`. The floor's and
+/// ceiling's unused azimuth gets a unit diagonal, so that every block stays invertible.
+pub(crate) fn evaluate(
+    rays: &[Ray],
+    frames: &[Frame],
+    residual: Residual,
+    k: f64,
+    with_arrow: bool,
+    out: &mut Evaluation,
+) {
+    out.cost = 0.0;
+    out.predicted.clear();
+    let arrow = &mut out.arrow;
+    arrow.h_aa = Matrix2::zeros();
+    arrow.g_a = Vector2::zeros();
+    arrow.blocks.clear();
+    arrow.blocks.resize(
+        frames.len(),
+        (Matrix2::zeros(), Matrix2::zeros(), Vector2::zeros()),
+    );
+    for run in rays.chunk_by(|a, b| a.slot == b.slot) {
+        let frame = &frames[run[0].slot];
+        let mut sums = Sums::default();
+        for ray in run {
+            // The residual, and the point and scale its derivatives take.
+            let (rho, q, scale) = match residual {
+                Residual::Range => {
+                    let (predicted, b) = frame.predict(ray);
+                    out.predicted.push(predicted);
+                    let q = ray.origin + ray.dir * predicted;
+                    (
+                        (ray.range - predicted) / ray.sigma,
+                        q,
+                        1.0 / (b * ray.sigma),
+                    )
+                }
+                Residual::Plane => {
+                    let rho = (frame.normal.dot(&ray.point) - frame.offset) * ray.plane_scale;
+                    (rho, ray.point, ray.plane_scale)
+                }
+            };
+            out.cost += huber_cost(rho, k);
+            if with_arrow {
+                // d r^/d theta = -n . L' q / b, d r^/d d = 1 / b, d r^/d a = -t . L q / b;
+                // the plane residual's are the same at its frozen incidence.
+                let ja = [
+                    frame.by_theta[0].dot(&q) * scale,
+                    frame.by_theta[1].dot(&q) * scale,
+                ];
+                let js = [-scale, frame.tangent.dot(&q) * scale];
+                sums.add(rho, ja, js, huber_weight(rho, k));
+            }
+        }
+        if with_arrow {
+            sums.into_arrow(arrow, run[0].slot);
+        }
+    }
+    for (block, frame) in arrow.blocks.iter_mut().zip(frames) {
+        if frame.level {
+            block.1[(1, 1)] = 1.0;
+        }
+    }
+}
+
+/// One surface's sums of the normal equations over its run of rays, kept in scalars.
+#[derive(Default)]
+struct Sums {
+    aa: [f64; 3],
+    ga: [f64; 2],
+    as_: [f64; 4],
+    ss: [f64; 3],
+    gs: [f64; 2],
+}
+
+impl Sums {
+    fn add(&mut self, rho: f64, ja: [f64; 2], js: [f64; 2], w: f64) {
+        let wa = [ja[0] * w, ja[1] * w];
+        let ws = [js[0] * w, js[1] * w];
+        self.aa[0] += ja[0] * wa[0];
+        self.aa[1] += ja[0] * wa[1];
+        self.aa[2] += ja[1] * wa[1];
+        self.ga[0] += wa[0] * rho;
+        self.ga[1] += wa[1] * rho;
+        self.as_[0] += wa[0] * js[0];
+        self.as_[1] += wa[0] * js[1];
+        self.as_[2] += wa[1] * js[0];
+        self.as_[3] += wa[1] * js[1];
+        self.ss[0] += js[0] * ws[0];
+        self.ss[1] += js[0] * ws[1];
+        self.ss[2] += js[1] * ws[1];
+        self.gs[0] += ws[0] * rho;
+        self.gs[1] += ws[1] * rho;
+    }
+
+    /// Adds the sums to the attitude's rows of `arrow` and to surface `slot`'s block.
+    fn into_arrow(self, arrow: &mut Arrow, slot: usize) {
+        arrow.h_aa += Matrix2::new(self.aa[0], self.aa[1], self.aa[1], self.aa[2]);
+        arrow.g_a += Vector2::new(self.ga[0], self.ga[1]);
+        let block = &mut arrow.blocks[slot];
+        block.0 += Matrix2::new(self.as_[0], self.as_[1], self.as_[2], self.as_[3]);
+        block.1 += Matrix2::new(self.ss[0], self.ss[1], self.ss[1], self.ss[2]);
+        block.2 += Vector2::new(self.gs[0], self.gs[1]);
+    }
+}
