@@ -10,7 +10,8 @@
 //! a step of Levenberg-Marquardt is nearly always accepted (its damping starts at 1e-6), and
 //! then the next step, and the covariance at the end, need no pass of their own.
 
-use super::model::{MIN_INCIDENCE, Plane, Rotations};
+use super::LabelledPoint;
+use super::model::{MIN_INCIDENCE, Plane, Rotations, off_grazing};
 use nalgebra::{Matrix2, Vector2, Vector3};
 
 /// The arrow-shaped normal equations at one state.
@@ -38,6 +39,23 @@ pub(crate) struct Ray {
     /// The plane residual's scale `1 / (sigma max(b, MIN_INCIDENCE))`, for `b` the incidence
     /// frozen when the ray was taken in ([`super::model::linearize_plane`]).
     pub plane_scale: f64,
+}
+
+impl Ray {
+    /// Point `index` of the input, on surface `slot`, met at `incidence` (`|n . L u|`, frozen
+    /// for the plane residual).
+    pub fn new(index: usize, slot: usize, p: &LabelledPoint, incidence: f64) -> Self {
+        Ray {
+            index,
+            slot,
+            origin: p.origin.coords,
+            dir: p.dir,
+            range: p.range,
+            sigma: p.sigma,
+            point: p.origin.coords + p.dir * p.range,
+            plane_scale: 1.0 / (p.sigma * incidence.max(MIN_INCIDENCE)),
+        }
+    }
 }
 
 /// Which residual the pass takes (the module [`super::solve`] explains both).
@@ -84,12 +102,7 @@ impl Frame {
     /// The range the model predicts for `ray`, and the divisor `b = n . L u` it took (kept
     /// from zero by [`MIN_INCIDENCE`]), as [`super::model::predict`].
     fn predict(&self, ray: &Ray) -> (f64, f64) {
-        let raw = self.normal.dot(&ray.dir);
-        let b = if raw.abs() < MIN_INCIDENCE {
-            MIN_INCIDENCE.copysign(raw)
-        } else {
-            raw
-        };
+        let b = off_grazing(self.normal.dot(&ray.dir));
         ((self.offset - self.normal.dot(&ray.origin)) / b, b)
     }
 }

@@ -3,8 +3,8 @@
 
 use super::evaluate::{Evaluation, Frame, Ray, Residual, evaluate, huber_cost, huber_weight};
 use super::model::{
-    Linearized, MIN_INCIDENCE, Placement, Plane, Rotations, incidence_on, linearize_on,
-    linearize_plane, plane_rho, predict,
+    Linearized, Placement, Plane, Rotations, incidence_on, linearize_on, linearize_plane,
+    plane_rho, predict,
 };
 use super::{LabelledPoint, Surface};
 use nalgebra::{Matrix2, Point3, Vector2, Vector3};
@@ -107,16 +107,7 @@ fn passes_match_the_model_point_by_point() {
             let s = slot(p);
             let incidence = incidence_on(p, &planes[s].normal, &rot);
             assert_close(frames[s].incidence(&p.dir), incidence, "incidence");
-            Ray {
-                index,
-                slot: s,
-                origin: p.origin.coords,
-                dir: p.dir,
-                range: p.range,
-                sigma: p.sigma,
-                point: p.origin.coords + p.dir * p.range,
-                plane_scale: 1.0 / (p.sigma * incidence.max(MIN_INCIDENCE)),
-            }
+            Ray::new(index, s, p, incidence)
         })
         .collect();
     rays.sort_by_key(|r| r.slot);

@@ -155,13 +155,18 @@ pub(crate) fn predict(point: &LabelledPoint, plane: &Plane, rot: &Rotations) -> 
 /// (a caller that tries one ray on several planes levels it once).
 pub(crate) fn predict_level(plane: &Plane, lu: &Vector3<f64>, lo: &Vector3<f64>) -> (f64, f64) {
     let n = &plane.normal;
-    let raw = n.dot(lu);
-    let b = if raw.abs() < MIN_INCIDENCE {
+    let b = off_grazing(n.dot(lu));
+    ((plane.offset - n.dot(lo)) / b, b)
+}
+
+/// The divisor `b = n . L u` a prediction takes: kept at least [`MIN_INCIDENCE`] from zero,
+/// with its sign.
+pub(crate) fn off_grazing(raw: f64) -> f64 {
+    if raw.abs() < MIN_INCIDENCE {
         MIN_INCIDENCE.copysign(raw)
     } else {
         raw
-    };
-    ((plane.offset - n.dot(lo)) / b, b)
+    }
 }
 
 /// The residual of `point` on its surface at `placement`, under the attitude `rot`.

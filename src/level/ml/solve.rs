@@ -12,7 +12,7 @@
 //! the points are [`super::evaluate`]'s.
 
 use super::evaluate::{Arrow, Evaluation, Frame, Ray, Residual, evaluate};
-use super::model::{MIN_INCIDENCE, Placement, Plane, Rotations, initial_placement};
+use super::model::{Placement, Plane, Rotations, initial_placement};
 use super::{LabelledPoint, MlError, MlParams, MlSolution, Surface, SurfaceFit, WallLine};
 use crate::geometry::Attitude;
 use nalgebra::{Matrix2, Vector2};
@@ -195,16 +195,7 @@ impl<'a> State<'a> {
             if incidence < min_incidence {
                 continue;
             }
-            sorted[at] = Some(Ray {
-                index,
-                slot,
-                origin: p.origin.coords,
-                dir: p.dir,
-                range: p.range,
-                sigma: p.sigma,
-                point: p.origin.coords + p.dir * p.range,
-                plane_scale: 1.0 / (p.sigma * incidence.max(MIN_INCIDENCE)),
-            });
+            sorted[at] = Some(Ray::new(index, slot, p, incidence));
         }
         self.rays.clear();
         self.rays.extend(sorted.into_iter().flatten());
