@@ -105,6 +105,40 @@ impl Frame {
         let b = off_grazing(self.normal.dot(&ray.dir));
         ((self.offset - self.normal.dot(&ray.origin)) / b, b)
     }
+
+    /// `ray`'s normalised residual `rho`, the point `q` and scale its derivatives take, and
+    /// (for the range residual) its predicted range.
+    pub fn residual(&self, ray: &Ray, residual: Residual) -> (f64, Vector3<f64>, f64, Option<f64>) {
+        match residual {
+            Residual::Range => {
+                let (predicted, b) = self.predict(ray);
+                let q = ray.origin + ray.dir * predicted;
+                let scale = 1.0 / (b * ray.sigma);
+                (
+                    (ray.range - predicted) / ray.sigma,
+                    q,
+                    scale,
+                    Some(predicted),
+                )
+            }
+            Residual::Plane => {
+                let rho = (self.normal.dot(&ray.point) - self.offset) * ray.plane_scale;
+                (rho, ray.point, ray.plane_scale, None)
+            }
+        }
+    }
+
+    /// The residual's derivatives by the attitude and by the surface's `(offset, azimuth)`
+    /// at the point `q` and `scale` of [`Self::residual`]: `d r^/d theta = -n . L' q / b`,
+    /// `d r^/d d = 1 / b`, `d r^/d a = -t . L q / b` (the plane residual's are the same at
+    /// its frozen incidence), negated and over `sigma` for `rho = (r - r^) / sigma`.
+    pub fn jacobians(&self, q: &Vector3<f64>, scale: f64) -> ([f64; 2], [f64; 2]) {
+        let ja = [
+            self.by_theta[0].dot(q) * scale,
+            self.by_theta[1].dot(q) * scale,
+        ];
+        (ja, [-scale, self.tangent.dot(q) * scale])
+    }
 }
 
 /// What a pass gives: the robust cost, the normal equations (when asked for) and, for the
@@ -155,32 +189,13 @@ pub(crate) fn evaluate(
         let frame = &frames[run[0].slot];
         let mut sums = Sums::default();
         for ray in run {
-            // The residual, and the point and scale its derivatives take.
-            let (rho, q, scale) = match residual {
-                Residual::Range => {
-                    let (predicted, b) = frame.predict(ray);
-                    out.predicted.push(predicted);
-                    let q = ray.origin + ray.dir * predicted;
-                    (
-                        (ray.range - predicted) / ray.sigma,
-                        q,
-                        1.0 / (b * ray.sigma),
-                    )
-                }
-                Residual::Plane => {
-                    let rho = (frame.normal.dot(&ray.point) - frame.offset) * ray.plane_scale;
-                    (rho, ray.point, ray.plane_scale)
-                }
-            };
+            let (rho, q, scale, predicted) = frame.residual(ray, residual);
+            if let Some(predicted) = predicted {
+                out.predicted.push(predicted);
+            }
             out.cost += huber_cost(rho, k);
             if with_arrow {
-                // d r^/d theta = -n . L' q / b, d r^/d d = 1 / b, d r^/d a = -t . L q / b;
-                // the plane residual's are the same at its frozen incidence.
-                let ja = [
-                    frame.by_theta[0].dot(&q) * scale,
-                    frame.by_theta[1].dot(&q) * scale,
-                ];
-                let js = [-scale, frame.tangent.dot(&q) * scale];
+                let (ja, js) = frame.jacobians(&q, scale);
                 sums.add(rho, ja, js, huber_weight(rho, k));
             }
         }

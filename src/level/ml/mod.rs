@@ -22,6 +22,7 @@
 //! `up = +-x` (pitch of 90 degrees), so the step is taken in the attitude the bound and the
 //! leveler report. Pure: plain points in, an estimate out.
 
+pub(crate) mod cluster;
 pub(crate) mod evaluate;
 #[cfg(test)]
 mod evaluate_tests;
@@ -127,6 +128,12 @@ pub struct MlParams {
     /// exceeds its expectation by more than this many of its standard deviations \[1\].
     /// Default 3 (a right model is inflated 0.13% of the time).
     pub inflation_z: f64,
+    /// The reported covariance covers the cluster-robust (sandwich) covariance of the
+    /// points' scores summed over runs of this many consecutive points of one surface
+    /// ([`cluster`]); 0 turns it off \[points\]. Default 8: points a segmentation gives to the
+    /// wrong surface come in runs (a wall's foot, a ledge), and their shared error is then
+    /// counted once per run; 4, 8 and 16 measured alike (docs/ESTIMATOR.md, section 6).
+    pub cluster_rays: usize,
     /// An estimate tilted further than this from the robot's up is refused \[deg\]. Default
     /// 60: the paper's robot never tilts beyond 45 degrees (sect. 5.2), and the chart of up
     /// by `(theta_x, theta_y)` degenerates at 90 (a refinement that ran there left its basin).
@@ -146,7 +153,7 @@ impl Default for MlParams {
             max_shift_sigmas: 2.0,
             relabel_passes: 1,
             relabel_margin: 0.3,
-            max_range_sigma: 0.03,
+            max_range_sigma: 0.08,
             relabel_window: 1,
             approach: true,
             max_iterations: 50,
@@ -156,6 +163,7 @@ impl Default for MlParams {
             min_surface_points: 3,
             min_incidence: 0.02,
             inflation_z: 3.0,
+            cluster_rays: 8,
             max_tilt_deg: 60.0,
             min_level_clearance: 0.1,
         }
@@ -188,7 +196,8 @@ pub(crate) struct MlSolution {
     /// Up in the robot frame (unit).
     pub up: Vector3<f64>,
     /// Covariance of `(theta_x, theta_y)` \[rad^2\] from the information matrix with every
-    /// placement marginalised, times `inflation`.
+    /// placement marginalised, times `inflation`, widened to cover the cluster-robust
+    /// covariance ([`cluster`]).
     pub covariance: [[f64; 2]; 2],
     /// 1 unless the chi-square test failed; then the chi-square per degree of freedom.
     pub inflation: f64,

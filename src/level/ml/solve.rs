@@ -11,6 +11,7 @@
 //! azimuth slot gets a unit diagonal so every block stays 2x2 and invertible. The passes over
 //! the points are [`super::evaluate`]'s.
 
+use super::cluster::{clustered_meat, widened};
 use super::evaluate::{Arrow, Evaluation, Frame, Ray, Residual, evaluate};
 use super::model::{Placement, Plane, Rotations, initial_placement};
 use super::{LabelledPoint, MlError, MlParams, MlSolution, Surface, SurfaceFit, WallLine};
@@ -348,7 +349,11 @@ impl<'a> State<'a> {
         } else {
             1.0
         };
-        let cov = cov * inflation;
+        let cov = self
+            .cluster_covariance(eval, &cov, params)
+            .map_or(cov * inflation, |robust| {
+                widened(&(cov * inflation), &robust)
+            });
         let attitude = Attitude::new(self.theta.x, self.theta.y);
         Ok(MlSolution {
             attitude: [self.theta.x, self.theta.y],
@@ -367,6 +372,29 @@ impl<'a> State<'a> {
             iterations,
             converged,
         })
+    }
+
+    /// The cluster-robust covariance at the current state ([`super::cluster`]), from the
+    /// range residual's pass `eval` and the information's inverse `cov`; `None` when turned
+    /// off (`cluster_rays` 0) or when a surface's block is singular.
+    fn cluster_covariance(
+        &self,
+        eval: &Evaluation,
+        cov: &Matrix2<f64>,
+        params: &MlParams,
+    ) -> Option<Matrix2<f64>> {
+        if params.cluster_rays == 0 {
+            return None;
+        }
+        let frames = self.frames(&self.theta, &self.placements);
+        let meat = clustered_meat(
+            &self.rays,
+            &frames,
+            &eval.arrow,
+            params.huber_k,
+            params.cluster_rays,
+        )?;
+        Some(cov * meat * cov)
     }
 
     fn lines(&self) -> Vec<WallLine> {
@@ -388,7 +416,7 @@ impl<'a> State<'a> {
     }
 }
 
-fn pseudo_inverse(m: &Matrix2<f64>) -> Option<Matrix2<f64>> {
+pub(super) fn pseudo_inverse(m: &Matrix2<f64>) -> Option<Matrix2<f64>> {
     let eig = m.symmetric_eigen();
     let top = eig.eigenvalues.amax();
     if !top.is_finite() {
