@@ -80,13 +80,11 @@ pub struct MlParams {
     /// (section 5).
     pub relabel_margin: f64,
     /// The stage runs only on poses whose range sigma (given or estimated) is at most this
-    /// \[m\]. Default 0.03. With the floor's feet left out (`relabel_window`) the sigmas at
-    /// 5 cm noise held 98.8-100% of errors within three per axis (99.3-99.7% over 24,000
-    /// poses), error / bound 0.88-1.09 and sigma / bound 1.17-1.28, but one pose in 8000 at
-    /// 4 scans came out ok and 5.2 degrees off with sigmas of 0.45-0.66 (the leveler alone:
-    /// 4.4 degrees, sigmas 0.9-1.4), and at 10 cm only 97.2-99.6% held within three, where
-    /// floor points at the foot of a wall that no scan sees standing over them still pull
-    /// (docs/ESTIMATOR.md, section 5).
+    /// \[m\]. Default 0.08. With the covariance widened to the cluster-robust one
+    /// (`cluster_rays`), at 5 cm noise 99.3-99.6% of errors lie within three sigmas per axis
+    /// over 100,800 protocol poses, error / bound 1.00-1.09, sigma / bound 1.26-1.34; at
+    /// 10 cm fewer than 99% do, from floor points at the foot of a wall that no scan sees
+    /// standing over them (docs/ESTIMATOR.md, sections 5 and 6).
     pub max_range_sigma: f64,
     /// A floor (ceiling) point is left out when a point of its own or an adjacent scan within
     /// this many bearings stands over (under) it as on a wall ([`relabel`]) \[rays\]. Default
