@@ -62,30 +62,36 @@ pub(crate) fn refine(
         return Err(MlError::TooFewPoints);
     }
     // From far: least squares on the plane residuals, into the basin; then the likelihood
-    // itself, robustly.
-    state.residual = Residual::Plane;
+    // itself, robustly. Without the approach the first pass is the likelihood's own, which
+    // its first step then takes as it is.
+    state.residual = if params.approach {
+        Residual::Plane
+    } else {
+        Residual::Range
+    };
+    let k = if params.approach {
+        f64::INFINITY
+    } else {
+        params.huber_k
+    };
     state.take_rays(params.min_incidence);
     let mut first = Evaluation::default();
-    state.evaluate_at(
-        &state.theta,
-        &state.placements,
-        f64::INFINITY,
-        true,
-        &mut first,
-    );
+    state.evaluate_at(&state.theta, &state.placements, k, true, &mut first);
     if observable_schur(&first.arrow).is_none() {
         return Err(MlError::Unobservable);
     }
     let approach = if params.approach {
-        state.minimise(params, f64::INFINITY, APPROACH_TOLERANCE).0
+        let approach = state.minimise(params, f64::INFINITY, APPROACH_TOLERANCE).0;
+        state.residual = Residual::Range;
+        if approach > 0 {
+            // The approach moved the state: which points graze their plane moved with it.
+            state.take_rays(params.min_incidence);
+        }
+        approach
     } else {
+        state.last = Some(first);
         0
     };
-    state.residual = Residual::Range;
-    if approach > 0 {
-        // The approach moved the state: which points graze their plane moved with it.
-        state.take_rays(params.min_incidence);
-    }
     let (iterations, converged) = state.minimise(params, params.huber_k, params.step_tolerance);
     let up = Attitude::new(state.theta.x, state.theta.y).up_in_robot();
     if up.z < params.max_tilt_deg.to_radians().cos() {
@@ -223,8 +229,9 @@ impl<'a> State<'a> {
         let mut lambda = 1e-6;
         let plane = self.residual == Residual::Plane;
         let step_sigmas2 = params.step_sigmas * params.step_sigmas;
+        // The range residual's pass at the current state, when the caller has it.
+        let mut known = !plane && self.last.is_some();
         let mut current = self.last.take().unwrap_or_default();
-        let mut known = false;
         let mut trial = Evaluation::default();
         let mut placements = Vec::with_capacity(self.placements.len());
         let mut outcome = (params.max_iterations, false);
