@@ -26,8 +26,9 @@ use nalgebra::Vector2;
 type Group<'a> = (Surface, &'a [usize]);
 
 /// Sets the estimate's attitude, sigmas and up (or its failure) from the leveler's
-/// `result`, refined by the core when `params.ml.enabled` and the range noise is at most
-/// `ml.max_range_sigma`. `est`'s patches are the segmentation behind `result` (the refined
+/// `result`, refined by the core when `params.ml.enabled`; above `ml.max_range_sigma` of
+/// range noise each sigma is the larger of the core's and the leveler's (the core's own
+/// sigmas are not honest there: docs/ESTIMATOR.md, section 6). `est`'s patches are the segmentation behind `result` (the refined
 /// models when re-segmentation's solution was kept, [`crate::level::adopt`]).
 pub(crate) fn finish(
     est: &mut LevelEstimate,
@@ -36,15 +37,20 @@ pub(crate) fn finish(
     params: &LevelParams,
 ) {
     let ml = match &result {
-        Ok(sol) if params.ml.enabled && est.range_sigma <= params.ml.max_range_sigma => {
-            final_estimate(est, scans, sol, params)
-        }
+        Ok(sol) if params.ml.enabled => final_estimate(est, scans, sol, params),
         _ => None,
     };
     match (ml, result) {
-        (Some(sol), _) => {
+        (Some(sol), leveler) => {
             est.attitude = Some(Attitude::new(sol.attitude[0], sol.attitude[1]));
-            est.sigmas = Some(sol.sigmas());
+            let mut sigmas = sol.sigmas();
+            if est.range_sigma > params.ml.max_range_sigma
+                && let Ok(leveler) = &leveler
+            {
+                let wide = attitude_sigmas(leveler, params);
+                sigmas = [sigmas[0].max(wide[0]), sigmas[1].max(wide[1])];
+            }
+            est.sigmas = Some(sigmas);
             est.up = Some(sol.up);
             est.failure = None;
             est.cause = None;

@@ -81,12 +81,14 @@ pub struct MlParams {
     /// A wall takes points this far beyond the stretch its points cover \[m\]. Default 0.3
     /// (section 5).
     pub relabel_margin: f64,
-    /// The stage runs only on poses whose range sigma (given or estimated) is at most this
-    /// \[m\]. Default 0.08. With the covariance widened to the cluster-robust one
-    /// (`cluster_rays`), at 5 cm noise 99.3-99.6% of errors lie within three sigmas per axis
-    /// over 100,800 protocol poses, error / bound 1.00-1.09, sigma / bound 1.26-1.34; at
-    /// 10 cm fewer than 99% do, from floor points at the foot of a wall that no scan sees
-    /// standing over them (docs/ESTIMATOR.md, sections 5 and 6).
+    /// The stage's own sigmas are reported only on poses whose range sigma (given or
+    /// estimated) is at most this \[m\]; above it the stage still refines the attitude, but
+    /// each axis reports the larger of its sigma and the leveler's. Default 0.08. With the
+    /// covariance widened to the cluster-robust one (`cluster_rays`), at 5 cm noise 99.1-99.5%
+    /// of errors lie within three sigmas per axis over 33,600 protocol poses, sigma / bound
+    /// 1.21-1.27; at 10 cm its own sigmas held only 98.2-99.4%, from floor points at the foot
+    /// of a wall that no scan sees standing over them, while its errors are a third below the
+    /// leveler's (docs/ESTIMATOR.md, sections 5 and 6).
     pub max_range_sigma: f64,
     /// A floor (ceiling) point is left out when a point of its own or an adjacent scan within
     /// this many bearings stands over (under) it as on a wall ([`relabel`]) \[rays\]. Default
