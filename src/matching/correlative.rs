@@ -70,6 +70,41 @@ fn round_i64(v: f64) -> i64 {
 /// How far (in cells, per axis) a reference point's Gaussian reaches in the fine table.
 const REACH: i64 = 2;
 
+/// A point's stamp is this many cells across.
+const MAX_SIDE: usize = (2 * REACH + 1) as usize;
+
+/// `out[a]` = the maximum of `v[a + 1 - factor ..= a]` (the indices inside `v`), for `a` in
+/// `0..v.len() + factor - 1`: each block of `factor` offsets that overlaps `v`. Windows that
+/// start at 0 are prefix maxima, windows that end at the last index suffix maxima; the values
+/// are the same as a loop over each window (the maximum of the same numbers).
+#[inline]
+fn window_maxima(v: &[f32], factor: usize, out: &mut [f32]) {
+    let n = v.len();
+    let mut prefix = [0f32; MAX_SIDE];
+    let mut suffix = [0f32; MAX_SIDE];
+    let mut m = 0f32;
+    for (p, &x) in prefix.iter_mut().zip(v) {
+        m = m.max(x);
+        *p = m;
+    }
+    m = 0.0;
+    for i in (0..n).rev() {
+        m = m.max(v[i]);
+        suffix[i] = m;
+    }
+    for (a, o) in out.iter_mut().enumerate() {
+        let lo = (a + 1).saturating_sub(factor);
+        let hi = a.min(n - 1);
+        *o = if lo == 0 {
+            prefix[hi]
+        } else if hi == n - 1 {
+            suffix[lo]
+        } else {
+            v[lo..=hi].iter().fold(0f32, |m, &x| m.max(x))
+        };
+    }
+}
+
 /// Buffers of the coarse search, kept between calls so a search allocates nothing once they
 /// have grown to the largest table seen. Between calls both tables are all zeros: a search
 /// writes only the cells near its reference points and clears those same cells before it
@@ -97,6 +132,8 @@ pub struct CorrelativeScratch {
     /// over the low-resolution blocks.
     stamp: Vec<f32>,
     rows: Vec<f32>,
+    /// One column of `rows`' block maxima over the low-resolution blocks.
+    maxima: Vec<f32>,
 }
 
 /// Where the fine likelihood table and its low-resolution bound lie (the cells themselves
@@ -108,23 +145,44 @@ struct Table {
     height: i64,
 }
 
-/// Translation offsets (in cells) scored together: rows of y, x ascending in each.
+/// Translation offsets (in cells) scored together: a grid of rows of y, x ascending in each.
 #[derive(Clone, Debug, Default)]
 struct Offsets {
     xy: Vec<(i64, i64)>,
-    /// `oy * width + ox`: each offset's step in the table's cell array.
-    linear: Vec<i64>,
+    /// Offsets per row, and the step between them along x.
+    per_row: usize,
+    step: usize,
+    /// `oy * width + ox` of each row's first offset: its step in the table's cell array.
+    row_starts: Vec<i64>,
     /// Smallest and largest x, then y.
     extent: (i64, i64, i64, i64),
 }
 
 impl Offsets {
-    fn set(&mut self, xy: impl Iterator<Item = (i64, i64)>, width: i64) {
+    /// The offsets `xs × ys` (ranges with a step), rows (y) outer.
+    fn set(
+        &mut self,
+        xs: impl Iterator<Item = i64> + Clone,
+        ys: impl Iterator<Item = i64>,
+        width: i64,
+    ) {
         self.xy.clear();
-        self.xy.extend(xy);
-        self.linear.clear();
-        self.linear
-            .extend(self.xy.iter().map(|&(ox, oy)| oy * width + ox));
+        self.row_starts.clear();
+        for oy in ys {
+            self.row_starts
+                .push(oy * width + xs.clone().next().unwrap_or(0));
+            self.xy.extend(xs.clone().map(|ox| (ox, oy)));
+        }
+        let mut x = xs;
+        let first = x.next();
+        self.per_row = usize::from(first.is_some()) + x.clone().count();
+        self.step = match (first, x.next()) {
+            (Some(a), Some(b)) => (b - a) as usize,
+            _ => 1,
+        };
+        if self.row_starts.is_empty() {
+            self.per_row = 0;
+        }
         let (first, last) = (self.xy.first(), self.xy.last());
         self.extent = match (first, last) {
             (Some(f), Some(l)) => (f.0.min(l.0), f.0.max(l.0), f.1, l.1),
@@ -176,6 +234,8 @@ impl Table {
         s.stamp.resize((side * side) as usize, 0.0);
         s.rows.clear();
         s.rows.resize((side * span) as usize, 0.0);
+        s.maxima.clear();
+        s.maxima.resize(span as usize, 0.0);
         for p in reference {
             let (cx, cy) = self.cell_of(p, res);
             for dy in -REACH..=REACH {
@@ -202,30 +262,31 @@ impl Table {
             // Block maxima along rows: rows[r, a] is the maximum of stamp row r over the
             // columns a - factor + 1 ..= a (of the stamp), the block of coarse column
             // cx - REACH - factor + 1 + a.
-            for r in 0..side {
-                for a in 0..span {
-                    let mut m = 0f32;
-                    for c in (a - factor + 1).max(0)..=a.min(side - 1) {
-                        m = m.max(s.stamp[(r * side + c) as usize]);
-                    }
-                    s.rows[(r * span + a) as usize] = m;
-                }
+            for r in 0..side as usize {
+                let row = &s.stamp[r * side as usize..(r + 1) * side as usize];
+                window_maxima(
+                    row,
+                    factor as usize,
+                    &mut s.rows[r * span as usize..][..span as usize],
+                );
             }
-            for b in 0..span {
-                let y = cy - REACH - factor + 1 + b;
-                if y < 0 || y >= self.height {
-                    continue;
+            // Then along columns, over the blocks inside the table only.
+            let (x0, y0) = (cx - REACH - factor + 1, cy - REACH - factor + 1);
+            let (a_lo, a_hi) = ((-x0).max(0), (self.width - 1 - x0).min(span - 1));
+            let (b_lo, b_hi) = ((-y0).max(0), (self.height - 1 - y0).min(span - 1));
+            if a_lo > a_hi || b_lo > b_hi {
+                continue;
+            }
+            let mut column = [0f32; MAX_SIDE];
+            for a in a_lo..=a_hi {
+                for (r, v) in column.iter_mut().enumerate() {
+                    *v = s.rows[r * span as usize + a as usize];
                 }
-                for a in 0..span {
-                    let x = cx - REACH - factor + 1 + a;
-                    if x < 0 || x >= self.width {
-                        continue;
-                    }
-                    let mut m = 0f32;
-                    for r in (b - factor + 1).max(0)..=b.min(side - 1) {
-                        m = m.max(s.rows[(r * span + a) as usize]);
-                    }
-                    let coarse = &mut s.coarse[(y * self.width + x) as usize];
+                window_maxima(&column, factor as usize, &mut s.maxima);
+                let x = x0 + a;
+                for b in b_lo..=b_hi {
+                    let m = s.maxima[b as usize];
+                    let coarse = &mut s.coarse[((y0 + b) * self.width + x) as usize];
                     if m > *coarse {
                         *coarse = m;
                     }
@@ -299,9 +360,23 @@ impl Table {
             return;
         }
         if cx + lo >= 0 && cy + bottom >= 0 && cx + hi < self.width && cy + top < self.height {
+            // Row by row: one slice of the table per row, no test per offset.
             let base = cy * self.width + cx;
-            for (sum, &d) in sums.iter_mut().zip(&offsets.linear) {
-                *sum += table[(base + d) as usize];
+            let (n, step) = (offsets.per_row, offsets.step);
+            if n == 0 {
+                return;
+            }
+            for (row, &start) in sums.chunks_exact_mut(n).zip(&offsets.row_starts) {
+                let cells = &table[(base + start) as usize..][..(n - 1) * step + 1];
+                if step == 1 {
+                    for (sum, &v) in row.iter_mut().zip(cells) {
+                        *sum += v;
+                    }
+                } else {
+                    for (k, sum) in row.iter_mut().enumerate() {
+                        *sum += cells[k * step];
+                    }
+                }
             }
         } else {
             for (sum, &(ox, oy)) in sums.iter_mut().zip(&offsets.xy) {
@@ -433,8 +508,7 @@ fn search(
     s.candidates.clear();
     // The low-resolution blocks' first offsets, rows (y) outer.
     let starts = || (-w..=w).step_by(factor as usize);
-    let xy = starts().flat_map(|oy| starts().map(move |ox| (ox, oy)));
-    s.offsets.set(xy, table.width);
+    s.offsets.set(starts(), starts(), table.width);
     for k in -kt..=kt {
         let theta = guess.theta + k as f64 * params.step_theta;
         let pose = Pose2::new(guess.x, guess.y, theta);
@@ -477,9 +551,8 @@ fn search(
         for i in (0..n).rev() {
             s.rest[i] = s.rest[i + 1] + table.block_bound(&s.coarse, cells[i], ox0, oy0, factor);
         }
-        let xs = move || ox0..(ox0 + factor).min(w + 1);
-        let xy = (oy0..(oy0 + factor).min(w + 1)).flat_map(|oy| xs().map(move |ox| (ox, oy)));
-        s.block.set(xy, table.width);
+        let xs = ox0..(ox0 + factor).min(w + 1);
+        s.block.set(xs, oy0..(oy0 + factor).min(w + 1), table.width);
         let bound = (&s.rest[..], best.0);
         if !table.score_block(&s.fine, cells, &s.block, bound, &mut s.sums) {
             continue;
@@ -531,6 +604,21 @@ mod tests {
         for a in v {
             for b in v {
                 assert_eq!(total_order_key(a).cmp(&total_order_key(b)), a.total_cmp(&b));
+            }
+        }
+    }
+
+    #[test]
+    fn window_maxima_equal_a_loop_over_each_window() {
+        let v = [0.3f32, 0.9, 0.1, 0.7, 0.2];
+        for factor in 1..=8usize {
+            let mut out = vec![-1f32; v.len() + factor - 1];
+            window_maxima(&v, factor, &mut out);
+            for (a, &o) in out.iter().enumerate() {
+                let lo = (a + 1).saturating_sub(factor);
+                let hi = a.min(v.len() - 1);
+                let m = v[lo..=hi].iter().fold(0f32, |m, &x| m.max(x));
+                assert_eq!(o, m, "factor {factor}, block {a}");
             }
         }
     }
