@@ -26,42 +26,44 @@ use nalgebra::Vector2;
 type Group<'a> = (Surface, &'a [usize]);
 
 /// Sets the estimate's attitude, sigmas and up (or its failure) from the leveler's
-/// `result`, refined by the core when `params.ml.enabled`; above `ml.max_range_sigma` of
-/// range noise each sigma is the larger of the core's and the leveler's (the core's own
-/// sigmas are not honest there: docs/ESTIMATOR.md, section 6). `est`'s patches are the segmentation behind `result` (the refined
-/// models when re-segmentation's solution was kept, [`crate::level::adopt`]).
+/// `result`, refined by the core when `params.ml.enabled`. `est`'s patches are the
+/// segmentation behind `result` (the refined models when re-segmentation's solution was kept,
+/// [`crate::level::adopt`]).
 pub(crate) fn finish(
     est: &mut LevelEstimate,
     scans: &[Scan],
     result: Result<UpSolution, FailCause>,
     params: &LevelParams,
 ) {
-    let ml = match &result {
-        Ok(sol) if params.ml.enabled => final_estimate(est, scans, sol, params),
-        _ => None,
+    let leveler = match result {
+        Ok(sol) => sol,
+        Err(cause) => return est.fail(failure::reported(est, cause)),
     };
-    match (ml, result) {
-        (Some(sol), leveler) => {
-            est.attitude = Some(Attitude::new(sol.attitude[0], sol.attitude[1]));
-            let mut sigmas = sol.sigmas();
-            if est.range_sigma > params.ml.max_range_sigma
-                && let Ok(leveler) = &leveler
-            {
-                let wide = attitude_sigmas(leveler, params);
-                sigmas = [sigmas[0].max(wide[0]), sigmas[1].max(wide[1])];
-            }
-            est.sigmas = Some(sigmas);
-            est.up = Some(sol.up);
-            est.failure = None;
-            est.cause = None;
-        }
-        (None, Ok(sol)) => {
-            est.attitude = Some(sol.attitude());
-            est.sigmas = Some(attitude_sigmas(&sol, params));
-            est.up = Some(sol.up);
-        }
-        (None, Err(cause)) => est.fail(failure::reported(est, cause)),
-    }
+    let ml = params
+        .ml
+        .enabled
+        .then(|| final_estimate(est, scans, &leveler, params))
+        .flatten();
+    let leveler_sigmas = attitude_sigmas(&leveler, params);
+    let Some(sol) = ml else {
+        est.attitude = Some(leveler.attitude());
+        est.sigmas = Some(leveler_sigmas);
+        est.up = Some(leveler.up);
+        return;
+    };
+    // Above `max_range_sigma` the core's own sigmas are not honest (docs/ESTIMATOR.md,
+    // section 6): each axis reports the larger of its and the leveler's.
+    let own = sol.sigmas();
+    let sigmas = if est.range_sigma > params.ml.max_range_sigma {
+        [own[0].max(leveler_sigmas[0]), own[1].max(leveler_sigmas[1])]
+    } else {
+        own
+    };
+    est.attitude = Some(Attitude::new(sol.attitude[0], sol.attitude[1]));
+    est.sigmas = Some(sigmas);
+    est.up = Some(sol.up);
+    est.failure = None;
+    est.cause = None;
 }
 
 /// The core's answer on the segmentation behind the leveler's result, when it gives one that
