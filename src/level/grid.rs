@@ -323,10 +323,7 @@ impl PlaneAccumulator {
         let dd = &self.sums[DD..DD + 6];
         let k = sigma * sigma * (nf - 1.0) / nf;
         let corrected: [f64; 6] = std::array::from_fn(|t| raw[t] - dd[t] * k);
-        // The noise term's largest eigenvalue is at most its trace: the corrected scatter's
-        // smallest eigenvalue is no lower than minus that.
-        let floor = -k * (dd[0] + dd[3] + dd[5]) * (1.0 + 1e-9);
-        let eig = super::eigen3::sym_eigen3_upper(&corrected, floor);
+        let eig = super::eigen3::sym_eigen3_upper(&corrected);
         let normal = eig.vectors[0].try_normalize(1e-300)?;
         // Noise along the normal: sigma^2 * mean (d . n)^2.
         let dn2 = quadratic_form(dd, &normal) / nf;
