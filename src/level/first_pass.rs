@@ -148,7 +148,6 @@ fn level_stepping_members(grid: &PoseGrid, p: &Patch) -> Option<Vec<usize>> {
         in_patch[i] = true;
     }
     let member = |i: usize| in_patch[i];
-    let rc = grid.row_col();
     // Signed scan-to-scan range steps in units of `r de`, keyed by the lower point.
     let step = |i: usize| -> Option<f64> {
         let j = i + cols;
@@ -156,7 +155,7 @@ fn level_stepping_members(grid: &PoseGrid, p: &Patch) -> Option<Vec<usize>> {
             return None;
         }
         let (a, b) = (grid.points[i].as_ref()?, grid.points[j].as_ref()?);
-        let de = grid.elevation[rc.row(j)] - grid.elevation[rc.row(i)];
+        let de = grid.elevation[grid.row(j)] - grid.elevation[grid.row(i)];
         let scale = 0.5 * (a.range + b.range) * de;
         (scale.abs() > 1e-9).then(|| (b.range - a.range) / scale)
     };
@@ -187,8 +186,7 @@ fn on_steep(grid: &PoseGrid, i: usize) -> bool {
     let Some(a) = grid.points[i].as_ref() else {
         return false;
     };
-    let (cols, rc) = (grid.cols, grid.row_col());
-    let r = rc.row(i);
+    let (cols, r) = (grid.cols, grid.row(i));
     [
         (r > 0).then(|| i - cols),
         (i + cols < grid.points.len()).then_some(i + cols),
@@ -197,7 +195,7 @@ fn on_steep(grid: &PoseGrid, i: usize) -> bool {
     .flatten()
     .any(|j| {
         grid.points[j].as_ref().is_some_and(|b| {
-            let de = grid.elevation[rc.row(j)] - grid.elevation[r];
+            let de = grid.elevation[grid.row(j)] - grid.elevation[r];
             (b.range - a.range).abs() <= 0.5 * (a.range + b.range) * de.abs()
         })
     })
@@ -215,14 +213,13 @@ fn fit_without_steep(
     sigma: f64,
     params: &LevelParams,
 ) -> Option<PlaneFit> {
-    let rc = grid.row_col();
     let kept_points = || {
         kept.iter()
             .filter_map(|&i| Some((i, grid.points[i].as_ref()?)))
     };
     let mut rows_all = vec![0usize; grid.rows()];
     for (i, _) in kept_points() {
-        rows_all[rc.row(i)] += 1;
+        rows_all[grid.row(i)] += 1;
     }
     let veto = steep_veto(&rows_all, sigma, params);
     // The fit with every kept point, and (for the veto) without those on a steep surface.
@@ -233,7 +230,7 @@ fn fit_without_steep(
         all.add(g);
         if veto && !on_steep(grid, i) {
             flat.add(g);
-            rows_flat[rc.row(i)] += 1;
+            rows_flat[grid.row(i)] += 1;
         }
     }
     let usable = |acc: &grid::PlaneAccumulator, per_row: &[usize]| {

@@ -165,54 +165,9 @@ impl PoseGrid {
         self.points[row * self.cols + col].as_ref()
     }
 
-    /// Row and column of grid indices without a hardware division (see [`RowCol`]).
-    pub(crate) fn row_col(&self) -> RowCol {
-        RowCol::new(self.cols)
-    }
-}
-
-/// Splits grid indices into row and column by a multiply and a shift instead of a division,
-/// which costs tens of cycles and sits in the inner loops of patch tests. With
-/// `m = ceil(2^40 / cols)`, `(i m) >> 40 = floor(i / cols)` exactly whenever
-/// `i cols <= 2^40` (Granlund and Montgomery 1994: `i m / 2^40 = i / cols + i e / (cols 2^40)`
-/// with `0 <= e < cols`, and the second term stays below `1 / cols`); larger grids divide.
-#[derive(Clone, Copy, Debug)]
-pub(crate) struct RowCol {
-    cols: usize,
-    m: u64,
-    /// Indices below this take the multiply.
-    fast_below: u64,
-}
-
-impl RowCol {
-    const SHIFT: u32 = 40;
-
-    pub(crate) fn new(cols: usize) -> Self {
-        let cols = cols.max(1);
-        let m = (1u64 << Self::SHIFT).div_ceil(cols as u64);
-        // i * cols <= 2^40 for the exactness bound, and i * m below 2^64.
-        let fast_below = ((1u64 << Self::SHIFT) / cols as u64).min(u64::MAX / m);
-        RowCol {
-            cols,
-            m,
-            fast_below,
-        }
-    }
-
-    /// `i / cols`.
-    #[inline]
+    /// The row of grid index `i`.
     pub(crate) fn row(&self, i: usize) -> usize {
-        if (i as u64) < self.fast_below {
-            ((i as u64 * self.m) >> Self::SHIFT) as usize
-        } else {
-            i / self.cols
-        }
-    }
-
-    /// `i % cols`.
-    #[inline]
-    pub(crate) fn col(&self, i: usize) -> usize {
-        i - self.row(i) * self.cols
+        i / self.cols
     }
 }
 
@@ -500,23 +455,6 @@ mod tests {
             p,
             dir: p.coords.normalize(),
             range: p.coords.norm(),
-        }
-    }
-
-    #[test]
-    fn row_col_matches_division() {
-        for cols in 1..=600 {
-            let rc = RowCol::new(cols);
-            for i in (0..cols * 12).chain([cols * 1000 - 1, cols * 4096 + 7]) {
-                assert_eq!((rc.row(i), rc.col(i)), (i / cols, i % cols), "{i} / {cols}");
-            }
-        }
-        for cols in [181, 361, 1081, 65_535, 1 << 20] {
-            let rc = RowCol::new(cols);
-            let near_limit = (1usize << 40) / cols;
-            for i in (near_limit - 3000..near_limit + 3000).chain([usize::MAX / 2]) {
-                assert_eq!((rc.row(i), rc.col(i)), (i / cols, i % cols), "{i} / {cols}");
-            }
         }
     }
 

@@ -95,17 +95,16 @@ pub(super) fn in_order(grid: &PoseGrid, members: &[usize], by_row: bool) -> Vec<
         return ascending;
     }
     let cols = grid.cols.max(1);
-    let rc = grid.row_col();
     let mut start = vec![0usize; cols + 1];
     for &i in &ascending {
-        start[rc.col(i) + 1] += 1;
+        start[i % cols + 1] += 1;
     }
     for c in 0..cols {
         start[c + 1] += start[c];
     }
     let mut out = vec![0usize; ascending.len()];
     for &i in &ascending {
-        let slot = &mut start[rc.col(i)];
+        let slot = &mut start[i % cols];
         out[*slot] = i;
         *slot += 1;
     }

@@ -309,13 +309,11 @@ fn flood(
     sigma: f64,
 ) {
     let (n, cols) = (grid.points.len(), grid.cols);
-    // Columns without a division per visit.
-    let rc = grid.row_col();
     let mut refit_at = acc.n + acc.n / 3 + 1;
     let mut next = 0;
     while let Some(&i) = members.get(next) {
         next += 1;
-        let c = rc.col(i);
+        let c = i % cols;
         // Left, right, previous and next row; `usize::MAX` where the grid ends (cheaper in
         // this, the hottest loop of region growing, than Options).
         let mut neighbours = [usize::MAX; 4];

@@ -70,10 +70,9 @@ pub(super) fn bent_across_rows(
     let s2 = sigma.max(params.min_sigma).powi(2);
     // Per row: sum of residuals, sum of (d . n)^2, count.
     let mut rows = vec![(0.0, 0.0, 0usize); grid.rows()];
-    let rc = grid.row_col();
     for &i in members {
         if let Some(g) = &grid.points[i] {
-            let r = &mut rows[rc.row(i)];
+            let r = &mut rows[grid.row(i)];
             r.0 += fit.distance(&g.p);
             r.1 += g.dir.dot(&fit.normal).powi(2).max(ROW_BEND_DN2_FLOOR);
             r.2 += 1;
@@ -161,9 +160,8 @@ pub fn split_members(
 /// two planes' RSS, `which`, boundary index), with the ordering's prefix plane sums. The
 /// bounds let [`best_cut`] skip most eigen decompositions.
 fn candidate_cuts(grid: &PoseGrid, sorted: &[usize], which: usize, params: &LevelParams) -> Cuts {
-    let rc = grid.row_col();
     let by_row = which == 1;
-    let key = |i: usize| if by_row { rc.row(i) } else { rc.col(i) };
+    let key = |i: usize| if by_row { grid.row(i) } else { i % grid.cols };
     let n = sorted.len();
     // Prefix plane sums, and the rows spanned by every prefix and suffix.
     let mut prefix = Vec::with_capacity(n + 1);
@@ -175,13 +173,13 @@ fn candidate_cuts(grid: &PoseGrid, sorted: &[usize], which: usize, params: &Leve
             acc.add(g);
         }
         prefix.push(acc);
-        pre_lo[k + 1] = pre_lo[k].min(rc.row(i));
-        pre_hi[k + 1] = pre_hi[k].max(rc.row(i));
+        pre_lo[k + 1] = pre_lo[k].min(grid.row(i));
+        pre_hi[k + 1] = pre_hi[k].max(grid.row(i));
     }
     let (mut suf_lo, mut suf_hi) = (vec![usize::MAX; n + 1], vec![0usize; n + 1]);
     for k in (0..n).rev() {
-        suf_lo[k] = suf_lo[k + 1].min(rc.row(sorted[k]));
-        suf_hi[k] = suf_hi[k + 1].max(rc.row(sorted[k]));
+        suf_lo[k] = suf_lo[k + 1].min(grid.row(sorted[k]));
+        suf_hi[k] = suf_hi[k + 1].max(grid.row(sorted[k]));
     }
     let total = acc;
     let half = params.min_patch_points / 2;

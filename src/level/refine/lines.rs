@@ -98,7 +98,6 @@ fn rows_at_height(ctx: &LineContext, zs: &[(f64, usize)], height: f64) -> Vec<Ve
     let f = ctx.f;
     let (params, s, k) = (f.params, f.s, f.params.refine_k);
     let mut rows: Vec<Vec<usize>> = vec![Vec::new(); f.grid.rows()];
-    let rc = f.grid.row_col();
     for &(z, i) in zs {
         let Some((q, d)) = f.lv.q[i].as_ref() else {
             continue;
@@ -106,7 +105,7 @@ fn rows_at_height(ctx: &LineContext, zs: &[(f64, usize)], height: f64) -> Vec<Ve
         let lever = q.xy().norm() * f.sigma_up;
         let sd = (s * s * d.z * d.z + params.min_sigma * params.min_sigma + lever * lever).sqrt();
         if (z - height).abs() <= k * sd + params.flat_margin {
-            rows[rc.row(i)].push(i);
+            rows[f.grid.row(i)].push(i);
         }
     }
     rows
