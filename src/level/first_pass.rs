@@ -202,8 +202,8 @@ fn on_steep(grid: &PoseGrid, i: usize) -> bool {
 }
 
 /// The plane of the `kept` members, over at least `min_level_points` points and enough scan
-/// lines (`LEVEL_MIN_ROWS_NOISY` from `level_steep_min_sigma` of noise, else 2). With
-/// `level_steep_veto`, from that noise up (or below it on two scan lines only, where a wall's
+/// lines (`LEVEL_MIN_ROWS_NOISY` from `level_steep_min_sigma` of noise, else 2). From that
+/// noise up (or below it on two scan lines only, where a wall's
 /// line and a floor line still pass for one plane when parallel), a plane that only the
 /// points on a steep surface ([`on_steep`]) make, over a fifth of them, is no floor: a floor
 /// line and a wall's line at its foot, coplanar within the noise.
@@ -268,9 +268,8 @@ pub(crate) fn enough_for_level(
 /// steep surface ([`fit_without_steep`]): from `level_steep_min_sigma` up, and below it on
 /// fewer than `LEVEL_MIN_ROWS_NOISY` scan lines.
 pub(crate) fn steep_veto(per_row: &[usize], sigma: f64, params: &LevelParams) -> bool {
-    params.level_steep_veto
-        && (sigma >= params.level_steep_min_sigma
-            || refine::supported_rows(per_row, LEVEL_ROW_SHARE) < LEVEL_MIN_ROWS_NOISY)
+    sigma >= params.level_steep_min_sigma
+        || refine::supported_rows(per_row, LEVEL_ROW_SHARE) < LEVEL_MIN_ROWS_NOISY
 }
 
 pub(crate) fn grid_rows(est: &LevelEstimate) -> usize {

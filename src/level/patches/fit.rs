@@ -27,7 +27,7 @@ pub(super) fn cauchy_weight(fit: &PlaneFit, g: &GridPoint, s: f64, params: &Leve
 
 /// How far from a patch's plane a point may lie and still join it: `grow_k` sigmas of the
 /// point's own range noise along the plane's normal, `sigma |d . n|` (at least
-/// `min_ray_share` of sigma), when `ray_tolerance` is on; else `tol` for every point.
+/// `min_ray_share` of sigma).
 ///
 /// A floor seen at a grazing angle carries its range noise almost along itself, so its points
 /// lie within centimetres of its plane even at 10 cm noise, while the foot of a wall rises
@@ -36,15 +36,10 @@ pub(super) fn cauchy_weight(fit: &PlaneFit, g: &GridPoint, s: f64, params: &Leve
 pub(super) fn ray_tolerance(
     fit: &PlaneFit,
     g: &GridPoint,
-    tol: f64,
     sigma: f64,
     params: &LevelParams,
 ) -> f64 {
-    if params.ray_tolerance {
-        params.grow_k * sigma * g.dir.dot(&fit.normal).abs().max(params.min_ray_share)
-    } else {
-        tol
-    }
+    params.grow_k * sigma * g.dir.dot(&fit.normal).abs().max(params.min_ray_share)
 }
 
 /// A plane refitted with each point weighted by the inverse variance of its range noise

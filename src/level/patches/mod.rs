@@ -99,9 +99,8 @@ pub(crate) fn grow_patches(
         wide = extract_quads_sized(grid, params, sigma, params.quad_rows, width);
         &wide
     };
-    let narrow_level = params.narrow_level_seeds && width != params.quad_cols;
     let mut members = Vec::new();
-    for q in ordered_seeds(three_row, quads, narrow_level) {
+    for q in ordered_seeds(three_row, quads, width != params.quad_cols) {
         let id = patches.len() as u32;
         if let Some(p) = growth.grow_seed(q, id, &mut labels, &mut members) {
             patches.push(p);
@@ -174,7 +173,7 @@ impl Growth<'_> {
         labels: &mut [u32],
         members: &mut Vec<usize>,
     ) -> Option<Patch> {
-        let (grid, params, sigma, tol) = (self.grid, self.params, self.sigma, self.tol);
+        let (grid, params, sigma) = (self.grid, self.params, self.sigma);
         let cols = grid.cols;
         if q.span(cols).any(|i| labels[i] != UNLABELLED) {
             return None;
@@ -190,7 +189,7 @@ impl Growth<'_> {
         }
         let mut fit = acc.fit(sigma)?;
         let s_eff = sigma.max(params.min_sigma);
-        let tol_at = |fit: &PlaneFit, g: &GridPoint| ray_tolerance(fit, g, tol, s_eff, params);
+        let tol_at = |fit: &PlaneFit, g: &GridPoint| ray_tolerance(fit, g, s_eff, params);
         flood(
             grid, id, labels, members, &mut acc, &mut fit, &tol_at, sigma,
         );
