@@ -98,7 +98,11 @@ pub(crate) fn find_levels(
             }
             continue;
         }
-        let zs = level_candidates(&f.lv, ok, floor);
+        let mut zs = height_candidates(&f.lv, floor, |i| ok[i]);
+        if !floor {
+            // By height, ascending, as for the floor.
+            zs = zs.into_iter().rev().map(|(z, i)| (-z, i)).collect();
+        }
         if zs.len() < params.min_level_points {
             continue;
         }
@@ -126,17 +130,21 @@ pub(crate) fn find_levels(
     out
 }
 
-/// The candidates for the floor (`floor`) or the ceiling: the usable (`ok`) points more than
-/// `MIN_LEVEL_DISTANCE` below or above the scanner in the level frame, as (height, grid
-/// index), ascending by height.
-fn level_candidates(lv: &Leveled, ok: &[bool], floor: bool) -> Vec<(f64, usize)> {
+/// The candidates for the floor (`floor`) or the ceiling: the points that `keep` accepts more
+/// than `MIN_LEVEL_DISTANCE` below or above the scanner in the level frame, as (height key
+/// growing away from the surface's side, grid index), ascending: the outermost first.
+pub(crate) fn height_candidates(
+    lv: &Leveled,
+    floor: bool,
+    keep: impl Fn(usize) -> bool,
+) -> Vec<(f64, usize)> {
+    let key = |z: f64| if floor { z } else { -z };
     let mut zs: Vec<(f64, usize)> =
         lv.q.iter()
             .enumerate()
             .filter_map(|(i, q)| {
                 let (q, _) = q.as_ref()?;
-                (ok[i] && (q.z < -MIN_LEVEL_DISTANCE) == floor && q.z.abs() > MIN_LEVEL_DISTANCE)
-                    .then_some((q.z, i))
+                (keep(i) && key(q.z) < -MIN_LEVEL_DISTANCE).then_some((key(q.z), i))
             })
             .collect();
     zs.sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
