@@ -296,38 +296,6 @@ impl PlaneAccumulator {
             residual_ss,
         })
     }
-
-    /// A lower bound on `self.fit(sigma)`'s `residual_ss`, without an eigen decomposition, for
-    /// pruning candidate fits. The residual is `n^T raw n` for the raw scatter and a unit
-    /// normal `n`, so it is at least `lambda_min(raw)`; for a positive definite matrix,
-    /// `lambda_min >= det / (sum of principal 2x2 minors)` (the other two eigenvalues' product
-    /// is at most that sum), which is tight when the points are flat. A margin of
-    /// `1e-8 trace(raw)` covers rounding; 0 when `raw` is not clearly positive definite or the
-    /// fit would fail.
-    pub fn residual_lower_bound(&self) -> f64 {
-        if self.n < 3 || self.weight < 3.0 {
-            return 0.0;
-        }
-        let (_, m) = self.scatter();
-        let trace = m[0] + m[3] + m[5];
-        let minor01 = m[0] * m[3] - m[1] * m[1];
-        let minor02 = m[0] * m[5] - m[2] * m[2];
-        let minor12 = m[3] * m[5] - m[4] * m[4];
-        let det = m[0] * minor12 - m[1] * (m[1] * m[5] - m[4] * m[2])
-            + m[2] * (m[1] * m[4] - m[3] * m[2]);
-        let sum_minors = minor01 + minor02 + minor12;
-        // Sylvester's criterion, with the 2x2 minors well away from zero so that the ratio's
-        // rounding stays far below the margin.
-        if !(m[0] > 0.0 && minor01 > 0.0 && det > 0.0 && sum_minors > 1e-4 * trace * trace) {
-            return 0.0;
-        }
-        let bound = det / sum_minors - 1e-8 * trace;
-        if bound.is_finite() {
-            bound.max(0.0)
-        } else {
-            0.0
-        }
-    }
 }
 
 /// Row and column of each entry of an upper triangle laid out as in [`Moments`].
