@@ -239,7 +239,7 @@ pub(crate) fn level_band<'a>(
     f: &'a Frame,
     height: f64,
     above: bool,
-) -> impl Iterator<Item = usize> + 'a {
+) -> impl Iterator<Item = usize> + Clone + 'a {
     let (s, k) = (f.s, f.k);
     f.lv.q.iter().enumerate().filter_map(move |(i, q)| {
         let (q, d) = q.as_ref()?;
