@@ -194,12 +194,8 @@ impl LevelEstimate {
 }
 
 /// The range noise for a pose: `params.sigma`, else the median of the scans' `readings_sigma`,
-/// else estimated from the data ([`noise::estimate_range_sigma`]), else `params.min_sigma`.
-pub fn range_sigma_for(scans: &[Scan], params: &LevelParams) -> f64 {
-    range_sigma_with(scans, params, None)
-}
-
-/// [`range_sigma_for`], given the `(sin, cos)` of the bearings when every scan shares them.
+/// else estimated from the data ([`noise::estimate_range_sigma_with`]), else
+/// `params.min_sigma`; given the `(sin, cos)` of the bearings when every scan shares them.
 fn range_sigma_with(scans: &[Scan], params: &LevelParams, trig: Option<&[(f64, f64)]>) -> f64 {
     if let Some(s) = params.sigma {
         return s;

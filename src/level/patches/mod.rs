@@ -356,7 +356,7 @@ pub(crate) fn plane_explained(fit: &PlaneFit, sigma: f64, params: &LevelParams) 
 }
 
 /// [`rows_span`] of members in ascending order: their first and last.
-fn rows_span_sorted(members: &[usize], cols: usize) -> (usize, usize) {
+pub(crate) fn rows_span_sorted(members: &[usize], cols: usize) -> (usize, usize) {
     match (members.first(), members.last()) {
         (Some(&lo), Some(&hi)) => (lo / cols, hi / cols),
         _ => (usize::MAX, 0),
