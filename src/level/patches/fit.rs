@@ -83,27 +83,13 @@ pub(super) fn ray_weighted_fit<'a>(
 
 /// Members in row-major order (`by_row`) or column-major order, ties by grid index, as a
 /// sort by `(row or column, index)` would give: ascending grid index is row-major, and a
-/// stable counting sort of that by column is column-major (members are distinct).
+/// stable sort of that by column is column-major.
 pub(super) fn in_order(grid: &PoseGrid, members: &[usize], by_row: bool) -> Vec<usize> {
-    let ascending = ascending(members);
-    if by_row {
-        return ascending;
+    let mut v = ascending(members);
+    if !by_row {
+        v.sort_by_key(|&i| i % grid.cols);
     }
-    let cols = grid.cols.max(1);
-    let mut start = vec![0usize; cols + 1];
-    for &i in &ascending {
-        start[i % cols + 1] += 1;
-    }
-    for c in 0..cols {
-        start[c + 1] += start[c];
-    }
-    let mut out = vec![0usize; ascending.len()];
-    for &i in &ascending {
-        let slot = &mut start[i % cols];
-        out[*slot] = i;
-        *slot += 1;
-    }
-    out
+    v
 }
 
 /// Distinct grid indices in ascending order: marked in a bitset over their range and read
