@@ -3,9 +3,8 @@
 //! cannot be leveled.
 
 use super::failure::{FailCause, acceptable};
-use super::grid::{self, PlaneFit, PoseGrid};
+use super::grid::{PlaneAccumulator, PlaneFit, PoseGrid};
 use super::patches::Patch;
-use super::polygons::Polygon;
 use super::up::{self, PlaneObs, UpSolution};
 use super::{Estimator, LevelEstimate, LevelParams, SurfaceKind, refine};
 use crate::level::params::first_pass::*;
@@ -23,20 +22,15 @@ pub(crate) fn solve(
     if est.wall_polygons() < params.min_polygons && levels.is_empty() {
         return Err(FailCause::TooFewPolygons);
     }
-    let misfit = |f: &grid::PlaneFit| f.misfit_ratio(sigma.max(params.min_sigma)).max(1.0);
     let sigma_eff = sigma.max(params.min_sigma);
     let sol = match params.estimator {
         Estimator::Paper => {
-            let wall_quads: Vec<&Polygon> = est
-                .quads
-                .iter()
-                .filter(|q| q.kind == SurfaceKind::Wall)
-                .collect();
+            let walls = est.quads.iter().filter(|q| q.kind == SurfaceKind::Wall);
             let normals: Vec<(Vector3<f64>, f64)> =
-                wall_quads.iter().map(|q| (q.fit.normal, q.area)).collect();
+                walls.clone().map(|q| (q.fit.normal, q.area)).collect();
             let up = up::up_paper(&normals).ok_or(FailCause::NoUp)?;
-            let obs: Vec<PlaneObs> = wall_quads
-                .iter()
+            let misfit = |f: &PlaneFit| f.misfit_ratio(sigma_eff).max(1.0);
+            let obs: Vec<PlaneObs> = walls
                 .map(|q| PlaneObs::wall(&q.fit, misfit(&q.fit)))
                 .collect();
             up::solution_at(up, &obs, sigma_eff, false)
@@ -63,7 +57,7 @@ pub(crate) fn robust_obs<'a>(
     params: &LevelParams,
     sigma: f64,
 ) -> Vec<PlaneObs<'a>> {
-    let misfit = |f: &grid::PlaneFit| f.misfit_ratio(sigma.max(params.min_sigma)).max(1.0);
+    let misfit = |f: &PlaneFit| f.misfit_ratio(sigma.max(params.min_sigma)).max(1.0);
     let full_rows = params.quad_rows.min(grid_rows(est)).saturating_sub(1);
     est.patches
         .iter()
@@ -223,8 +217,8 @@ fn fit_without_steep(
     }
     let veto = steep_veto(&rows_all, sigma, params);
     // The fit with every kept point, and (for the veto) without those on a steep surface.
-    let mut all = grid::PlaneAccumulator::default();
-    let mut flat = grid::PlaneAccumulator::default();
+    let mut all = PlaneAccumulator::default();
+    let mut flat = PlaneAccumulator::default();
     let mut rows_flat = vec![0usize; grid.rows()];
     for (i, g) in kept_points() {
         all.add(g);
@@ -233,7 +227,7 @@ fn fit_without_steep(
             rows_flat[grid.row(i)] += 1;
         }
     }
-    let usable = |acc: &grid::PlaneAccumulator, per_row: &[usize]| {
+    let usable = |acc: &PlaneAccumulator, per_row: &[usize]| {
         enough_for_level(acc.n, per_row, sigma, params)
             .then(|| acc.fit(sigma))
             .flatten()

@@ -258,8 +258,10 @@ pub fn level_pose_with(
         adopt::adopt_refined(&mut est, models);
     }
     // The wall points and base scan of the pseudo-level scan (sect. 6), then the attitude.
-    est.wall_mask = wall_mask(&est);
-    est.base_scan = est.grid.as_ref().map(|g| base_scan(g, &est.wall_mask));
+    if let Some(grid) = &est.grid {
+        est.wall_mask = wall_mask_where(grid, &est, |_| true);
+        est.base_scan = Some(base_scan(grid, &est.wall_mask));
+    }
     // The attitude, refined by maximum likelihood on that segmentation.
     ml::from_segmentation::finish(&mut est, scans, result, params);
     est
@@ -288,16 +290,9 @@ fn segmented(
     }
 }
 
-/// Per grid point, whether it lies on a wall: inside a wall quad's span or a wall patch (of
-/// the segmentation that produced the attitude, sect. 6).
-fn wall_mask(est: &LevelEstimate) -> Vec<bool> {
-    est.grid
-        .as_ref()
-        .map_or_else(Vec::new, |grid| wall_mask_where(grid, est, |_| true))
-}
-
-/// [`wall_mask`] over the wall quads `quad_counts` accepts (the pseudo-level scan's keep test
-/// takes only those vertical once leveled); wall patches always count.
+/// Per grid point, whether it lies on a wall: inside the span of a wall quad that `quad_counts`
+/// accepts (the pseudo-level scan's keep test takes only those vertical once leveled) or in a
+/// wall patch (of the segmentation that produced the attitude, sect. 6).
 pub(crate) fn wall_mask_where(
     grid: &PoseGrid,
     est: &LevelEstimate,

@@ -114,20 +114,19 @@ type Term = (Vector3<f64>, f64);
 impl PlaneObs<'_> {
     /// A wall plane.
     pub(crate) fn wall(fit: &PlaneFit, inflate: f64) -> PlaneObs<'_> {
-        PlaneObs::of(Evidence::Wall(fit), inflate)
+        let evidence = Evidence::Wall(fit);
+        PlaneObs { evidence, inflate }
     }
 
     /// A floor or ceiling plane taken as level.
     pub(crate) fn level(fit: &PlaneFit, inflate: f64) -> PlaneObs<'_> {
-        PlaneObs::of(Evidence::Level(fit), inflate)
+        let evidence = Evidence::Level(fit);
+        PlaneObs { evidence, inflate }
     }
 
     /// A line on a floor or ceiling.
     pub(crate) fn level_line(line: &LevelLine, inflate: f64) -> PlaneObs<'_> {
-        PlaneObs::of(Evidence::LevelLine(line), inflate)
-    }
-
-    fn of(evidence: Evidence<'_>, inflate: f64) -> PlaneObs<'_> {
+        let evidence = Evidence::LevelLine(line);
         PlaneObs { evidence, inflate }
     }
 
