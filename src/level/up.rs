@@ -130,15 +130,8 @@ impl PlaneObs<'_> {
         PlaneObs { evidence, inflate }
     }
 
-    /// Scalar residuals this evidence contributes.
-    fn constraints(&self) -> usize {
-        match self.evidence {
-            Evidence::Level(_) => 2,
-            _ => 1,
-        }
-    }
-
-    /// The single constrained direction `a` (with `a . up = 0`) of one-residual evidence.
+    /// The single constrained direction `a` (with `a . up = 0`) of one-residual evidence;
+    /// `None` for a level plane's two residuals.
     fn single(&self) -> Option<Vector3<f64>> {
         match self.evidence {
             Evidence::Wall(f) => Some(f.normal),
@@ -302,7 +295,7 @@ fn tangent_basis(up: &Vector3<f64>) -> [Vector3<f64>; 2] {
 /// 50 degrees of the robot's own up are considered. `None` with fewer than two planes or when
 /// no proposal qualifies.
 pub(crate) fn up_robust(planes: &[PlaneObs], sigma: f64, iterations: usize) -> Option<UpSolution> {
-    let constraints: usize = planes.iter().map(|p| p.constraints()).sum();
+    let constraints: usize = planes.iter().map(|p| p.single().map_or(2, |_| 1)).sum();
     if constraints < 2 {
         return None;
     }
