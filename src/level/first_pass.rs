@@ -49,8 +49,8 @@ pub(crate) fn solve(
 }
 
 /// The robust estimator's observations: wall patches over three or more scans (a plane
-/// through two scan lines can be a wall line and a floor line that happen to be coplanar)
-/// and the level planes.
+/// through two scan lines can be a wall line and a floor line that happen to be coplanar;
+/// fewer when the grid has fewer) and the level planes.
 pub(crate) fn robust_obs<'a>(
     est: &'a LevelEstimate,
     levels: &'a [PlaneFit],
@@ -58,7 +58,8 @@ pub(crate) fn robust_obs<'a>(
     sigma: f64,
 ) -> Vec<PlaneObs<'a>> {
     let misfit = |f: &PlaneFit| f.misfit_ratio(sigma.max(params.min_sigma)).max(1.0);
-    let full_rows = params.quad_rows.min(grid_rows(est)).saturating_sub(1);
+    let rows = est.grid.as_ref().map_or(0, PoseGrid::rows);
+    let full_rows = params.quad_rows.min(rows).saturating_sub(1);
     est.patches
         .iter()
         .filter(|p| p.kind == SurfaceKind::Wall)
@@ -264,17 +265,4 @@ pub(crate) fn enough_for_level(
 pub(crate) fn steep_veto(per_row: &[usize], sigma: f64, params: &LevelParams) -> bool {
     sigma >= params.level_steep_min_sigma
         || refine::supported_rows(per_row, LEVEL_ROW_SHARE) < LEVEL_MIN_ROWS_NOISY
-}
-
-pub(crate) fn grid_rows(est: &LevelEstimate) -> usize {
-    est.grid.as_ref().map_or_else(
-        || {
-            est.patches
-                .iter()
-                .map(|p| p.row_range.1 + 1)
-                .max()
-                .unwrap_or(0)
-        },
-        |g| g.rows(),
-    )
 }
