@@ -123,9 +123,7 @@ impl PoseGrid {
             return Err(FailCause::TooFewScans);
         }
         let cols = scans[order[0].0].nrays();
-        if order.iter().any(|&(i, _)| scans[i].nrays() != cols)
-            || scans.iter().any(|s| s.nrays() != cols)
-        {
+        if scans.iter().any(|s| s.nrays() != cols) {
             return Err(FailCause::InconsistentScans);
         }
         let mut points = Vec::with_capacity(order.len() * cols);
