@@ -142,11 +142,10 @@ fn level_stepping_members(grid: &PoseGrid, p: &Patch) -> Option<Vec<usize>> {
     for &i in &p.members {
         in_patch[i] = true;
     }
-    let member = |i: usize| in_patch[i];
     // Signed scan-to-scan range steps in units of `r de`, keyed by the lower point.
     let step = |i: usize| -> Option<f64> {
         let j = i + cols;
-        if j >= grid.points.len() || !member(j) {
+        if j >= grid.points.len() || !in_patch[j] {
             return None;
         }
         let (a, b) = (grid.points[i].as_ref()?, grid.points[j].as_ref()?);
@@ -167,7 +166,7 @@ fn level_stepping_members(grid: &PoseGrid, p: &Patch) -> Option<Vec<usize>> {
     let sign = super::median_of(&mut steps).signum();
     let levelish = |i: usize| step_at[i].is_some_and(|x| x * sign > 1.0);
     let kept = |i: usize| {
-        let from_below = i >= cols && member(i - cols) && levelish(i - cols);
+        let from_below = i >= cols && in_patch[i - cols] && levelish(i - cols);
         levelish(i) || from_below
     };
     Some(p.members.iter().copied().filter(|&i| kept(i)).collect())

@@ -158,11 +158,8 @@ impl LevelEstimate {
     /// it, with few wall points for its pseudo-level scan; cleverRobot retakes such scans.
     pub fn facing(&self) -> Option<FailReason> {
         let count = |k: SurfaceKind| self.quads.iter().filter(|q| q.kind == k).count();
-        let (walls, floors, ceilings) = (
-            count(SurfaceKind::Wall),
-            count(SurfaceKind::Floor),
-            count(SurfaceKind::Ceiling),
-        );
+        let walls = self.wall_polygons();
+        let (floors, ceilings) = (count(SurfaceKind::Floor), count(SurfaceKind::Ceiling));
         if floors > walls && floors >= ceilings {
             Some(FailReason::FacingFloor)
         } else if ceilings > walls {

@@ -268,10 +268,8 @@ impl Growth<'_> {
         let fit = robust_fit(grid, members, first, params, sigma)?;
         let fronted = without_front_row_ends(grid, members, &fit, params, sigma);
         let (members, fit) = match &fronted {
+            Some(kept) if !still_a_patch(kept) => return None,
             Some(kept) => {
-                if !still_a_patch(kept) {
-                    return None;
-                }
                 let first = grid.accumulate(kept).fit(sigma)?;
                 (&kept[..], robust_fit(grid, kept, first, params, sigma)?)
             }
