@@ -301,9 +301,7 @@ pub(crate) fn up_robust(planes: &[PlaneObs], sigma: f64, iterations: usize) -> O
     }
     let mut candidates: Vec<Vector3<f64>> = planes.iter().filter_map(|p| p.proposal()).collect();
     let start: Matrix3<f64> = planes.iter().map(|p| p.start_matrix()).sum();
-    if let Some(v) = smallest_eigenvector(&start) {
-        candidates.push(v);
-    }
+    candidates.extend(smallest_eigenvector(&start));
     // Walls and level lines: each pair proposes the direction normal to both.
     let singles: Vec<Vector3<f64>> = planes.iter().filter_map(|p| p.single()).collect();
     for (i, a) in singles.iter().enumerate() {

@@ -102,9 +102,7 @@ pub(crate) fn grow_patches(
     let mut members = Vec::new();
     for q in ordered_seeds(three_row, quads, width != params.quad_cols) {
         let id = patches.len() as u32;
-        if let Some(p) = growth.grow_seed(q, id, &mut labels, &mut members) {
-            patches.push(p);
-        }
+        patches.extend(growth.grow_seed(q, id, &mut labels, &mut members));
     }
     let split = growth.split_two_plane_patches(patches);
     labels.fill(UNLABELLED);
@@ -194,9 +192,7 @@ impl Growth<'_> {
             grid, id, labels, members, &mut acc, &mut fit, &tol_at, sigma,
         );
         // Release members that the final plane does not explain, then refit.
-        if let Some(f) = acc.fit(sigma) {
-            fit = f;
-        }
+        fit = acc.fit(sigma).unwrap_or(fit);
         // Few are released: their sums come off the accumulator, rather than the kept ones'
         // being summed again.
         let mut released = PlaneAccumulator::default();
@@ -336,9 +332,7 @@ fn flood(
                 members.push(j);
                 acc.add(g);
                 if acc.n >= refit_at {
-                    if let Some(f) = acc.fit(sigma) {
-                        *fit = f;
-                    }
+                    *fit = acc.fit(sigma).unwrap_or(*fit);
                     refit_at = acc.n + acc.n / 3 + 1;
                 }
             }

@@ -93,9 +93,7 @@ pub(crate) fn find_levels(
     for floor in [true, false] {
         if !fresh {
             // Later passes carry what the first found, and look for nothing new.
-            if let Some(l) = given.iter().find(|l| below(l) == floor) {
-                out.push(*l);
-            }
+            out.extend(given.iter().find(|l| below(l) == floor).copied());
             continue;
         }
         let mut zs = height_candidates(&f.lv, floor, |i| ok[i]);
@@ -121,11 +119,8 @@ pub(crate) fn find_levels(
         let cos = params.refine_level_cos();
         let level = |n: &Vector3<f64>| n.dot(up).abs() >= cos;
         let members = sampled_plane(grid, &window, &stepping, level, s, params).unwrap_or(window);
-        if let Some(fit) = refit_rounds(grid, &zs, members, params, s) {
-            if checks::refined_level(&fit, up, s, params) {
-                out.push(fit);
-            }
-        }
+        let fit = refit_rounds(grid, &zs, members, params, s);
+        out.extend(fit.filter(|fit| checks::refined_level(fit, up, s, params)));
     }
     out
 }
