@@ -234,10 +234,9 @@ fn fit_without_steep(
     };
     let fit = usable(&all, &rows_all)?;
     let steep = if veto { all.n - flat.n } else { 0 };
-    if steep > 0 && usable(&flat, &rows_flat).is_none() && STEEP_SHARE_INV * steep > all.n {
-        return None;
-    }
-    Some(fit)
+    let vetoed =
+        steep > 0 && usable(&flat, &rows_flat).is_none() && STEEP_SHARE_INV * steep > all.n;
+    (!vetoed).then_some(fit)
 }
 
 /// [`Check::LevelMinPoints`](super::checks::Check::LevelMinPoints) and
