@@ -157,50 +157,6 @@ proptest! {
         let slow = split_reference(&grid, &members, &params, sigma, params.split_depth);
         prop_assert_eq!(fast, slow);
     }
-
-    /// The lower bound never exceeds the fitted plane's residual sum of squares.
-    #[test]
-    fn residual_lower_bound_is_below_the_fit(
-        seed in 0u64..1_000_000,
-        cols in 5usize..60,
-        far in 1.5f64..6.0,
-        sigma in prop_oneof![Just(0.0), 0.001f64..0.15],
-        assumed in 0.0f64..0.2,
-    ) {
-        let grid = corner_grid(cols, far, sigma, seed);
-        let mut acc = PlaneAccumulator::default();
-        for g in grid.points.iter().flatten() {
-            acc.add(g);
-        }
-        if let Some(fit) = acc.fit(assumed) {
-            let bound = acc.residual_lower_bound();
-            prop_assert!(bound >= 0.0);
-            prop_assert!(bound <= fit.residual_ss, "{} > {}", bound, fit.residual_ss);
-        }
-    }
-}
-
-/// On a clean corner the bound is tight enough to prune: close to the residual of a plane
-/// through a single wall, and far above it for the two walls together.
-#[test]
-fn residual_lower_bound_is_tight_on_one_wall() {
-    let grid = corner_grid(60, 2.5, 0.01, 3);
-    let mut one_wall = PlaneAccumulator::default();
-    let mut both = PlaneAccumulator::default();
-    for g in grid.points.iter().flatten() {
-        both.add(g);
-        if g.p.x > 2.9 && g.p.y < 2.4 {
-            one_wall.add(g);
-        }
-    }
-    let fit = one_wall.fit(0.01).unwrap();
-    let bound = one_wall.residual_lower_bound();
-    assert!(
-        bound > 0.5 * fit.residual_ss,
-        "{bound} vs {}",
-        fit.residual_ss
-    );
-    assert!(both.residual_lower_bound() > 10.0 * fit.residual_ss);
 }
 
 /// The twin test above means something only if cuts happen: a clean corner is split.

@@ -6,7 +6,7 @@
 //! patches run across a wall's foot onto the floor.
 
 use super::LevelEstimate;
-use super::patches::{Patch, UNLABELLED};
+use super::patches::{Patch, UNLABELLED, rows_span_sorted};
 use super::refine::Model;
 
 /// Replaces `est`'s patches and labels by the refined `models` (each a patch of its members;
@@ -16,7 +16,6 @@ pub(crate) fn adopt_refined(est: &mut LevelEstimate, models: Vec<Model>) {
     let Some(grid) = &est.grid else {
         return;
     };
-    let cols = grid.cols.max(1);
     let mut labels = vec![UNLABELLED; grid.points.len()];
     let patches: Vec<Patch> = models
         .into_iter()
@@ -26,13 +25,11 @@ pub(crate) fn adopt_refined(est: &mut LevelEstimate, models: Vec<Model>) {
             for &i in &m.members {
                 labels[i] = k as u32;
             }
-            let rows = m.members.iter().map(|&i| i / cols);
-            let row_range = (rows.clone().min().unwrap_or(0), rows.max().unwrap_or(0));
             Patch {
+                row_range: rows_span_sorted(&m.members, grid.cols),
                 fit: m.fit,
                 kind: m.kind,
                 members: m.members,
-                row_range,
             }
         })
         .collect();

@@ -574,9 +574,9 @@ fn ceiling_band_steps() {
     let p = LevelParams::default();
     let t = Check::CeilingBandSteps.threshold(&p) as usize;
     let ceiling: Vec<bool> = (0..20).map(|i| i % 2 == 0).collect();
-    let band = |steps: usize| -> Vec<usize> { (0..2 * steps).collect() };
-    assert!(refine::steps_as_ceiling(&band(t), &ceiling));
-    assert!(!refine::steps_as_ceiling(&band(t - 1), &ceiling));
+    let band = |steps: usize| 0..2 * steps;
+    assert!(refine::steps_as_ceiling(band(t), &ceiling));
+    assert!(!refine::steps_as_ceiling(band(t - 1), &ceiling));
 }
 
 #[test]

@@ -162,14 +162,9 @@ checks! {
 }
 
 impl Check {
-    /// The check's threshold under `params`.
+    /// The check's threshold under `params` (from its row in [`CHECKS`]).
     pub fn threshold(self, params: &LevelParams) -> f64 {
-        (self.spec().threshold)(params)
-    }
-
-    /// The check's row in [`CHECKS`].
-    pub fn spec(self) -> &'static Spec {
-        &CHECKS[self as usize]
+        (CHECKS[self as usize].threshold)(params)
     }
 }
 

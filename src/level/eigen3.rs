@@ -1,8 +1,7 @@
 //! Closed-form eigen decomposition of symmetric 3x3 matrices: every plane fit and every up
-//! estimate needs one, thousands of times per second. Eigenvalues by Newton's method on the
-//! characteristic cubic for the positive semi-definite scatters of planes, else by its
-//! trigonometric solution (Smith 1961); eigenvectors as the best-conditioned cross product of
-//! two rows of `A - lambda I`. Falls back to nalgebra's iterative solver when two eigenvalues
+//! estimate needs one, thousands of times per second. Eigenvalues by the trigonometric solution
+//! of the characteristic cubic (Smith 1961); eigenvectors as the best-conditioned cross product
+//! of two rows of `A - lambda I`. Falls back to nalgebra's iterative solver when two eigenvalues
 //! (nearly) coincide, where the cross products lose their accuracy.
 
 use nalgebra::{Matrix3, SymmetricEigen, Vector3};
@@ -16,7 +15,7 @@ pub(crate) struct Eigen3 {
 
 /// Decomposes a symmetric matrix (only its upper triangle is read).
 pub(crate) fn sym_eigen3(a: &Matrix3<f64>) -> Eigen3 {
-    sym_eigen3_upper(&upper_triangle(a), 0.0)
+    sym_eigen3_upper(&upper_triangle(a))
 }
 
 /// A matrix's upper triangle (xx, xy, xz, yy, yz, zz).
@@ -31,10 +30,8 @@ fn upper_triangle(a: &Matrix3<f64>) -> [f64; 6] {
     ]
 }
 
-/// [`sym_eigen3`] of the symmetric matrix with upper triangle `upper` (xx, xy, xz, yy, yz, zz)
-/// and smallest eigenvalue expected at or above `floor` (0 for a scatter; a guess, which only
-/// speeds the solve when it holds).
-pub(crate) fn sym_eigen3_upper(upper: &[f64; 6], floor: f64) -> Eigen3 {
+/// [`sym_eigen3`] of the symmetric matrix with upper triangle `upper` (xx, xy, xz, yy, yz, zz).
+pub(crate) fn sym_eigen3_upper(upper: &[f64; 6]) -> Eigen3 {
     let scale = upper.iter().fold(0.0f64, |m, v| m.max(v.abs()));
     if scale == 0.0 || !scale.is_finite() {
         return fallback(upper);
@@ -42,9 +39,7 @@ pub(crate) fn sym_eigen3_upper(upper: &[f64; 6], floor: f64) -> Eigen3 {
     // Scaled to unit size so that the cubic's terms stay well inside the float range.
     let inv = 1.0 / scale;
     let m = upper.map(|v| v * inv);
-    let Some([l_min, l_mid, l_max]) =
-        eigenvalues_above(&m, floor * inv).or_else(|| eigenvalues_trig(&m))
-    else {
+    let Some([l_min, l_mid, l_max]) = eigenvalues_trig(&m) else {
         return fallback(upper);
     };
     // Well separated eigenvalues give accurate cross products; otherwise iterate.
@@ -60,50 +55,6 @@ pub(crate) fn sym_eigen3_upper(upper: &[f64; 6], floor: f64) -> Eigen3 {
         values: [l_min * scale, l_mid * scale, l_max * scale],
         vectors: [v_min, v_mid, v_max],
     }
-}
-
-/// Ascending eigenvalues of a symmetric matrix (upper triangle `m`) whose smallest eigenvalue is
-/// at least `floor`, as with a plane's scatter (`floor` 0, or below by its noise correction):
-/// Newton's method on the characteristic polynomial `p(l) = l^3 - c1 l^2 + c2 l - c0` from
-/// `floor`, then the other two from the quadratic left. Below its smallest root `p` is
-/// negative, increasing and concave (the root is at most the mean eigenvalue, where `p''`
-/// changes sign), so the iterates rise to that root without passing it, within a few steps
-/// when it stands apart from the others (a plane). `None` when the floor does not hold or the
-/// iteration does not settle; no transcendental function is needed.
-fn eigenvalues_above(m: &[f64; 6], floor: f64) -> Option<[f64; 3]> {
-    let [a00, a01, a02, a11, a12, a22] = *m;
-    let c1 = a00 + a11 + a22;
-    let c2 = a00 * a11 + a00 * a22 + a11 * a22 - a01 * a01 - a02 * a02 - a12 * a12;
-    let c0 = a00 * (a11 * a22 - a12 * a12) - a01 * (a01 * a22 - a12 * a02)
-        + a02 * (a01 * a12 - a11 * a02);
-    let p = |l: f64| ((l - c1) * l + c2) * l - c0;
-    // Below the mean eigenvalue, `p <= 0` with `p' > 0` (checked in the loop) only holds left of
-    // the smallest root: between the two smaller roots `p > 0`, and from the middle root up to
-    // the mean `p' < 0` (`p'` falls there, from negative at that root).
-    if !(p(floor) <= 0.0 && floor < c1 / 3.0) {
-        return None;
-    }
-    let mut l = floor;
-    for _ in 0..8 {
-        let dp = (3.0 * l - 2.0 * c1) * l + c2;
-        if dp.is_nan() || dp <= 0.0 {
-            return None;
-        }
-        let step = p(l) / dp;
-        l -= step;
-        // Newton's error after this step is about `step^2 p'' / (2 p')`: stop once that is
-        // below rounding rather than take one more step to see it.
-        if step * step * (3.0 * l - c1).abs() <= 1e-16 * dp * c1.abs().max(1.0) {
-            // The other two: sum c1 - l, product c2 - l (c1 - l).
-            let sum = c1 - l;
-            let product = c2 - l * sum;
-            let half = 0.5 * sum;
-            let l_max = half + (half * half - product).max(0.0).sqrt();
-            let l_mid = if l_max > 0.0 { product / l_max } else { 0.0 };
-            return Some([l, l_mid, l_max]);
-        }
-    }
-    None
 }
 
 /// Ascending eigenvalues by the trigonometric solution of the characteristic cubic (Smith
@@ -165,14 +116,10 @@ mod tests {
     use super::*;
     use proptest::prelude::*;
 
+    /// The decomposition against nalgebra's.
     fn check(a: &Matrix3<f64>) {
-        check_above(a, 0.0);
-    }
-
-    /// The decomposition with smallest eigenvalue expected above `floor`, against nalgebra's.
-    fn check_above(a: &Matrix3<f64>, floor: f64) {
         let upper = upper_triangle(a);
-        let e = sym_eigen3_upper(&upper, floor);
+        let e = sym_eigen3_upper(&upper);
         let twin = fallback(&upper);
         let scale = a.norm().max(1e-300);
         for k in 0..3 {
@@ -211,11 +158,10 @@ mod tests {
         }
 
         #[test]
-        fn matches_nalgebra_below_zero_with_a_floor(
+        fn matches_nalgebra_below_zero(
             v in proptest::collection::vec(-10.0f64..10.0, 9),
             d in proptest::collection::vec(-1.0f64..1.0, 3),
             k in 0.0f64..2.0,
-            floor_slack in 0.0f64..1.0,
         ) {
             // A plane's scatter minus a noise term k d d^T, as in a bias-corrected fit: its
             // smallest eigenvalue can be negative, but not below -k |d|^2.
@@ -223,29 +169,15 @@ mod tests {
             let squash = Matrix3::from_diagonal(&Vector3::new(1.0, 1.0, 1e-3));
             let d = Vector3::from_row_slice(&d);
             let a = b.transpose() * squash * b - d * d.transpose() * k;
-            check_above(&a, -k * d.norm_squared() * (1.0 + floor_slack));
-            // A floor that does not hold must not matter either, wherever it lies.
-            let e = SymmetricEigen::new(a).eigenvalues;
-            for f in [e.min() + 1e-6, e.mean(), e.max() - 1e-6, e.max() * 2.0] {
-                check_above(&a, f * (1.0 + floor_slack));
-            }
+            check(&a);
         }
     }
 
     #[test]
-    fn newton_handles_a_negative_smallest_eigenvalue() {
+    fn handles_a_negative_smallest_eigenvalue() {
         let a = Matrix3::from_diagonal(&Vector3::new(-0.25, 4.0, 9.0));
-        let e = sym_eigen3_upper(&[-0.25, 0.0, 0.0, 4.0, 0.0, 9.0], -0.5);
+        let e = sym_eigen3_upper(&[-0.25, 0.0, 0.0, 4.0, 0.0, 9.0]);
         assert!((e.values[0] + 0.25).abs() < 1e-12, "{:?}", e.values);
-        check_above(&a, -0.5);
-        // The Newton path itself, without the fallbacks.
-        let l = eigenvalues_above(&[-0.025, 0.0, 0.0, 0.4, 0.0, 0.9], -0.05).unwrap();
-        assert!(
-            (l[0] + 0.025).abs() < 1e-15 && (l[1] - 0.4).abs() < 1e-12,
-            "{l:?}"
-        );
-        assert!(eigenvalues_above(&[-0.025, 0.0, 0.0, 0.4, 0.0, 0.9], 0.0).is_none());
-        // Just below the largest root `p <= 0` and `p' > 0` as below the smallest: not a floor.
-        assert!(eigenvalues_above(&[-0.025, 0.0, 0.0, 0.4, 0.0, 0.9], 0.89).is_none());
+        check(&a);
     }
 }

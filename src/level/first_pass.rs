@@ -3,9 +3,8 @@
 //! cannot be leveled.
 
 use super::failure::{FailCause, acceptable};
-use super::grid::{self, PlaneFit, PoseGrid};
+use super::grid::{PlaneAccumulator, PlaneFit, PoseGrid};
 use super::patches::Patch;
-use super::polygons::Polygon;
 use super::up::{self, PlaneObs, UpSolution};
 use super::{Estimator, LevelEstimate, LevelParams, SurfaceKind, refine};
 use crate::level::params::first_pass::*;
@@ -23,20 +22,15 @@ pub(crate) fn solve(
     if est.wall_polygons() < params.min_polygons && levels.is_empty() {
         return Err(FailCause::TooFewPolygons);
     }
-    let misfit = |f: &grid::PlaneFit| f.misfit_ratio(sigma.max(params.min_sigma)).max(1.0);
     let sigma_eff = sigma.max(params.min_sigma);
     let sol = match params.estimator {
         Estimator::Paper => {
-            let wall_quads: Vec<&Polygon> = est
-                .quads
-                .iter()
-                .filter(|q| q.kind == SurfaceKind::Wall)
-                .collect();
+            let walls = est.quads.iter().filter(|q| q.kind == SurfaceKind::Wall);
             let normals: Vec<(Vector3<f64>, f64)> =
-                wall_quads.iter().map(|q| (q.fit.normal, q.area)).collect();
+                walls.clone().map(|q| (q.fit.normal, q.area)).collect();
             let up = up::up_paper(&normals).ok_or(FailCause::NoUp)?;
-            let obs: Vec<PlaneObs> = wall_quads
-                .iter()
+            let misfit = |f: &PlaneFit| f.misfit_ratio(sigma_eff).max(1.0);
+            let obs: Vec<PlaneObs> = walls
                 .map(|q| PlaneObs::wall(&q.fit, misfit(&q.fit)))
                 .collect();
             up::solution_at(up, &obs, sigma_eff, false)
@@ -55,16 +49,17 @@ pub(crate) fn solve(
 }
 
 /// The robust estimator's observations: wall patches over three or more scans (a plane
-/// through two scan lines can be a wall line and a floor line that happen to be coplanar)
-/// and the level planes.
+/// through two scan lines can be a wall line and a floor line that happen to be coplanar;
+/// fewer when the grid has fewer) and the level planes.
 pub(crate) fn robust_obs<'a>(
     est: &'a LevelEstimate,
     levels: &'a [PlaneFit],
     params: &LevelParams,
     sigma: f64,
 ) -> Vec<PlaneObs<'a>> {
-    let misfit = |f: &grid::PlaneFit| f.misfit_ratio(sigma.max(params.min_sigma)).max(1.0);
-    let full_rows = params.quad_rows.min(grid_rows(est)).saturating_sub(1);
+    let misfit = |f: &PlaneFit| f.misfit_ratio(sigma.max(params.min_sigma)).max(1.0);
+    let rows = est.grid.as_ref().map_or(0, PoseGrid::rows);
+    let full_rows = params.quad_rows.min(rows).saturating_sub(1);
     est.patches
         .iter()
         .filter(|p| p.kind == SurfaceKind::Wall)
@@ -147,16 +142,14 @@ fn level_stepping_members(grid: &PoseGrid, p: &Patch) -> Option<Vec<usize>> {
     for &i in &p.members {
         in_patch[i] = true;
     }
-    let member = |i: usize| in_patch[i];
-    let rc = grid.row_col();
     // Signed scan-to-scan range steps in units of `r de`, keyed by the lower point.
     let step = |i: usize| -> Option<f64> {
         let j = i + cols;
-        if j >= grid.points.len() || !member(j) {
+        if j >= grid.points.len() || !in_patch[j] {
             return None;
         }
         let (a, b) = (grid.points[i].as_ref()?, grid.points[j].as_ref()?);
-        let de = grid.elevation[rc.row(j)] - grid.elevation[rc.row(i)];
+        let de = grid.elevation[grid.row(j)] - grid.elevation[grid.row(i)];
         let scale = 0.5 * (a.range + b.range) * de;
         (scale.abs() > 1e-9).then(|| (b.range - a.range) / scale)
     };
@@ -173,7 +166,7 @@ fn level_stepping_members(grid: &PoseGrid, p: &Patch) -> Option<Vec<usize>> {
     let sign = super::median_of(&mut steps).signum();
     let levelish = |i: usize| step_at[i].is_some_and(|x| x * sign > 1.0);
     let kept = |i: usize| {
-        let from_below = i >= cols && member(i - cols) && levelish(i - cols);
+        let from_below = i >= cols && in_patch[i - cols] && levelish(i - cols);
         levelish(i) || from_below
     };
     Some(p.members.iter().copied().filter(|&i| kept(i)).collect())
@@ -187,8 +180,7 @@ fn on_steep(grid: &PoseGrid, i: usize) -> bool {
     let Some(a) = grid.points[i].as_ref() else {
         return false;
     };
-    let (cols, rc) = (grid.cols, grid.row_col());
-    let r = rc.row(i);
+    let (cols, r) = (grid.cols, grid.row(i));
     [
         (r > 0).then(|| i - cols),
         (i + cols < grid.points.len()).then_some(i + cols),
@@ -197,15 +189,15 @@ fn on_steep(grid: &PoseGrid, i: usize) -> bool {
     .flatten()
     .any(|j| {
         grid.points[j].as_ref().is_some_and(|b| {
-            let de = grid.elevation[rc.row(j)] - grid.elevation[r];
+            let de = grid.elevation[grid.row(j)] - grid.elevation[r];
             (b.range - a.range).abs() <= 0.5 * (a.range + b.range) * de.abs()
         })
     })
 }
 
 /// The plane of the `kept` members, over at least `min_level_points` points and enough scan
-/// lines (`LEVEL_MIN_ROWS_NOISY` from `level_steep_min_sigma` of noise, else 2). With
-/// `level_steep_veto`, from that noise up (or below it on two scan lines only, where a wall's
+/// lines (`LEVEL_MIN_ROWS_NOISY` from `level_steep_min_sigma` of noise, else 2). From that
+/// noise up (or below it on two scan lines only, where a wall's
 /// line and a floor line still pass for one plane when parallel), a plane that only the
 /// points on a steep surface ([`on_steep`]) make, over a fifth of them, is no floor: a floor
 /// line and a wall's line at its foot, coplanar within the noise.
@@ -215,38 +207,36 @@ fn fit_without_steep(
     sigma: f64,
     params: &LevelParams,
 ) -> Option<PlaneFit> {
-    let rc = grid.row_col();
     let kept_points = || {
         kept.iter()
             .filter_map(|&i| Some((i, grid.points[i].as_ref()?)))
     };
     let mut rows_all = vec![0usize; grid.rows()];
     for (i, _) in kept_points() {
-        rows_all[rc.row(i)] += 1;
+        rows_all[grid.row(i)] += 1;
     }
     let veto = steep_veto(&rows_all, sigma, params);
     // The fit with every kept point, and (for the veto) without those on a steep surface.
-    let mut all = grid::PlaneAccumulator::default();
-    let mut flat = grid::PlaneAccumulator::default();
+    let mut all = PlaneAccumulator::default();
+    let mut flat = PlaneAccumulator::default();
     let mut rows_flat = vec![0usize; grid.rows()];
     for (i, g) in kept_points() {
         all.add(g);
         if veto && !on_steep(grid, i) {
             flat.add(g);
-            rows_flat[rc.row(i)] += 1;
+            rows_flat[grid.row(i)] += 1;
         }
     }
-    let usable = |acc: &grid::PlaneAccumulator, per_row: &[usize]| {
+    let usable = |acc: &PlaneAccumulator, per_row: &[usize]| {
         enough_for_level(acc.n, per_row, sigma, params)
             .then(|| acc.fit(sigma))
             .flatten()
     };
     let fit = usable(&all, &rows_all)?;
     let steep = if veto { all.n - flat.n } else { 0 };
-    if steep > 0 && usable(&flat, &rows_flat).is_none() && STEEP_SHARE_INV * steep > all.n {
-        return None;
-    }
-    Some(fit)
+    let vetoed =
+        steep > 0 && usable(&flat, &rows_flat).is_none() && STEEP_SHARE_INV * steep > all.n;
+    (!vetoed).then_some(fit)
 }
 
 /// [`Check::LevelMinPoints`](super::checks::Check::LevelMinPoints) and
@@ -271,20 +261,6 @@ pub(crate) fn enough_for_level(
 /// steep surface ([`fit_without_steep`]): from `level_steep_min_sigma` up, and below it on
 /// fewer than `LEVEL_MIN_ROWS_NOISY` scan lines.
 pub(crate) fn steep_veto(per_row: &[usize], sigma: f64, params: &LevelParams) -> bool {
-    params.level_steep_veto
-        && (sigma >= params.level_steep_min_sigma
-            || refine::supported_rows(per_row, LEVEL_ROW_SHARE) < LEVEL_MIN_ROWS_NOISY)
-}
-
-pub(crate) fn grid_rows(est: &LevelEstimate) -> usize {
-    est.grid.as_ref().map_or_else(
-        || {
-            est.patches
-                .iter()
-                .map(|p| p.row_range.1 + 1)
-                .max()
-                .unwrap_or(0)
-        },
-        |g| g.rows(),
-    )
+    sigma >= params.level_steep_min_sigma
+        || refine::supported_rows(per_row, LEVEL_ROW_SHARE) < LEVEL_MIN_ROWS_NOISY
 }

@@ -123,9 +123,7 @@ impl PoseGrid {
             return Err(FailCause::TooFewScans);
         }
         let cols = scans[order[0].0].nrays();
-        if order.iter().any(|&(i, _)| scans[i].nrays() != cols)
-            || scans.iter().any(|s| s.nrays() != cols)
-        {
+        if scans.iter().any(|s| s.nrays() != cols) {
             return Err(FailCause::InconsistentScans);
         }
         let mut points = Vec::with_capacity(order.len() * cols);
@@ -165,54 +163,9 @@ impl PoseGrid {
         self.points[row * self.cols + col].as_ref()
     }
 
-    /// Row and column of grid indices without a hardware division (see [`RowCol`]).
-    pub(crate) fn row_col(&self) -> RowCol {
-        RowCol::new(self.cols)
-    }
-}
-
-/// Splits grid indices into row and column by a multiply and a shift instead of a division,
-/// which costs tens of cycles and sits in the inner loops of patch tests. With
-/// `m = ceil(2^40 / cols)`, `(i m) >> 40 = floor(i / cols)` exactly whenever
-/// `i cols <= 2^40` (Granlund and Montgomery 1994: `i m / 2^40 = i / cols + i e / (cols 2^40)`
-/// with `0 <= e < cols`, and the second term stays below `1 / cols`); larger grids divide.
-#[derive(Clone, Copy, Debug)]
-pub(crate) struct RowCol {
-    cols: usize,
-    m: u64,
-    /// Indices below this take the multiply.
-    fast_below: u64,
-}
-
-impl RowCol {
-    const SHIFT: u32 = 40;
-
-    pub(crate) fn new(cols: usize) -> Self {
-        let cols = cols.max(1);
-        let m = (1u64 << Self::SHIFT).div_ceil(cols as u64);
-        // i * cols <= 2^40 for the exactness bound, and i * m below 2^64.
-        let fast_below = ((1u64 << Self::SHIFT) / cols as u64).min(u64::MAX / m);
-        RowCol {
-            cols,
-            m,
-            fast_below,
-        }
-    }
-
-    /// `i / cols`.
-    #[inline]
+    /// The row of grid index `i`.
     pub(crate) fn row(&self, i: usize) -> usize {
-        if (i as u64) < self.fast_below {
-            ((i as u64 * self.m) >> Self::SHIFT) as usize
-        } else {
-            i / self.cols
-        }
-    }
-
-    /// `i % cols`.
-    #[inline]
-    pub(crate) fn col(&self, i: usize) -> usize {
-        i - self.row(i) * self.cols
+        i / self.cols
     }
 }
 
@@ -323,10 +276,7 @@ impl PlaneAccumulator {
         let dd = &self.sums[DD..DD + 6];
         let k = sigma * sigma * (nf - 1.0) / nf;
         let corrected: [f64; 6] = std::array::from_fn(|t| raw[t] - dd[t] * k);
-        // The noise term's largest eigenvalue is at most its trace: the corrected scatter's
-        // smallest eigenvalue is no lower than minus that.
-        let floor = -k * (dd[0] + dd[3] + dd[5]) * (1.0 + 1e-9);
-        let eig = super::eigen3::sym_eigen3_upper(&corrected, floor);
+        let eig = super::eigen3::sym_eigen3_upper(&corrected);
         let normal = eig.vectors[0].try_normalize(1e-300)?;
         // Noise along the normal: sigma^2 * mean (d . n)^2.
         let dn2 = quadratic_form(dd, &normal) / nf;
@@ -343,38 +293,6 @@ impl PlaneAccumulator {
             dn2,
             residual_ss,
         })
-    }
-
-    /// A lower bound on `self.fit(sigma)`'s `residual_ss`, without an eigen decomposition, for
-    /// pruning candidate fits. The residual is `n^T raw n` for the raw scatter and a unit
-    /// normal `n`, so it is at least `lambda_min(raw)`; for a positive definite matrix,
-    /// `lambda_min >= det / (sum of principal 2x2 minors)` (the other two eigenvalues' product
-    /// is at most that sum), which is tight when the points are flat. A margin of
-    /// `1e-8 trace(raw)` covers rounding; 0 when `raw` is not clearly positive definite or the
-    /// fit would fail.
-    pub fn residual_lower_bound(&self) -> f64 {
-        if self.n < 3 || self.weight < 3.0 {
-            return 0.0;
-        }
-        let (_, m) = self.scatter();
-        let trace = m[0] + m[3] + m[5];
-        let minor01 = m[0] * m[3] - m[1] * m[1];
-        let minor02 = m[0] * m[5] - m[2] * m[2];
-        let minor12 = m[3] * m[5] - m[4] * m[4];
-        let det = m[0] * minor12 - m[1] * (m[1] * m[5] - m[4] * m[2])
-            + m[2] * (m[1] * m[4] - m[3] * m[2]);
-        let sum_minors = minor01 + minor02 + minor12;
-        // Sylvester's criterion, with the 2x2 minors well away from zero so that the ratio's
-        // rounding stays far below the margin.
-        if !(m[0] > 0.0 && minor01 > 0.0 && det > 0.0 && sum_minors > 1e-4 * trace * trace) {
-            return 0.0;
-        }
-        let bound = det / sum_minors - 1e-8 * trace;
-        if bound.is_finite() {
-            bound.max(0.0)
-        } else {
-            0.0
-        }
     }
 }
 
@@ -503,23 +421,6 @@ mod tests {
             p,
             dir: p.coords.normalize(),
             range: p.coords.norm(),
-        }
-    }
-
-    #[test]
-    fn row_col_matches_division() {
-        for cols in 1..=600 {
-            let rc = RowCol::new(cols);
-            for i in (0..cols * 12).chain([cols * 1000 - 1, cols * 4096 + 7]) {
-                assert_eq!((rc.row(i), rc.col(i)), (i / cols, i % cols), "{i} / {cols}");
-            }
-        }
-        for cols in [181, 361, 1081, 65_535, 1 << 20] {
-            let rc = RowCol::new(cols);
-            let near_limit = (1usize << 40) / cols;
-            for i in (near_limit - 3000..near_limit + 3000).chain([usize::MAX / 2]) {
-                assert_eq!((rc.row(i), rc.col(i)), (i / cols, i % cols), "{i} / {cols}");
-            }
         }
     }
 

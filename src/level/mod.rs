@@ -158,11 +158,8 @@ impl LevelEstimate {
     /// it, with few wall points for its pseudo-level scan; cleverRobot retakes such scans.
     pub fn facing(&self) -> Option<FailReason> {
         let count = |k: SurfaceKind| self.quads.iter().filter(|q| q.kind == k).count();
-        let (walls, floors, ceilings) = (
-            count(SurfaceKind::Wall),
-            count(SurfaceKind::Floor),
-            count(SurfaceKind::Ceiling),
-        );
+        let walls = self.wall_polygons();
+        let (floors, ceilings) = (count(SurfaceKind::Floor), count(SurfaceKind::Ceiling));
         if floors > walls && floors >= ceilings {
             Some(FailReason::FacingFloor)
         } else if ceilings > walls {
@@ -194,12 +191,8 @@ impl LevelEstimate {
 }
 
 /// The range noise for a pose: `params.sigma`, else the median of the scans' `readings_sigma`,
-/// else estimated from the data ([`noise::estimate_range_sigma`]), else `params.min_sigma`.
-pub fn range_sigma_for(scans: &[Scan], params: &LevelParams) -> f64 {
-    range_sigma_with(scans, params, None)
-}
-
-/// [`range_sigma_for`], given the `(sin, cos)` of the bearings when every scan shares them.
+/// else estimated from the data ([`noise::estimate_range_sigma_with`]), else
+/// `params.min_sigma`; given the `(sin, cos)` of the bearings when every scan shares them.
 fn range_sigma_with(scans: &[Scan], params: &LevelParams, trig: Option<&[(f64, f64)]>) -> f64 {
     if let Some(s) = params.sigma {
         return s;
@@ -262,8 +255,10 @@ pub fn level_pose_with(
         adopt::adopt_refined(&mut est, models);
     }
     // The wall points and base scan of the pseudo-level scan (sect. 6), then the attitude.
-    est.wall_mask = wall_mask(&est);
-    est.base_scan = est.grid.as_ref().map(|g| base_scan(g, &est.wall_mask));
+    if let Some(grid) = &est.grid {
+        est.wall_mask = wall_mask_where(grid, &est, |_| true);
+        est.base_scan = Some(base_scan(grid, &est.wall_mask));
+    }
     // The attitude, refined by maximum likelihood on that segmentation.
     ml::from_segmentation::finish(&mut est, scans, result, params);
     est
@@ -292,16 +287,9 @@ fn segmented(
     }
 }
 
-/// Per grid point, whether it lies on a wall: inside a wall quad's span or a wall patch (of
-/// the segmentation that produced the attitude, sect. 6).
-fn wall_mask(est: &LevelEstimate) -> Vec<bool> {
-    est.grid
-        .as_ref()
-        .map_or_else(Vec::new, |grid| wall_mask_where(grid, est, |_| true))
-}
-
-/// [`wall_mask`] over the wall quads `quad_counts` accepts (the pseudo-level scan's keep test
-/// takes only those vertical once leveled); wall patches always count.
+/// Per grid point, whether it lies on a wall: inside the span of a wall quad that `quad_counts`
+/// accepts (the pseudo-level scan's keep test takes only those vertical once leveled) or in a
+/// wall patch (of the segmentation that produced the attitude, sect. 6).
 pub(crate) fn wall_mask_where(
     grid: &PoseGrid,
     est: &LevelEstimate,

@@ -49,15 +49,13 @@ level_params! {
     /// dropped \[1\]. Default 0.3.
     min_edge_ratio: f64 = 0.3,
     // ---- Patches: growing, robust fits, splits and trims (after sect. 9, `patches`) ----
-    /// Region growing admits points within this many sigmas of a patch's plane. Default 3.
+    /// Region growing admits points within this many sigmas of a patch's plane, each point's
+    /// own range noise along the plane's normal, `sigma |d . n|`, rather than `sigma`: a floor
+    /// seen at a grazing angle lies within centimetres of its plane even at 10 cm noise, and an
+    /// isotropic tolerance lets floor patches run up the walls' feet. Walls grown this tightly
+    /// keep the floor line at their foot only as a bend across rows, which
+    /// `max_row_bend_sigmas` rejects; neither helps without the other. Default 3.
     grow_k: f64 = 3.0,
-    /// Those sigmas are each point's own range noise along the plane's normal,
-    /// `sigma |d . n|`, rather than `sigma`: a floor seen at a grazing angle lies within
-    /// centimetres of its plane even at 10 cm noise, and an isotropic tolerance lets floor
-    /// patches run up the walls' feet. Default true. Walls grown this tightly keep the floor
-    /// line at their foot only as a bend across rows, which `max_row_bend_sigmas` rejects;
-    /// neither helps without the other.
-    ray_tolerance: bool = true,
     /// Smallest share of sigma used for that tolerance, `|d . n|` floor \[1\]. Default 0.1.
     min_ray_share: f64 = 0.1,
     /// Floor on `|d . n|` in the ray weights of each patch's plane, `1 / (d . n)^2` \[1\].
@@ -65,11 +63,10 @@ level_params! {
     ray_weight_floor: f64 = 0.2,
     /// Region-growing seeds span about this many range-noise sigmas sideways \[1\]. Default 6.
     seed_span_sigmas: f64 = 6.0,
-    /// Widest seed \[columns\]. Default 25.
+    /// Widest seed \[columns\]. Default 25. (Floors and ceilings also seed from the paper's
+    /// narrow quads when the seeds are wider: along a level surface's normal the grazing rays
+    /// carry little noise.)
     max_seed_cols: usize = 25,
-    /// Floors and ceilings also seed from the paper's narrow quads when the seeds are wider.
-    /// Default true: along a level surface's normal the grazing rays carry little noise.
-    narrow_level_seeds: bool = true,
     /// Patches whose residuals exceed this multiple of what the noise explains are tested for
     /// being two planes \[1\]. Default 1.1.
     split_misfit: f64 = 1.1,
@@ -134,16 +131,15 @@ level_params! {
     max_level_misfit: f64 = 3.0,
     /// Factor on a level plane's normal variance \[1\]. The noise model does not see what
     /// cleaning leaves of a wall's foot in a floor patch; simulations at 1-10 cm noise show its
-    /// sigmas about this much too small. Default 2 (measured with `ray_tolerance`, which keeps
-    /// the wall's foot out of floor patches; 4 without it).
+    /// sigmas about this much too small. Default 2 (measured with the per-ray growing tolerance
+    /// of `grow_k`, which keeps the wall's foot out of floor patches; 4 without it).
     level_inflation: f64 = 2.0,
     /// A floor or ceiling patch is not used as level when it only spans two scans thanks to
     /// points whose range hardly changes to a neighbouring scan's point (member of the patch
     /// or not), i.e. points on a wall, and those are more than a fifth of it: a floor line and
     /// a wall's line at its foot, coplanar within high noise, gave planes 10 degrees off with
-    /// sigmas under 1 degree (a box room and an angled room at 10 cm). Default true.
-    level_steep_veto: bool = true,
-    /// ... for every patch from range noise of this sigma \[m\], and below it for a patch on
+    /// sigmas under 1 degree (a box room and an angled room at 10 cm). That veto applies to
+    /// every patch from range noise of this sigma \[m\], and below it for a patch on
     /// fewer than `LEVEL_MIN_ROWS_NOISY` scan lines. Default 0.03: at 1 cm noise the misfit
     /// test refuses most such planes, and the veto on every patch cost a thousandth of a
     /// degree in the 1 cm means (floor points just in front of a wall's foot). On two scan
@@ -327,7 +323,7 @@ pub(crate) mod first_pass {
     /// step direction from (`first_pass::level_stepping_members`).
     pub(crate) const MIN_LEVEL_STEPS: usize = 10;
 
-    /// With `level_steep_veto`, a plane that only its points on a steep surface make is no
+    /// A plane that only its points on a steep surface make is no
     /// floor when those are more than one in this many of its points (a fifth).
     pub(crate) const STEEP_SHARE_INV: usize = 5;
 

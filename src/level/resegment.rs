@@ -183,12 +183,14 @@ pub(crate) fn refined_solution(
     first: &Result<UpSolution, FailCause>,
     params: &LevelParams,
 ) -> Refinement {
-    let Some(found) = refine_estimate(est, levels, first, params) else {
+    let Some(Resegmented {
+        start,
+        refined,
+        rivals,
+    }) = refine_estimate(est, levels, first, params)
+    else {
         return Refinement::default();
     };
-    let (start, refined, rivals) = (found.start, found.refined, found.rivals);
-    let raw = Some(refined.solution);
-    let start = Some(start);
     let level_models = refined.models.iter().any(|m| m.kind != SurfaceKind::Wall);
     // Lines alone leave each direction of up to single lines, with nothing to check them
     // against: traced on a zigzag wall at 10 cm, three floor lines (no wall kept) leveled a
@@ -201,17 +203,15 @@ pub(crate) fn refined_solution(
         acceptable(&refined.solution, params, level_models)
             .is_ok()
             .then_some(refined.solution)
-    } else {
+    } else if passes_line_gate(&refined.solution, params) {
         // A line pins up down across it only: the other direction rests on the walls that
         // alone could not pass the gate, so it is held to a stricter one; failing that, the
         // models without the lines are gated as usual.
-        if passes_line_gate(&refined.solution, params) {
-            Some(refined.solution)
-        } else {
-            refined
-                .without_lines(params, est.range_sigma)
-                .filter(|w| acceptable(w, params, level_models).is_ok())
-        }
+        Some(refined.solution)
+    } else {
+        refined
+            .without_lines(params, est.range_sigma)
+            .filter(|w| acceptable(w, params, level_models).is_ok())
     };
     // Another start's re-segmentation that passes the gate as well but lies far from this
     // one: two self-consistent readings of the pose, and which one is right is not known.
@@ -226,8 +226,8 @@ pub(crate) fn refined_solution(
     Refinement {
         models: accepted.is_some().then_some(refined.models),
         accepted,
-        raw,
-        start,
+        raw: Some(refined.solution),
+        start: Some(start),
     }
 }
 

@@ -114,32 +114,24 @@ type Term = (Vector3<f64>, f64);
 impl PlaneObs<'_> {
     /// A wall plane.
     pub(crate) fn wall(fit: &PlaneFit, inflate: f64) -> PlaneObs<'_> {
-        PlaneObs::of(Evidence::Wall(fit), inflate)
+        let evidence = Evidence::Wall(fit);
+        PlaneObs { evidence, inflate }
     }
 
     /// A floor or ceiling plane taken as level.
     pub(crate) fn level(fit: &PlaneFit, inflate: f64) -> PlaneObs<'_> {
-        PlaneObs::of(Evidence::Level(fit), inflate)
+        let evidence = Evidence::Level(fit);
+        PlaneObs { evidence, inflate }
     }
 
     /// A line on a floor or ceiling.
     pub(crate) fn level_line(line: &LevelLine, inflate: f64) -> PlaneObs<'_> {
-        PlaneObs::of(Evidence::LevelLine(line), inflate)
-    }
-
-    fn of(evidence: Evidence<'_>, inflate: f64) -> PlaneObs<'_> {
+        let evidence = Evidence::LevelLine(line);
         PlaneObs { evidence, inflate }
     }
 
-    /// Scalar residuals this evidence contributes.
-    fn constraints(&self) -> usize {
-        match self.evidence {
-            Evidence::Level(_) => 2,
-            _ => 1,
-        }
-    }
-
-    /// The single constrained direction `a` (with `a . up = 0`) of one-residual evidence.
+    /// The single constrained direction `a` (with `a . up = 0`) of one-residual evidence;
+    /// `None` for a level plane's two residuals.
     fn single(&self) -> Option<Vector3<f64>> {
         match self.evidence {
             Evidence::Wall(f) => Some(f.normal),
@@ -303,15 +295,13 @@ fn tangent_basis(up: &Vector3<f64>) -> [Vector3<f64>; 2] {
 /// 50 degrees of the robot's own up are considered. `None` with fewer than two planes or when
 /// no proposal qualifies.
 pub(crate) fn up_robust(planes: &[PlaneObs], sigma: f64, iterations: usize) -> Option<UpSolution> {
-    let constraints: usize = planes.iter().map(|p| p.constraints()).sum();
+    let constraints: usize = planes.iter().map(|p| p.single().map_or(2, |_| 1)).sum();
     if constraints < 2 {
         return None;
     }
     let mut candidates: Vec<Vector3<f64>> = planes.iter().filter_map(|p| p.proposal()).collect();
     let start: Matrix3<f64> = planes.iter().map(|p| p.start_matrix()).sum();
-    if let Some(v) = smallest_eigenvector(&start) {
-        candidates.push(v);
-    }
+    candidates.extend(smallest_eigenvector(&start));
     // Walls and level lines: each pair proposes the direction normal to both.
     let singles: Vec<Vector3<f64>> = planes.iter().filter_map(|p| p.single()).collect();
     for (i, a) in singles.iter().enumerate() {

@@ -27,7 +27,7 @@ pub(super) fn cauchy_weight(fit: &PlaneFit, g: &GridPoint, s: f64, params: &Leve
 
 /// How far from a patch's plane a point may lie and still join it: `grow_k` sigmas of the
 /// point's own range noise along the plane's normal, `sigma |d . n|` (at least
-/// `min_ray_share` of sigma), when `ray_tolerance` is on; else `tol` for every point.
+/// `min_ray_share` of sigma).
 ///
 /// A floor seen at a grazing angle carries its range noise almost along itself, so its points
 /// lie within centimetres of its plane even at 10 cm noise, while the foot of a wall rises
@@ -36,15 +36,10 @@ pub(super) fn cauchy_weight(fit: &PlaneFit, g: &GridPoint, s: f64, params: &Leve
 pub(super) fn ray_tolerance(
     fit: &PlaneFit,
     g: &GridPoint,
-    tol: f64,
     sigma: f64,
     params: &LevelParams,
 ) -> f64 {
-    if params.ray_tolerance {
-        params.grow_k * sigma * g.dir.dot(&fit.normal).abs().max(params.min_ray_share)
-    } else {
-        tol
-    }
+    params.grow_k * sigma * g.dir.dot(&fit.normal).abs().max(params.min_ray_share)
 }
 
 /// A plane refitted with each point weighted by the inverse variance of its range noise
@@ -88,28 +83,13 @@ pub(super) fn ray_weighted_fit<'a>(
 
 /// Members in row-major order (`by_row`) or column-major order, ties by grid index, as a
 /// sort by `(row or column, index)` would give: ascending grid index is row-major, and a
-/// stable counting sort of that by column is column-major (members are distinct).
+/// stable sort of that by column is column-major.
 pub(super) fn in_order(grid: &PoseGrid, members: &[usize], by_row: bool) -> Vec<usize> {
-    let ascending = ascending(members);
-    if by_row {
-        return ascending;
+    let mut v = ascending(members);
+    if !by_row {
+        v.sort_by_key(|&i| i % grid.cols);
     }
-    let cols = grid.cols.max(1);
-    let rc = grid.row_col();
-    let mut start = vec![0usize; cols + 1];
-    for &i in &ascending {
-        start[rc.col(i) + 1] += 1;
-    }
-    for c in 0..cols {
-        start[c + 1] += start[c];
-    }
-    let mut out = vec![0usize; ascending.len()];
-    for &i in &ascending {
-        let slot = &mut start[rc.col(i)];
-        out[*slot] = i;
-        *slot += 1;
-    }
-    out
+    v
 }
 
 /// Distinct grid indices in ascending order: marked in a bitset over their range and read

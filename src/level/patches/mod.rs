@@ -99,13 +99,10 @@ pub(crate) fn grow_patches(
         wide = extract_quads_sized(grid, params, sigma, params.quad_rows, width);
         &wide
     };
-    let narrow_level = params.narrow_level_seeds && width != params.quad_cols;
     let mut members = Vec::new();
-    for q in ordered_seeds(three_row, quads, narrow_level) {
+    for q in ordered_seeds(three_row, quads, width != params.quad_cols) {
         let id = patches.len() as u32;
-        if let Some(p) = growth.grow_seed(q, id, &mut labels, &mut members) {
-            patches.push(p);
-        }
+        patches.extend(growth.grow_seed(q, id, &mut labels, &mut members));
     }
     let split = growth.split_two_plane_patches(patches);
     labels.fill(UNLABELLED);
@@ -174,7 +171,7 @@ impl Growth<'_> {
         labels: &mut [u32],
         members: &mut Vec<usize>,
     ) -> Option<Patch> {
-        let (grid, params, sigma, tol) = (self.grid, self.params, self.sigma, self.tol);
+        let (grid, params, sigma) = (self.grid, self.params, self.sigma);
         let cols = grid.cols;
         if q.span(cols).any(|i| labels[i] != UNLABELLED) {
             return None;
@@ -190,14 +187,12 @@ impl Growth<'_> {
         }
         let mut fit = acc.fit(sigma)?;
         let s_eff = sigma.max(params.min_sigma);
-        let tol_at = |fit: &PlaneFit, g: &GridPoint| ray_tolerance(fit, g, tol, s_eff, params);
+        let tol_at = |fit: &PlaneFit, g: &GridPoint| ray_tolerance(fit, g, s_eff, params);
         flood(
             grid, id, labels, members, &mut acc, &mut fit, &tol_at, sigma,
         );
         // Release members that the final plane does not explain, then refit.
-        if let Some(f) = acc.fit(sigma) {
-            fit = f;
-        }
+        fit = acc.fit(sigma).unwrap_or(fit);
         // Few are released: their sums come off the accumulator, rather than the kept ones'
         // being summed again.
         let mut released = PlaneAccumulator::default();
@@ -269,10 +264,8 @@ impl Growth<'_> {
         let fit = robust_fit(grid, members, first, params, sigma)?;
         let fronted = without_front_row_ends(grid, members, &fit, params, sigma);
         let (members, fit) = match &fronted {
+            Some(kept) if !still_a_patch(kept) => return None,
             Some(kept) => {
-                if !still_a_patch(kept) {
-                    return None;
-                }
                 let first = grid.accumulate(kept).fit(sigma)?;
                 (&kept[..], robust_fit(grid, kept, first, params, sigma)?)
             }
@@ -309,13 +302,11 @@ fn flood(
     sigma: f64,
 ) {
     let (n, cols) = (grid.points.len(), grid.cols);
-    // Columns without a division per visit.
-    let rc = grid.row_col();
     let mut refit_at = acc.n + acc.n / 3 + 1;
     let mut next = 0;
     while let Some(&i) = members.get(next) {
         next += 1;
-        let c = rc.col(i);
+        let c = i % cols;
         // Left, right, previous and next row; `usize::MAX` where the grid ends (cheaper in
         // this, the hottest loop of region growing, than Options).
         let mut neighbours = [usize::MAX; 4];
@@ -341,9 +332,7 @@ fn flood(
                 members.push(j);
                 acc.add(g);
                 if acc.n >= refit_at {
-                    if let Some(f) = acc.fit(sigma) {
-                        *fit = f;
-                    }
+                    *fit = acc.fit(sigma).unwrap_or(*fit);
                     refit_at = acc.n + acc.n / 3 + 1;
                 }
             }
@@ -359,7 +348,7 @@ pub(crate) fn plane_explained(fit: &PlaneFit, sigma: f64, params: &LevelParams) 
 }
 
 /// [`rows_span`] of members in ascending order: their first and last.
-fn rows_span_sorted(members: &[usize], cols: usize) -> (usize, usize) {
+pub(crate) fn rows_span_sorted(members: &[usize], cols: usize) -> (usize, usize) {
     match (members.first(), members.last()) {
         (Some(&lo), Some(&hi)) => (lo / cols, hi / cols),
         _ => (usize::MAX, 0),

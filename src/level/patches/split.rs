@@ -70,10 +70,9 @@ pub(super) fn bent_across_rows(
     let s2 = sigma.max(params.min_sigma).powi(2);
     // Per row: sum of residuals, sum of (d . n)^2, count.
     let mut rows = vec![(0.0, 0.0, 0usize); grid.rows()];
-    let rc = grid.row_col();
     for &i in members {
         if let Some(g) = &grid.points[i] {
-            let r = &mut rows[rc.row(i)];
+            let r = &mut rows[grid.row(i)];
             r.0 += fit.distance(&g.p);
             r.1 += g.dir.dot(&fit.normal).powi(2).max(ROW_BEND_DN2_FLOOR);
             r.2 += 1;
@@ -135,8 +134,11 @@ pub fn split_members(
         return whole;
     };
     let orders = [false, true].map(|by_row| in_order(grid, members, by_row));
-    let cuts = [0, 1].map(|which| candidate_cuts(grid, &orders[which], which, params));
-    let Some((which, cut)) = best_cut(&cuts, sigma) else {
+    // The least two-plane RSS over both orderings, ties to the first ordering and boundary.
+    let Some((_, which, cut)) = (0..2)
+        .filter_map(|w| best_cut(grid, &orders[w], w == 1, params, sigma).map(|(r, b)| (r, w, b)))
+        .min_by(|x, y| x.0.total_cmp(&y.0))
+    else {
         return whole;
     };
     let (a, b) = (orders[which][..cut].to_vec(), orders[which][cut..].to_vec());
@@ -156,14 +158,17 @@ pub fn split_members(
     out
 }
 
-/// The cuts of one member ordering (`which`: 0 by column, 1 by row) that [`split_members`]
-/// considers: where the key changes and both parts span two rows, each as (lower bound on the
-/// two planes' RSS, `which`, boundary index), with the ordering's prefix plane sums. The
-/// bounds let [`best_cut`] skip most eigen decompositions.
-fn candidate_cuts(grid: &PoseGrid, sorted: &[usize], which: usize, params: &LevelParams) -> Cuts {
-    let rc = grid.row_col();
-    let by_row = which == 1;
-    let key = |i: usize| if by_row { rc.row(i) } else { rc.col(i) };
+/// The cut of one member ordering (`by_row`, else by column) that [`split_members`] takes:
+/// where the key changes and both parts span two rows, the one of least two-plane RSS (ties
+/// to the first), as (RSS, boundary index).
+fn best_cut(
+    grid: &PoseGrid,
+    sorted: &[usize],
+    by_row: bool,
+    params: &LevelParams,
+    sigma: f64,
+) -> Option<(f64, usize)> {
+    let key = |i: usize| if by_row { grid.row(i) } else { i % grid.cols };
     let n = sorted.len();
     // Prefix plane sums, and the rows spanned by every prefix and suffix.
     let mut prefix = Vec::with_capacity(n + 1);
@@ -175,65 +180,31 @@ fn candidate_cuts(grid: &PoseGrid, sorted: &[usize], which: usize, params: &Leve
             acc.add(g);
         }
         prefix.push(acc);
-        pre_lo[k + 1] = pre_lo[k].min(rc.row(i));
-        pre_hi[k + 1] = pre_hi[k].max(rc.row(i));
+        pre_lo[k + 1] = pre_lo[k].min(grid.row(i));
+        pre_hi[k + 1] = pre_hi[k].max(grid.row(i));
     }
     let (mut suf_lo, mut suf_hi) = (vec![usize::MAX; n + 1], vec![0usize; n + 1]);
     for k in (0..n).rev() {
-        suf_lo[k] = suf_lo[k + 1].min(rc.row(sorted[k]));
-        suf_hi[k] = suf_hi[k + 1].max(rc.row(sorted[k]));
+        suf_lo[k] = suf_lo[k + 1].min(grid.row(sorted[k]));
+        suf_hi[k] = suf_hi[k + 1].max(grid.row(sorted[k]));
     }
-    let total = acc;
     let half = params.min_patch_points / 2;
-    let mut candidates = Vec::new();
+    let mut best: Option<(f64, usize)> = None;
     for b in half.max(1)..n.saturating_sub(half).max(1) {
         // Only where the key changes (column or row boundaries).
-        if key(sorted[b]) == key(sorted[b - 1]) {
+        if key(sorted[b]) == key(sorted[b - 1]) || pre_hi[b] <= pre_lo[b] || suf_hi[b] <= suf_lo[b]
+        {
             continue;
         }
-        if pre_hi[b] <= pre_lo[b] || suf_hi[b] <= suf_lo[b] {
-            continue;
-        }
-        let l = prefix[b];
-        let r = total.minus(&l);
-        let bound = l.residual_lower_bound() + r.residual_lower_bound();
-        candidates.push((bound, which, b));
-    }
-    (candidates, prefix)
-}
-
-/// One ordering's candidate cuts, as (lower bound on the two planes' RSS, ordering, boundary
-/// index), and its prefix plane sums.
-type Cuts = (Vec<(f64, usize, usize)>, Vec<PlaneAccumulator>);
-
-/// The cut of least two-plane RSS among both orderings' [`candidate_cuts`], as (ordering,
-/// boundary index). They are fitted in order of their bounds, and a cut whose bound exceeds
-/// the best RSS found cannot win, so most need no eigen decomposition. The winner is the same
-/// as fitting every cut in turn: the least RSS, ties to the first ordering and boundary.
-fn best_cut(cuts: &[Cuts; 2], sigma: f64) -> Option<(usize, usize)> {
-    let mut candidates: Vec<(f64, usize, usize)> =
-        cuts.iter().flat_map(|c| c.0.iter().copied()).collect();
-    candidates.sort_by(|x, y| x.0.total_cmp(&y.0));
-    // Best split so far: (RSS of the two planes, which ordering, boundary index).
-    let mut best: Option<(f64, usize, usize)> = None;
-    for &(bound, which, b) in &candidates {
-        if best.is_some_and(|(br, _, _)| bound > br) {
-            break;
-        }
-        let prefix = &cuts[which].1;
-        let l = prefix[b];
-        let r = prefix[prefix.len() - 1].minus(&l);
-        let (Some(fl), Some(fr)) = (l.fit(sigma), r.fit(sigma)) else {
+        let (Some(fl), Some(fr)) = (prefix[b].fit(sigma), acc.minus(&prefix[b]).fit(sigma)) else {
             continue;
         };
         let rss2 = fl.residual_ss + fr.residual_ss;
-        let better =
-            best.is_none_or(|(br, bw, bb)| rss2 < br || (rss2 == br && (which, b) < (bw, bb)));
-        if better {
-            best = Some((rss2, which, b));
+        if best.is_none_or(|(br, _)| rss2 < br) {
+            best = Some((rss2, b));
         }
     }
-    best.map(|(_, which, b)| (which, b))
+    best
 }
 
 /// Whether parts `a` and `b` of `n` members (one plane's RSS `rss1`) are two planes: each at

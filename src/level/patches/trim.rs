@@ -37,12 +37,11 @@ pub(super) fn trim_edge_rows(
     if plane_explained(all_fit, sigma, params) {
         return None;
     }
-    let rc = grid.row_col();
     // Each row's own sums, so that the other rows' plane is a subtraction away.
     let mut per_row = vec![PlaneAccumulator::default(); hi + 1];
     for &i in members {
         if let Some(g) = &grid.points[i] {
-            per_row[rc.row(i)].add(g);
+            per_row[grid.row(i)].add(g);
         }
     }
     let rows = EdgeRows {
@@ -74,7 +73,7 @@ pub(super) fn trim_edge_rows(
         members
             .iter()
             .copied()
-            .filter(|&i| (first..=last).contains(&rc.row(i)))
+            .filter(|&i| (first..=last).contains(&grid.row(i)))
             .collect(),
     )
 }
@@ -98,7 +97,6 @@ impl EdgeRows<'_> {
     /// plane's misfit), as the doc of [`trim_edge_rows`] explains.
     fn stands_off(&self, row: usize, first: usize, last: usize) -> bool {
         let (params, s) = (self.params, self.sigma.max(self.params.min_sigma));
-        let rc = self.grid.row_col();
         let others = (self.span.0..=self.span.1)
             .filter(|&r| r == row || !(first..=last).contains(&r))
             .fold(*self.all, |acc, r| acc.minus(&self.per_row[r]));
@@ -112,7 +110,7 @@ impl EdgeRows<'_> {
         for g in self
             .members
             .iter()
-            .filter(|&&i| rc.row(i) == row)
+            .filter(|&&i| self.grid.row(i) == row)
             .filter_map(|&i| self.grid.points[i].as_ref())
         {
             sum += fit.distance(&g.p);
@@ -195,14 +193,13 @@ pub(super) fn without_front_row_ends(
             (along.dot(&g.p.coords) - at, share * share)
         })
     };
-    let rc = grid.row_col();
     let k = params.front_end_sigmas;
     let mut keep = vec![true; members.len()];
     let mut dropped = false;
     // Members ascend: each row's are one slice, in column order.
     let mut start = 0;
     while start < members.len() {
-        let next_row = (rc.row(members[start]) + 1) * grid.cols;
+        let next_row = (grid.row(members[start]) + 1) * grid.cols;
         let len = members[start..].partition_point(|&i| i < next_row);
         let run = &members[start..start + len];
         let half = len / 2;

@@ -93,12 +93,14 @@ pub(crate) fn find_levels(
     for floor in [true, false] {
         if !fresh {
             // Later passes carry what the first found, and look for nothing new.
-            if let Some(l) = given.iter().find(|l| below(l) == floor) {
-                out.push(*l);
-            }
+            out.extend(given.iter().find(|l| below(l) == floor).copied());
             continue;
         }
-        let zs = level_candidates(&f.lv, ok, floor);
+        let mut zs = height_candidates(&f.lv, floor, |i| ok[i]);
+        if !floor {
+            // By height, ascending, as for the floor.
+            zs = zs.into_iter().rev().map(|(z, i)| (-z, i)).collect();
+        }
         if zs.len() < params.min_level_points {
             continue;
         }
@@ -117,26 +119,27 @@ pub(crate) fn find_levels(
         let cos = params.refine_level_cos();
         let level = |n: &Vector3<f64>| n.dot(up).abs() >= cos;
         let members = sampled_plane(grid, &window, &stepping, level, s, params).unwrap_or(window);
-        if let Some(fit) = refit_rounds(grid, &zs, members, params, s) {
-            if checks::refined_level(&fit, up, s, params) {
-                out.push(fit);
-            }
-        }
+        let fit = refit_rounds(grid, &zs, members, params, s);
+        out.extend(fit.filter(|fit| checks::refined_level(fit, up, s, params)));
     }
     out
 }
 
-/// The candidates for the floor (`floor`) or the ceiling: the usable (`ok`) points more than
-/// `MIN_LEVEL_DISTANCE` below or above the scanner in the level frame, as (height, grid
-/// index), ascending by height.
-fn level_candidates(lv: &Leveled, ok: &[bool], floor: bool) -> Vec<(f64, usize)> {
+/// The candidates for the floor (`floor`) or the ceiling: the points that `keep` accepts more
+/// than `MIN_LEVEL_DISTANCE` below or above the scanner in the level frame, as (height key
+/// growing away from the surface's side, grid index), ascending: the outermost first.
+pub(crate) fn height_candidates(
+    lv: &Leveled,
+    floor: bool,
+    keep: impl Fn(usize) -> bool,
+) -> Vec<(f64, usize)> {
+    let key = |z: f64| if floor { z } else { -z };
     let mut zs: Vec<(f64, usize)> =
         lv.q.iter()
             .enumerate()
             .filter_map(|(i, q)| {
                 let (q, _) = q.as_ref()?;
-                (ok[i] && (q.z < -MIN_LEVEL_DISTANCE) == floor && q.z.abs() > MIN_LEVEL_DISTANCE)
-                    .then_some((q.z, i))
+                (keep(i) && key(q.z) < -MIN_LEVEL_DISTANCE).then_some((key(q.z), i))
             })
             .collect();
     zs.sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
@@ -231,7 +234,7 @@ pub(crate) fn level_band<'a>(
     f: &'a Frame,
     height: f64,
     above: bool,
-) -> impl Iterator<Item = usize> + 'a {
+) -> impl Iterator<Item = usize> + Clone + 'a {
     let (s, k) = (f.s, f.k);
     f.lv.q.iter().enumerate().filter_map(move |(i, q)| {
         let (q, d) = q.as_ref()?;

@@ -40,7 +40,9 @@ pub(crate) enum LevelEvidence {
 /// [`PLANE_LINE_MIN_POINTS`] counts.
 pub(crate) fn level_lines(ctx: &LineContext, kind: SurfaceKind) -> LevelEvidence {
     let (grid, params, s) = (ctx.f.grid, ctx.f.params, ctx.f.s);
-    let zs = line_candidates(ctx, kind == SurfaceKind::Floor);
+    let zs = height_candidates(&ctx.f.lv, kind == SurfaceKind::Floor, |i| {
+        ctx.levelish[i] && !ctx.taken[i]
+    });
     let min_points = params.level_line_min_points.max(3);
     if zs.len() < min_points {
         return LevelEvidence::None;
@@ -55,28 +57,6 @@ pub(crate) fn level_lines(ctx: &LineContext, kind: SurfaceKind) -> LevelEvidence
         .filter_map(|row| fit_line(grid, row, &ctx.f.up, Some(ctx.f.sigma_up), s, params, short))
         .collect();
     lines_evidence(ctx, found, min_points)
-}
-
-/// The candidates of [`level_lines`]: the points stepping like a level surface not yet in a
-/// model, more than `MIN_LEVEL_DISTANCE` below (`floor`) or above the scanner, as (height key
-/// growing away from the surface's side, grid index), ascending: the outermost level surface
-/// first.
-fn line_candidates(ctx: &LineContext, floor: bool) -> Vec<(f64, usize)> {
-    let key = |z: f64| if floor { z } else { -z };
-    let mut zs: Vec<(f64, usize)> = ctx
-        .f
-        .lv
-        .q
-        .iter()
-        .enumerate()
-        .filter_map(|(i, q)| {
-            let (q, _) = q.as_ref()?;
-            (ctx.levelish[i] && !ctx.taken[i] && key(q.z) < -MIN_LEVEL_DISTANCE)
-                .then_some((key(q.z), i))
-        })
-        .collect();
-    zs.sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
-    zs
 }
 
 /// The level surface's height key in [`level_lines`]: the middle of the outermost window
@@ -98,7 +78,6 @@ fn rows_at_height(ctx: &LineContext, zs: &[(f64, usize)], height: f64) -> Vec<Ve
     let f = ctx.f;
     let (params, s, k) = (f.params, f.s, f.params.refine_k);
     let mut rows: Vec<Vec<usize>> = vec![Vec::new(); f.grid.rows()];
-    let rc = f.grid.row_col();
     for &(z, i) in zs {
         let Some((q, d)) = f.lv.q[i].as_ref() else {
             continue;
@@ -106,7 +85,7 @@ fn rows_at_height(ctx: &LineContext, zs: &[(f64, usize)], height: f64) -> Vec<Ve
         let lever = q.xy().norm() * f.sigma_up;
         let sd = (s * s * d.z * d.z + params.min_sigma * params.min_sigma + lever * lever).sqrt();
         if (z - height).abs() <= k * sd + params.flat_margin {
-            rows[rc.row(i)].push(i);
+            rows[f.grid.row(i)].push(i);
         }
     }
     rows

@@ -149,7 +149,7 @@ pub(crate) fn refine(
 ) -> Option<Refined> {
     let s = sigma.max(params.min_sigma);
     let mut up = start.up;
-    let mut sigma_up = start_sigma(start, params);
+    let mut sigma_up = sigma_up_of(start, params);
     // Wall planes to assign from, robot frame.
     let mut wall_fits: Vec<PlaneFit> = walls.iter().map(|p| p.fit).collect();
     let mut level_fits: Vec<PlaneFit> = Vec::new();
@@ -192,9 +192,7 @@ pub(crate) fn refine(
         let (sol, flat_lines) = solve_models(&f, &models, flat_lines)?;
         let change = sol.up.angle(&up);
         up = sol.up;
-        sigma_up = sol
-            .max_attitude_sigma()
-            .clamp(params.refine_min_sigma_deg.to_radians(), MAX_SIGMA_UP);
+        sigma_up = sigma_up_of(&sol, params);
         wall_fits = models[..walls_found].iter().map(|m| m.fit).collect();
         level_fits = models[walls_found..].iter().map(|m| m.fit).collect();
         result = Some(Refined {
@@ -284,26 +282,25 @@ fn assign_levels(
     // Without a floor model, the lowest points seen stand for the floor: the band above
     // them holds a wall's foot and the floor just in front of it, which no vertical plane
     // tells apart at high noise. If no floor is in view, this only trims the lowest wall
-    // points.
-    if !level_fits.iter().any(|l| l.centroid.coords.dot(&up) < 0.0) {
-        if let Some(low) = extreme_height(lv, true) {
-            for i in level_band(f, low, true) {
-                near_level[i] = true;
-            }
-        }
-    }
-    // Likewise the highest points stand for a ceiling without a model, when a few of them
-    // step from scan to scan as a ceiling does: the band below them holds a wall's top and
-    // the ceiling just beyond it (traced at 1 cm: a wall's plane through that corner, 7
+    // points. Likewise the highest points stand for a ceiling without a model, when a few of
+    // them step from scan to scan as a ceiling does: the band below them holds a wall's top
+    // and the ceiling just beyond it (traced at 1 cm: a wall's plane through that corner, 7
     // degrees off vertical, leveled a pose 7 degrees off with a sigma of 1.4). Without such
     // steps the highest points are the tops of walls, which keep them.
-    if !level_fits.iter().any(|l| l.centroid.coords.dot(&up) > 0.0) {
-        if let Some(high) = extreme_height(lv, false) {
-            let band: Vec<usize> = level_band(f, high, false).collect();
-            if steps_as_ceiling(&band, &f.steps.ceiling) {
-                for i in band {
-                    near_level[i] = true;
-                }
+    for (lowest, side) in [(true, -1.0), (false, 1.0)] {
+        if level_fits
+            .iter()
+            .any(|l| l.centroid.coords.dot(&up) * side > 0.0)
+        {
+            continue;
+        }
+        let Some(height) = extreme_height(lv, lowest) else {
+            continue;
+        };
+        let band = level_band(f, height, lowest);
+        if lowest || steps_as_ceiling(band.clone(), &f.steps.ceiling) {
+            for i in band {
+                near_level[i] = true;
             }
         }
     }
@@ -313,8 +310,8 @@ fn assign_levels(
 /// [`Check::CeilingBandSteps`](checks::Check::CeilingBandSteps): whether the highest points
 /// `band` stand for a ceiling: `CEILING_BAND_MIN_STEPS` of them step as a ceiling does
 /// (`ceiling`, per grid point).
-pub(crate) fn steps_as_ceiling(band: &[usize], ceiling: &[bool]) -> bool {
-    band.iter().filter(|&&i| ceiling[i]).count() >= CEILING_BAND_MIN_STEPS
+pub(crate) fn steps_as_ceiling(band: impl Iterator<Item = usize>, ceiling: &[bool]) -> bool {
+    band.filter(|&i| ceiling[i]).count() >= CEILING_BAND_MIN_STEPS
 }
 
 /// Points assigned to walls: the walls' lines (`wall_fits` in this frame, merged, and with
@@ -535,11 +532,9 @@ fn solve_models(
     Some((sol, flat_lines))
 }
 
-fn start_sigma(start: &UpSolution, params: &LevelParams) -> f64 {
-    let s = start.max_attitude_sigma();
-    if s.is_finite() {
-        s.clamp(params.refine_min_sigma_deg.to_radians(), MAX_SIGMA_UP)
-    } else {
-        MAX_SIGMA_UP
-    }
+/// Up's uncertainty for assigning points \[rad\]: `sol`'s larger attitude sigma, within
+/// `refine_min_sigma_deg` and `MAX_SIGMA_UP` (an undetermined sigma is infinite, not NaN).
+fn sigma_up_of(sol: &UpSolution, params: &LevelParams) -> f64 {
+    sol.max_attitude_sigma()
+        .clamp(params.refine_min_sigma_deg.to_radians(), MAX_SIGMA_UP)
 }

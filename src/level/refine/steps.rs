@@ -39,10 +39,9 @@ pub struct LevelSteps {
 pub fn level_steps(grid: &PoseGrid, params: &LevelParams, sigma: f64) -> LevelSteps {
     let two_ranges = std::f64::consts::SQRT_2 * sigma.max(params.min_sigma);
     let margin = params.refine_step_k * two_ranges;
-    let rc = grid.row_col();
     // +1 a floor's step, -1 a ceiling's, 0 neither; beside it the same by sign alone.
     let pairs = row_pairs(grid, |a, b, i, j| {
-        let de = grid.elevation[rc.row(j)] - grid.elevation[rc.row(i)];
+        let de = grid.elevation[grid.row(j)] - grid.elevation[grid.row(i)];
         let change = (b.range - a.range) * de.signum() * a.dir.x.signum();
         let bound = 0.5 * (a.range + b.range) * de.abs() + margin;
         let side = |bound: f64| {
@@ -95,10 +94,10 @@ pub(crate) fn every_row_neighbour<T: Copy>(
     pairs: &[Option<T>],
     accept: impl Fn(T) -> bool,
 ) -> Vec<bool> {
-    let (cols, rows, rc) = (grid.cols, grid.rows(), grid.row_col());
+    let (cols, rows) = (grid.cols, grid.rows());
     (0..grid.points.len())
         .map(|i| {
-            let r = rc.row(i);
+            let r = grid.row(i);
             let below = if r > 0 { pairs[i - cols] } else { None };
             let above = if r + 1 < rows { pairs[i] } else { None };
             match (below, above) {
@@ -141,10 +140,9 @@ pub(crate) fn flat_points(f: &Frame) -> Vec<bool> {
     let pairs: Vec<Option<bool>> = (0..cols * rows.saturating_sub(1))
         .map(|i| pair(i, i + cols))
         .collect();
-    let rc = grid.row_col();
     (0..grid.points.len())
         .map(|i| {
-            let r = rc.row(i);
+            let r = grid.row(i);
             let below = if r > 0 { pairs[i - cols] } else { None };
             let above = if r + 1 < rows { pairs[i] } else { None };
             below != Some(false)

@@ -17,8 +17,7 @@ pub(crate) fn without_standing_rows(
     s: f64,
     params: &LevelParams,
 ) -> Vec<usize> {
-    let rc = grid.row_col();
-    let mut rows: Vec<usize> = members.iter().map(|&i| rc.row(i)).collect();
+    let mut rows: Vec<usize> = members.iter().map(|&i| grid.row(i)).collect();
     rows.sort_unstable();
     rows.dedup();
     if rows.len() < 3 {
@@ -34,8 +33,8 @@ pub(crate) fn without_standing_rows(
         let (line, others): (Vec<usize>, Vec<usize>) = members
             .iter()
             .copied()
-            .filter(|&i| !drop.contains(&rc.row(i)))
-            .partition(|&i| rc.row(i) == edge);
+            .filter(|&i| !drop.contains(&grid.row(i)))
+            .partition(|&i| grid.row(i) == edge);
         let Some(fit) = fit_members(grid, &others, s) else {
             continue;
         };
@@ -48,7 +47,7 @@ pub(crate) fn without_standing_rows(
     }
     members
         .into_iter()
-        .filter(|&i| !drop.contains(&rc.row(i)))
+        .filter(|&i| !drop.contains(&grid.row(i)))
         .collect()
 }
 
@@ -59,9 +58,8 @@ pub(crate) fn fit_members(grid: &PoseGrid, members: &[usize], sigma: f64) -> Opt
 /// Rows holding at least `share` of the members each.
 pub(crate) fn rows_supported(grid: &PoseGrid, members: &[usize], share: f64) -> usize {
     let mut per_row = vec![0usize; grid.rows()];
-    let rc = grid.row_col();
     for &i in members {
-        per_row[rc.row(i)] += 1;
+        per_row[grid.row(i)] += 1;
     }
     supported_rows(&per_row, share)
 }

@@ -67,16 +67,12 @@ pub(crate) fn discover_lines(f: &Frame, candidate: &[bool], width: usize) -> Vec
                 acc.add(&p, &d, z);
                 end += 1;
                 if acc.n >= refit_at {
-                    if let Some(l) = acc.line() {
-                        line = l;
-                    }
+                    line = acc.line().unwrap_or(line);
                     refit_at = acc.n * 5 / 4 + 1;
                 }
             }
             if acc.n >= min_points {
-                if let Some(l) = acc.line() {
-                    out.push(l);
-                }
+                out.extend(acc.line());
             }
             c = end;
         }
