@@ -26,6 +26,10 @@ pub struct CellStats {
     pub max_deg: f64,
     /// Leveled poses with an error above 5 degrees.
     pub wrong_over_5_deg: usize,
+    /// How many leveled poses honest sigmas put above 5 degrees: the sum over them of
+    /// [`chance_over`] 5 degrees at their reported sigmas. `wrong_over_5_deg` well above it
+    /// means errors in a tail heavier than the sigmas say (docs/ESTIMATOR.md, section 6).
+    pub expected_over_5_deg: f64,
     /// Fraction of leveled poses whose error lies within 3 reported sigmas.
     pub within_3_sigma: f64,
     /// Phantom pseudo-level points (farther than `phantom_distance` from every wall) over all
@@ -68,6 +72,40 @@ pub struct CellStats {
     /// Every pose's outcome, in pose order (written apart, as `poses.jsonl`).
     #[serde(skip)]
     pub outcomes: Vec<PoseOutcome>,
+}
+
+/// The chance that the paper's error `max(|e_x|, |e_y|)` exceeds `limit` when the two angle
+/// errors are independent Gaussians of sigmas `sigmas` (same unit as `limit`).
+pub(crate) fn chance_over(limit: f64, sigmas: [f64; 2]) -> f64 {
+    let outside = |s: f64| {
+        if s > 0.0 {
+            erfc(limit / (s * std::f64::consts::SQRT_2))
+        } else {
+            0.0
+        }
+    };
+    1.0 - (1.0 - outside(sigmas[0])) * (1.0 - outside(sigmas[1]))
+}
+
+/// The complementary error function for `x >= 0`, by the Chebyshev fit of Press et al.,
+/// *Numerical Recipes* (2nd ed., 1992), sect. 6.2: relative error below 1.2e-7 everywhere, so
+/// the far tails that a sum over many poses adds up stay right too.
+fn erfc(x: f64) -> f64 {
+    const C: [f64; 10] = [
+        -1.26551223,
+        1.00002368,
+        0.37409196,
+        0.09678418,
+        -0.18628806,
+        0.27886807,
+        -1.13520398,
+        1.48851587,
+        -0.82215223,
+        0.17087277,
+    ];
+    let t = 1.0 / (1.0 + 0.5 * x);
+    let poly = C.iter().rev().fold(0.0, |acc, c| c + t * acc);
+    t * (-x * x + poly).exp()
 }
 
 fn ratio(a: usize, b: usize) -> f64 {
@@ -148,6 +186,11 @@ pub(crate) fn cell_stats(
         p95_deg: nearest_rank(&sorted, 0.95),
         max_deg: sorted.last().copied().unwrap_or(f64::NAN),
         wrong_over_5_deg: errors.iter().filter(|&&e| e > 5.0).count(),
+        expected_over_5_deg: leveled
+            .iter()
+            .filter_map(|p| p.sigmas_deg)
+            .map(|s| chance_over(5.0, s))
+            .sum(),
         within_3_sigma: ratio(leveled.iter().filter(|p| p.within_3_sigma).count(), n),
         phantom_rate: ratio(sum(|p| p.phantoms), valid),
         floor_kept_rate: ratio(sum(|p| p.floor_kept), valid),
@@ -176,6 +219,32 @@ mod tests {
     use super::*;
     use crate::eval::true_segments::TrueSegmentsFit;
     use crate::level::FailReason;
+
+    /// erfc against known values (Abramowitz and Stegun, table 7.1), and the chance of the
+    /// max-axis error against its closed form for one axis.
+    #[test]
+    fn erfc_and_chance_over_on_known_values() {
+        for (x, want) in [
+            (0.0, 1.0),
+            (0.5, 0.479_500_122_186_953_5),
+            (1.0, 0.157_299_207_050_285_1),
+            (2.0, 0.004_677_734_981_047_266),
+            (3.0, 2.209_049_699_858_544e-5),
+            (5.0, 1.537_459_794_428_035e-12),
+        ] {
+            let got = erfc(x);
+            assert!(
+                (got / want - 1.0).abs() < 2e-7,
+                "erfc({x}) = {got}, want {want}"
+            );
+        }
+        // One axis with no spread: the other axis's two-sided tail, 2 Phi(-k).
+        let k2 = chance_over(2.0, [1.0, 0.0]);
+        assert!((k2 - 0.045_500_263_896_358_42).abs() < 1e-8, "{k2}");
+        // Two equal axes: 1 - (1 - p)^2.
+        let p = erfc(2.0 / std::f64::consts::SQRT_2);
+        assert!((chance_over(2.0, [1.0, 1.0]) - (1.0 - (1.0 - p) * (1.0 - p))).abs() < 1e-15);
+    }
 
     #[test]
     fn cell_stats_on_known_errors() {
@@ -217,6 +286,11 @@ mod tests {
         assert_eq!(s.median_deg, 3.0);
         assert_eq!(s.max_deg, 6.0);
         assert_eq!(s.wrong_over_5_deg, 1);
+        // Sigmas (0.5, 0.25), (1.5, 0.75), (3, 1.5): 5 degrees is 10, 3.33 and 1.67 x-sigmas.
+        let expected = chance_over(5.0, [0.5, 0.25])
+            + chance_over(5.0, [1.5, 0.75])
+            + chance_over(5.0, [3.0, 1.5]);
+        assert!((s.expected_over_5_deg - expected).abs() < 1e-12);
         assert_eq!(s.failures.get("parallel_walls"), Some(&1));
         assert!((s.phantom_rate - 0.1).abs() < 1e-12);
         assert!((s.floor_kept_rate - 0.2).abs() < 1e-12);
