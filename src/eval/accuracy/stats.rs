@@ -76,7 +76,7 @@ pub struct CellStats {
 
 /// The chance that the paper's error `max(|e_x|, |e_y|)` exceeds `limit` when the two angle
 /// errors are independent Gaussians of sigmas `sigmas` (same unit as `limit`).
-pub(crate) fn chance_over(limit: f64, sigmas: [f64; 2]) -> f64 {
+fn chance_over(limit: f64, sigmas: [f64; 2]) -> f64 {
     let outside = |s: f64| {
         if s > 0.0 {
             erfc(limit / (s * std::f64::consts::SQRT_2))

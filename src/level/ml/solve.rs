@@ -64,16 +64,12 @@ pub(crate) fn refine(
     // From far: least squares on the plane residuals, into the basin; then the likelihood
     // itself, robustly. Without the approach the first pass is the likelihood's own, which
     // its first step then takes as it is.
-    state.residual = if params.approach {
-        Residual::Plane
+    let (residual, k) = if params.approach {
+        (Residual::Plane, f64::INFINITY)
     } else {
-        Residual::Range
+        (Residual::Range, params.huber_k)
     };
-    let k = if params.approach {
-        f64::INFINITY
-    } else {
-        params.huber_k
-    };
+    state.residual = residual;
     state.take_rays(params.min_incidence);
     let mut first = Evaluation::default();
     state.evaluate_at(&state.theta, &state.placements, k, true, &mut first);
