@@ -186,11 +186,9 @@ impl Growth<'_> {
             }
         }
         let mut fit = acc.fit(sigma)?;
+        self.flood(id, labels, members, &mut acc, &mut fit);
         let s_eff = sigma.max(params.min_sigma);
         let tol_at = |fit: &PlaneFit, g: &GridPoint| ray_tolerance(fit, g, s_eff, params);
-        flood(
-            grid, id, labels, members, &mut acc, &mut fit, &tol_at, sigma,
-        );
         // Release members that the final plane does not explain, then refit.
         fit = acc.fit(sigma).unwrap_or(fit);
         // Few are released: their sums come off the accumulator, rather than the kept ones'
@@ -284,56 +282,56 @@ impl Growth<'_> {
             row_range: (lo, hi),
         })
     }
-}
 
-/// The breadth-first growth of one patch (sect. 9's region growing): an unlabelled neighbour
-/// (left, right, previous or next row) of a member joins when within `tol_at` of the current
-/// plane `fit`, which is refitted each time the members grew by a third, so the plane follows
-/// the surface without a refit per point. The members not yet visited are the queue.
-#[allow(clippy::too_many_arguments)]
-fn flood(
-    grid: &PoseGrid,
-    id: u32,
-    labels: &mut [u32],
-    members: &mut Vec<usize>,
-    acc: &mut PlaneAccumulator,
-    fit: &mut PlaneFit,
-    tol_at: &impl Fn(&PlaneFit, &GridPoint) -> f64,
-    sigma: f64,
-) {
-    let (n, cols) = (grid.points.len(), grid.cols);
-    let mut refit_at = acc.n + acc.n / 3 + 1;
-    let mut next = 0;
-    while let Some(&i) = members.get(next) {
-        next += 1;
-        let c = i % cols;
-        // Left, right, previous and next row; `usize::MAX` where the grid ends (cheaper in
-        // this, the hottest loop of region growing, than Options).
-        let mut neighbours = [usize::MAX; 4];
-        if c > 0 {
-            neighbours[0] = i - 1;
-        }
-        if c + 1 < cols {
-            neighbours[1] = i + 1;
-        }
-        if i >= cols {
-            neighbours[2] = i - cols;
-        }
-        if i + cols < n {
-            neighbours[3] = i + cols;
-        }
-        for j in neighbours {
-            if j == usize::MAX || labels[j] != UNLABELLED {
-                continue;
+    /// The breadth-first growth of one patch (sect. 9's region growing): an unlabelled
+    /// neighbour (left, right, previous or next row) of a member joins when within
+    /// [`ray_tolerance`] of the current plane `fit`, which is refitted each time the members
+    /// grew by a third, so the plane follows the surface without a refit per point. The members
+    /// not yet visited are the queue.
+    fn flood(
+        &self,
+        id: u32,
+        labels: &mut [u32],
+        members: &mut Vec<usize>,
+        acc: &mut PlaneAccumulator,
+        fit: &mut PlaneFit,
+    ) {
+        let (grid, params, sigma) = (self.grid, self.params, self.sigma);
+        let s_eff = sigma.max(params.min_sigma);
+        let (n, cols) = (grid.points.len(), grid.cols);
+        let mut refit_at = acc.n + acc.n / 3 + 1;
+        let mut next = 0;
+        while let Some(&i) = members.get(next) {
+            next += 1;
+            let c = i % cols;
+            // Left, right, previous and next row; `usize::MAX` where the grid ends (cheaper in
+            // this, the hottest loop of region growing, than Options).
+            let mut neighbours = [usize::MAX; 4];
+            if c > 0 {
+                neighbours[0] = i - 1;
             }
-            let Some(g) = &grid.points[j] else { continue };
-            if fit.distance(&g.p).abs() <= tol_at(fit, g) {
-                labels[j] = id;
-                members.push(j);
-                acc.add(g);
-                if acc.n >= refit_at {
-                    *fit = acc.fit(sigma).unwrap_or(*fit);
-                    refit_at = acc.n + acc.n / 3 + 1;
+            if c + 1 < cols {
+                neighbours[1] = i + 1;
+            }
+            if i >= cols {
+                neighbours[2] = i - cols;
+            }
+            if i + cols < n {
+                neighbours[3] = i + cols;
+            }
+            for j in neighbours {
+                if j == usize::MAX || labels[j] != UNLABELLED {
+                    continue;
+                }
+                let Some(g) = &grid.points[j] else { continue };
+                if fit.distance(&g.p).abs() <= ray_tolerance(fit, g, s_eff, params) {
+                    labels[j] = id;
+                    members.push(j);
+                    acc.add(g);
+                    if acc.n >= refit_at {
+                        *fit = acc.fit(sigma).unwrap_or(*fit);
+                        refit_at = acc.n + acc.n / 3 + 1;
+                    }
                 }
             }
         }
@@ -347,20 +345,13 @@ pub(crate) fn plane_explained(fit: &PlaneFit, sigma: f64, params: &LevelParams) 
     fit.misfit_ratio(sigma.max(params.min_sigma)) <= params.split_misfit
 }
 
-/// [`rows_span`] of members in ascending order: their first and last.
+/// The lowest and highest rows of members in ascending order (rows grow with the grid index):
+/// their first's and last's; `(usize::MAX, 0)` for none.
 pub(crate) fn rows_span_sorted(members: &[usize], cols: usize) -> (usize, usize) {
     match (members.first(), members.last()) {
         (Some(&lo), Some(&hi)) => (lo / cols, hi / cols),
         _ => (usize::MAX, 0),
     }
-}
-
-fn rows_span(members: &[usize], cols: usize) -> (usize, usize) {
-    // Rows grow with the grid index: the lowest and highest rows are those of the lowest and
-    // highest index.
-    let lo = members.iter().min().map_or(usize::MAX, |&i| i / cols);
-    let hi = members.iter().max().map_or(0, |&i| i / cols);
-    (lo, hi)
 }
 
 /// [`Check::PatchMinPoints`](super::checks::Check::PatchMinPoints): the rows that ascending

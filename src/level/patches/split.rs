@@ -141,20 +141,12 @@ pub fn split_members(
     else {
         return whole;
     };
-    let (a, b) = (orders[which][..cut].to_vec(), orders[which][cut..].to_vec());
-    if !split_significant(
-        grid,
-        members.len(),
-        fit_all.residual_ss,
-        &a,
-        &b,
-        params,
-        sigma,
-    ) {
+    let (a, b) = orders[which].split_at(cut);
+    if !split_significant(grid, fit_all.residual_ss, a, b, params, sigma) {
         return whole;
     }
-    let mut out = split_members(grid, &a, params, sigma, depth - 1);
-    out.extend(split_members(grid, &b, params, sigma, depth - 1));
+    let mut out = split_members(grid, a, params, sigma, depth - 1);
+    out.extend(split_members(grid, b, params, sigma, depth - 1));
     out
 }
 
@@ -207,11 +199,11 @@ fn best_cut(
     best
 }
 
-/// Whether parts `a` and `b` of `n` members (one plane's RSS `rss1`) are two planes: each at
-/// least half a patch over two rows, and the F test of [`split_members`] above `split_f`.
+/// Whether parts `a` and `b` of one patch's members (one plane's RSS `rss1`) are two planes:
+/// each at least half a patch over two rows, and the F test of [`split_members`] above
+/// `split_f`.
 fn split_significant(
     grid: &PoseGrid,
-    n: usize,
     rss1: f64,
     a: &[usize],
     b: &[usize],
@@ -219,8 +211,7 @@ fn split_significant(
     sigma: f64,
 ) -> bool {
     let ok = |m: &[usize]| {
-        let (lo, hi) = rows_span(m, grid.cols);
-        m.len() >= params.min_patch_points / 2 && hi > lo
+        m.len() >= params.min_patch_points / 2 && m.iter().any(|&i| grid.row(i) != grid.row(m[0]))
     };
     if !ok(a) || !ok(b) {
         return false;
@@ -229,7 +220,12 @@ fn split_significant(
     else {
         return false;
     };
-    two_planes(rss1, fa.residual_ss + fb.residual_ss, n, params)
+    two_planes(
+        rss1,
+        fa.residual_ss + fb.residual_ss,
+        a.len() + b.len(),
+        params,
+    )
 }
 
 /// [`Check::PatchSplitF`](crate::level::checks::Check::PatchSplitF): whether two planes of
