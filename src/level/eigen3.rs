@@ -90,13 +90,8 @@ fn null_vector(m: &[f64; 6], l: f64) -> Option<Vector3<f64>> {
     let r2 = Vector3::new(m[2], m[4], m[5] - l);
     let c = [r0.cross(&r1), r0.cross(&r2), r1.cross(&r2)];
     let norms = c.map(|v| v.norm_squared());
-    let best = if norms[0] >= norms[1] && norms[0] >= norms[2] {
-        0
-    } else if norms[1] >= norms[2] {
-        1
-    } else {
-        2
-    };
+    // The first of the largest.
+    let best = (1..3).fold(0, |b, k| if norms[k] > norms[b] { k } else { b });
     c[best].try_normalize(1e-150)
 }
 

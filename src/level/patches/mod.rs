@@ -105,13 +105,20 @@ pub(crate) fn grow_patches(
         patches.extend(growth.grow_seed(q, id, &mut labels, &mut members));
     }
     let split = growth.split_two_plane_patches(patches);
-    labels.fill(UNLABELLED);
-    for (id, p) in split.iter().enumerate() {
+    let labels = labels_of(grid.points.len(), &split);
+    (split, labels)
+}
+
+/// Per grid point (of `n`), the index of the patch among `patches` that holds it, or
+/// [`UNLABELLED`].
+pub(crate) fn labels_of(n: usize, patches: &[Patch]) -> Vec<u32> {
+    let mut labels = vec![UNLABELLED; n];
+    for (id, p) in patches.iter().enumerate() {
         for &i in &p.members {
             labels[i] = id as u32;
         }
     }
-    (split, labels)
+    labels
 }
 
 /// The seeds of [`grow_patches`] in the order they are tried (sect. 5.2's quads as seeds):
