@@ -47,28 +47,19 @@ pub(crate) fn level_lines(ctx: &LineContext, kind: SurfaceKind) -> LevelEvidence
     if zs.len() < min_points {
         return LevelEvidence::None;
     }
-    let half = window_half(params, s, ctx.f.sigma_up);
-    let Some(height) = outermost_height(&zs, half, min_points) else {
+    // The outermost window that holds `min_points` and a third as many as the densest (a box
+    // top is not the floor); the surface's height key is its middle.
+    let Some((lo, hi)) = height_window(ctx.f, &zs, |n, most| n >= min_points && 3 * n >= most)
+    else {
         return LevelEvidence::None;
     };
+    let height = zs[(lo + hi) / 2].0;
     let short = PLANE_LINE_MIN_POINTS.min(min_points);
     let found: Vec<(LevelLine, Vec<usize>)> = rows_at_height(ctx, &zs, height)
         .into_iter()
         .filter_map(|row| fit_line(grid, row, &ctx.f.up, Some(ctx.f.sigma_up), s, params, short))
         .collect();
     lines_evidence(ctx, found, min_points)
-}
-
-/// The level surface's height key in [`level_lines`]: the middle of the outermost window
-/// `2 half` wide over the ascending keys `zs` that holds `min_points` and a third as many as
-/// the densest window (a box top is not the floor).
-fn outermost_height(zs: &[(f64, usize)], half: f64, min_points: usize) -> Option<f64> {
-    let counts = height_windows(zs, half);
-    let densest = counts.iter().map(|(lo, hi)| hi - lo).max().unwrap_or(0);
-    let &(lo, hi) = counts
-        .iter()
-        .find(|(lo, hi)| hi - lo >= min_points && 3 * (hi - lo) >= densest)?;
-    Some(zs[(lo + hi) / 2].0)
 }
 
 /// Per scan (grid row), the candidates `zs` within their own vertical tolerance of `height`:
