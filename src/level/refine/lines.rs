@@ -4,15 +4,6 @@
 
 use super::*;
 
-/// What [`level_lines`] works on: the pass's frame, the points that step like the surface
-/// sought, and those already taken.
-pub(crate) struct LineContext<'a> {
-    pub(crate) f: &'a Frame<'a>,
-    pub(crate) levelish: &'a [bool],
-    /// Points already in a wall or level model.
-    pub(crate) taken: &'a [bool],
-}
-
 /// Floor or ceiling evidence found by [`level_lines`].
 pub(crate) enum LevelEvidence {
     None,
@@ -37,36 +28,37 @@ pub(crate) enum LevelEvidence {
 /// `level_line_misfit` of its noise. With two or more scans, the lines
 /// are one plane (its lever arm is the distance between the lines) when their points fit one
 /// within `refine_level_misfit`; in a plane with a full line, a line of as few as
-/// [`PLANE_LINE_MIN_POINTS`] counts.
-pub(crate) fn level_lines(ctx: &LineContext, kind: SurfaceKind) -> LevelEvidence {
-    let (grid, params, s) = (ctx.f.grid, ctx.f.params, ctx.f.s);
-    let zs = height_candidates(&ctx.f.lv, kind == SurfaceKind::Floor, |i| {
-        ctx.levelish[i] && !ctx.taken[i]
-    });
+/// [`PLANE_LINE_MIN_POINTS`] counts. The `candidate`s, in frame `f`, are the points that step
+/// like the surface sought and that no wall or level model has taken.
+pub(crate) fn level_lines(
+    f: &Frame,
+    kind: SurfaceKind,
+    candidate: impl Fn(usize) -> bool,
+) -> LevelEvidence {
+    let (grid, params, s) = (f.grid, f.params, f.s);
+    let zs = height_candidates(&f.lv, kind == SurfaceKind::Floor, candidate);
     let min_points = params.level_line_min_points.max(3);
     if zs.len() < min_points {
         return LevelEvidence::None;
     }
     // The outermost window that holds `min_points` and a third as many as the densest (a box
     // top is not the floor); the surface's height key is its middle.
-    let Some((lo, hi)) = height_window(ctx.f, &zs, |n, most| n >= min_points && 3 * n >= most)
-    else {
+    let Some((lo, hi)) = height_window(f, &zs, |n, most| n >= min_points && 3 * n >= most) else {
         return LevelEvidence::None;
     };
     let height = zs[(lo + hi) / 2].0;
     let short = PLANE_LINE_MIN_POINTS.min(min_points);
-    let found: Vec<(LevelLine, Vec<usize>)> = rows_at_height(ctx, &zs, height)
+    let found: Vec<(LevelLine, Vec<usize>)> = rows_at_height(f, &zs, height)
         .into_iter()
-        .filter_map(|row| fit_line(grid, row, &ctx.f.up, Some(ctx.f.sigma_up), s, params, short))
+        .filter_map(|row| fit_line(grid, row, &f.up, Some(f.sigma_up), s, params, short))
         .collect();
-    lines_evidence(ctx, found, min_points)
+    lines_evidence(f, found, min_points)
 }
 
 /// Per scan (grid row), the candidates `zs` within their own vertical tolerance of `height`:
 /// `refine_k` standard deviations of the range noise along the vertical and an error of up
 /// `sigma_up` at their horizontal distance, plus `flat_margin`.
-fn rows_at_height(ctx: &LineContext, zs: &[(f64, usize)], height: f64) -> Vec<Vec<usize>> {
-    let f = ctx.f;
+fn rows_at_height(f: &Frame, zs: &[(f64, usize)], height: f64) -> Vec<Vec<usize>> {
     let (params, s, k) = (f.params, f.s, f.params.refine_k);
     let mut rows: Vec<Vec<usize>> = vec![Vec::new(); f.grid.rows()];
     for &(z, i) in zs {
@@ -87,18 +79,18 @@ fn rows_at_height(ctx: &LineContext, zs: &[(f64, usize)], height: f64) -> Vec<Ve
 /// when two or more fit one ([`level_plane`]), else as lines when they are not skew beyond
 /// `LINES_PLANE_MISFIT`; nothing when they cannot be one floor.
 fn lines_evidence(
-    ctx: &LineContext,
+    f: &Frame,
     found: Vec<(LevelLine, Vec<usize>)>,
     min_points: usize,
 ) -> LevelEvidence {
-    let (grid, params, s) = (ctx.f.grid, ctx.f.params, ctx.f.s);
+    let (grid, params, s) = (f.grid, f.params, f.s);
     let full = |(l, _): &(LevelLine, Vec<usize>)| l.n >= min_points;
     // Short lines count only in a plane with a full one; without short lines, the full lines
     // alone are tried below.
     let full_lines = found.iter().filter(|l| full(l)).count();
     if full_lines > 0 && full_lines < found.len() && one_plane(grid, &found, s, params) {
         if let Some(plane) =
-            lines_plane(grid, &found, s).and_then(|(fit, members)| level_plane(ctx.f, fit, members))
+            lines_plane(grid, &found, s).and_then(|(fit, members)| level_plane(f, fit, members))
         {
             return plane;
         }
@@ -118,7 +110,7 @@ fn lines_evidence(
             return LevelEvidence::None;
         };
         let skew = skew_lines(&fit, s);
-        if let Some(plane) = level_plane(ctx.f, fit, members) {
+        if let Some(plane) = level_plane(f, fit, members) {
             return plane;
         }
         if skew {

@@ -479,21 +479,12 @@ fn level_line_evidence(
                 lines.iter().any(|l| f.line_z2(l, q, d).is_some())
             };
         }
-        for kind in [SurfaceKind::Floor, SurfaceKind::Ceiling] {
+        let floor = (SurfaceKind::Floor, &steps.floor_line);
+        for (kind, levelish) in [floor, (SurfaceKind::Ceiling, &steps.ceiling)] {
             if models.iter().any(|m| m.kind == kind) {
                 continue;
             }
-            let levelish = if kind == SurfaceKind::Floor {
-                &steps.floor_line
-            } else {
-                &steps.ceiling
-            };
-            let ctx = LineContext {
-                f,
-                levelish,
-                taken: &taken,
-            };
-            match level_lines(&ctx, kind) {
+            match level_lines(f, kind, |i| levelish[i] && !taken[i]) {
                 LevelEvidence::None => {}
                 LevelEvidence::Lines(found) => flat_lines.extend(found),
                 LevelEvidence::Plane(fit, members) => models.push(Model { kind, fit, members }),
