@@ -169,20 +169,15 @@ impl BearingSteps {
     fn new(sc: &[(f64, f64)]) -> Self {
         let sin_diff = |i: usize, j: usize| sc[j].0 * sc[i].1 - sc[j].1 * sc[i].0;
         let n = sc.len();
-        Self {
-            one: (0..n)
-                .map(|i| if i > 0 { sin_diff(i - 1, i) } else { 0.0 })
-                .collect(),
-            two: (0..n)
-                .map(|i| {
-                    if i > 0 && i + 1 < n {
-                        sin_diff(i - 1, i + 1)
-                    } else {
-                        0.0
-                    }
-                })
-                .collect(),
+        // Zero where a bearing has no neighbour on a side.
+        let (mut one, mut two) = (vec![0.0; n], vec![0.0; n]);
+        for i in 1..n {
+            one[i] = sin_diff(i - 1, i);
         }
+        for i in 1..n.saturating_sub(1) {
+            two[i] = sin_diff(i - 1, i + 1);
+        }
+        Self { one, two }
     }
 }
 

@@ -220,12 +220,8 @@ fn split_significant(
     else {
         return false;
     };
-    two_planes(
-        rss1,
-        fa.residual_ss + fb.residual_ss,
-        a.len() + b.len(),
-        params,
-    )
+    let rss2 = fa.residual_ss + fb.residual_ss;
+    two_planes(rss1, rss2, a.len() + b.len(), params)
 }
 
 /// [`Check::PatchSplitF`](crate::level::checks::Check::PatchSplitF): whether two planes of

@@ -69,13 +69,8 @@ pub(super) fn trim_edge_rows(
     if (first, last) == (lo, hi) || !trimmed_rows_hold(&counts, all.n) {
         return None;
     }
-    Some(
-        members
-            .iter()
-            .copied()
-            .filter(|&i| (first..=last).contains(&grid.row(i)))
-            .collect(),
-    )
+    let kept = |i: &usize| (first..=last).contains(&grid.row(*i));
+    Some(members.iter().copied().filter(kept).collect())
 }
 
 /// A patch's rows for [`trim_edge_rows`]: its members, their sums, each row's own sums and the

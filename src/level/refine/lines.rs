@@ -294,21 +294,13 @@ pub(crate) fn start_lines(
     sigma: f64,
 ) -> Vec<LevelLine> {
     let s = sigma.max(params.min_sigma);
-    let cols = grid.cols;
+    let (cols, min_points) = (grid.cols, params.level_line_min_points);
     let mut out = Vec::new();
     for mask in [&steps.floor, &steps.ceiling] {
         let lines: Vec<(LevelLine, Vec<usize>)> = (0..grid.rows())
             .filter_map(|r| {
                 let idx: Vec<usize> = (r * cols..(r + 1) * cols).filter(|&i| mask[i]).collect();
-                fit_line(
-                    grid,
-                    idx,
-                    &Vector3::z(),
-                    None,
-                    s,
-                    params,
-                    params.level_line_min_points,
-                )
+                fit_line(grid, idx, &Vector3::z(), None, s, params, min_points)
             })
             .collect();
         // One floor is one plane: lines that cannot lie in one plane are not all on it, and
