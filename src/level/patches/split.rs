@@ -162,30 +162,27 @@ fn best_cut(
 ) -> Option<(f64, usize)> {
     let key = |i: usize| if by_row { grid.row(i) } else { i % grid.cols };
     let n = sorted.len();
-    // Prefix plane sums, and the rows spanned by every prefix and suffix.
+    // Prefix plane sums.
     let mut prefix = Vec::with_capacity(n + 1);
     let mut acc = PlaneAccumulator::default();
     prefix.push(acc);
-    let (mut pre_lo, mut pre_hi) = (vec![usize::MAX; n + 1], vec![0usize; n + 1]);
-    for (k, &i) in sorted.iter().enumerate() {
+    for &i in sorted {
         if let Some(g) = &grid.points[i] {
             acc.add(g);
         }
         prefix.push(acc);
-        pre_lo[k + 1] = pre_lo[k].min(grid.row(i));
-        pre_hi[k + 1] = pre_hi[k].max(grid.row(i));
     }
-    let (mut suf_lo, mut suf_hi) = (vec![usize::MAX; n + 1], vec![0usize; n + 1]);
-    for k in (0..n).rev() {
-        suf_lo[k] = suf_lo[k + 1].min(grid.row(sorted[k]));
-        suf_hi[k] = suf_hi[k + 1].max(grid.row(sorted[k]));
-    }
+    // The parts before and from `b` span two rows each when they reach past the run of the
+    // first member's row and of the last one's.
+    let row = |k: usize| grid.row(sorted[k]);
+    let first_other = (0..n).find(|&k| row(k) != row(0)).unwrap_or(n);
+    let last_other = (0..n).rev().find(|&k| row(k) != row(n - 1));
+    let two_rows = |b: usize| first_other < b && last_other.is_some_and(|k| k >= b);
     let half = params.min_patch_points / 2;
     let mut best: Option<(f64, usize)> = None;
     for b in half.max(1)..n.saturating_sub(half).max(1) {
         // Only where the key changes (column or row boundaries).
-        if key(sorted[b]) == key(sorted[b - 1]) || pre_hi[b] <= pre_lo[b] || suf_hi[b] <= suf_lo[b]
-        {
+        if key(sorted[b]) == key(sorted[b - 1]) || !two_rows(b) {
             continue;
         }
         let (Some(fl), Some(fr)) = (prefix[b].fit(sigma), acc.minus(&prefix[b]).fit(sigma)) else {

@@ -23,9 +23,8 @@ pub(crate) fn without_standing_rows(
     if rows.len() < 3 {
         return members;
     }
-    let (first, last) = (rows[0], rows[rows.len() - 1]);
     let mut drop = Vec::new();
-    for edge in [first, last] {
+    for edge in [rows[0], rows[rows.len() - 1]] {
         // The others must still span two rows to make a plane.
         if rows.len() - drop.len() < 3 {
             break;
@@ -41,9 +40,6 @@ pub(crate) fn without_standing_rows(
         if line_offset_sigmas(grid, &line, &fit, s, params.min_sigma) > params.refine_k {
             drop.push(edge);
         }
-    }
-    if drop.is_empty() {
-        return members;
     }
     members
         .into_iter()
