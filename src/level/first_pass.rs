@@ -60,16 +60,13 @@ pub(crate) fn robust_obs<'a>(
     let misfit = |f: &PlaneFit| f.misfit_ratio(sigma.max(params.min_sigma)).max(1.0);
     let rows = est.grid.as_ref().map_or(0, PoseGrid::rows);
     let full_rows = params.quad_rows.min(rows).saturating_sub(1);
+    let level = |f: &'a PlaneFit| PlaneObs::level(f, misfit(f) * params.level_inflation);
     est.patches
         .iter()
         .filter(|p| p.kind == SurfaceKind::Wall)
         .filter(|p| p.row_range.1 - p.row_range.0 >= full_rows)
         .map(|p| PlaneObs::wall(&p.fit, misfit(&p.fit)))
-        .chain(
-            levels
-                .iter()
-                .map(|f| PlaneObs::level(f, misfit(f) * params.level_inflation)),
-        )
+        .chain(levels.iter().map(level))
         .collect()
 }
 

@@ -162,12 +162,8 @@ pub(crate) fn blind_starts(
         .then(|| refine::start_lines(grid, steps, params, sigma))
         .filter(|lines| !lines.is_empty())
         .and_then(|lines| {
-            let mut obs = obs.clone();
-            obs.extend(
-                lines
-                    .iter()
-                    .map(|l| up::PlaneObs::level_line(l, params.level_line_inflation)),
-            );
+            let (mut obs, inflate) = (obs.clone(), params.level_line_inflation);
+            obs.extend(lines.iter().map(|l| up::PlaneObs::level_line(l, inflate)));
             up::up_robust(&obs, sigma_eff, params.iterations)
         });
     let level = refine::level_start(grid, steps, params, sigma);

@@ -266,13 +266,13 @@ impl Growth<'_> {
         if !still_a_patch(members) {
             return None;
         }
-        let fit = robust_fit(grid, members, first, params, sigma)?;
+        let fit = self.robust_fit(members, first)?;
         let fronted = without_front_row_ends(grid, members, &fit, params, sigma);
         let (members, fit) = match &fronted {
             Some(kept) if !still_a_patch(kept) => return None,
             Some(kept) => {
                 let first = grid.accumulate(kept).fit(sigma)?;
-                (&kept[..], robust_fit(grid, kept, first, params, sigma)?)
+                (&kept[..], self.robust_fit(kept, first)?)
             }
             None => (members, fit),
         };

@@ -263,8 +263,7 @@ fn assign_levels(
     let level_models: Vec<LevelModel> = level_fits.iter().map(|l| LevelModel::new(l, s)).collect();
     for (i, g) in grid.points.iter().enumerate() {
         let Some(g) = g else { continue };
-        let mut reach = 0;
-        let mut which = 0;
+        let (mut reach, mut which) = (0, 0);
         for (m, model) in level_models.iter().enumerate() {
             let (d, sd) = model.distance_sd(g, s, params.min_sigma);
             if d <= k * sd {
@@ -500,15 +499,11 @@ fn solve_models(
     models: &[Model],
     mut flat_lines: Vec<LevelLine>,
 ) -> Option<(UpSolution, Vec<LevelLine>)> {
-    let (s, params) = (f.s, f.params);
+    let (s, params, inflate) = (f.s, f.params, f.params.level_line_inflation);
     let obs: Vec<PlaneObs> = models
         .iter()
         .map(|m| m.obs(s, params))
-        .chain(
-            flat_lines
-                .iter()
-                .map(|l| PlaneObs::level_line(l, params.level_line_inflation)),
-        )
+        .chain(flat_lines.iter().map(|l| PlaneObs::level_line(l, inflate)))
         .collect();
     let sol = match up::up_robust(&obs, s, params.iterations) {
         Some(sol) => sol,

@@ -82,11 +82,8 @@ pub(crate) fn sampled_plane(
     for h in 0..START_HYPOTHESES {
         // Three points spread over the candidates: a fixed stride walk, no random state.
         let pick = |k: usize| sample[(h * (2 * k + 1) * 7 + k * n / 3) % n];
-        let (Some(pa), Some(pb), Some(pc)) = (
-            grid.points[pick(0)].as_ref(),
-            grid.points[pick(1)].as_ref(),
-            grid.points[pick(2)].as_ref(),
-        ) else {
+        let point = |k: usize| grid.points[pick(k)].as_ref();
+        let (Some(pa), Some(pb), Some(pc)) = (point(0), point(1), point(2)) else {
             continue;
         };
         let (u, v) = (pb.p - pa.p, pc.p - pa.p);
@@ -104,12 +101,8 @@ pub(crate) fn sampled_plane(
         }
     }
     let (_, p0, normal) = best?;
-    Some(
-        idx.iter()
-            .copied()
-            .filter(|&i| on(i, &p0, &normal))
-            .collect(),
-    )
+    let on_best = |i: &usize| on(*i, &p0, &normal);
+    Some(idx.iter().copied().filter(on_best).collect())
 }
 
 /// How many of `idx` satisfy `on`, when that beats `best` (more than it; anything beats
