@@ -254,25 +254,18 @@ impl PlaneAccumulator {
         out
     }
 
-    /// The weighted centroid and the upper triangle of the scatter about it (layout of
-    /// [`Moments`]).
-    fn scatter(&self) -> (Vector3<f64>, [f64; 6]) {
-        let nf = self.weight;
-        let c = Vector3::new(self.sums[SUM], self.sums[SUM + 1], self.sums[SUM + 2]) / nf;
-        let cv = [c.x, c.y, c.z];
-        let raw = std::array::from_fn(|t| self.sums[PP + t] - nf * cv[UPPER_I[t]] * cv[UPPER_J[t]]);
-        (c, raw)
-    }
-
     /// Fits the plane; `sigma` is the range noise \[m\] used for the bias correction (0 for none).
     pub fn fit(&self, sigma: f64) -> Option<PlaneFit> {
         if self.n < 3 || self.weight < 3.0 {
             return None;
         }
         let nf = self.weight;
-        // Upper triangles (xx, xy, xz, yy, yz, zz): the raw scatter about the centroid, and
-        // that minus the expected noise along the rays.
-        let (c, raw) = self.scatter();
+        // Upper triangles (layout of [`Moments`]): the raw scatter about the weighted centroid
+        // `c`, and that minus the expected noise along the rays.
+        let c = Vector3::new(self.sums[SUM], self.sums[SUM + 1], self.sums[SUM + 2]) / nf;
+        let cv = [c.x, c.y, c.z];
+        let raw: [f64; 6] =
+            std::array::from_fn(|t| self.sums[PP + t] - nf * cv[UPPER_I[t]] * cv[UPPER_J[t]]);
         let dd = &self.sums[DD..DD + 6];
         let k = sigma * sigma * (nf - 1.0) / nf;
         let corrected: [f64; 6] = std::array::from_fn(|t| raw[t] - dd[t] * k);

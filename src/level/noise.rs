@@ -48,13 +48,11 @@ pub(crate) fn estimate_range_sigma_with(
         return None;
     }
     // The pooled estimate reorders its copy; `z` stays in step with `ranges` for the screen.
-    let mut all = z.clone();
-    let mad = mad_sigma(&mut all);
-    let pooled = trimmed_rms(all.iter().map(|&b| f64::from_bits(b)), mad);
+    let (pooled, mad) = trimmed_sigma(&mut z.clone());
     let halves = looks_heteroscedastic(&z, &ranges, mad)
         .then(|| split_at_median_range(&z, &ranges))
         .flatten()
-        .map(|(mut near, mut far)| (trimmed_sigma(&mut near), trimmed_sigma(&mut far)));
+        .map(|(mut near, mut far)| (trimmed_sigma(&mut near).0, trimmed_sigma(&mut far).0));
     Some(far_if_noisier(pooled, halves))
 }
 
@@ -116,16 +114,11 @@ pub(crate) fn split_at_median_range<T: Copy>(
 }
 
 /// The noise from squared standardised residuals (as bits): their trimmed RMS, started from
-/// their MAD. Reorders `z`.
-fn trimmed_sigma(z: &mut [u64]) -> f64 {
-    let mad = mad_sigma(z);
-    trimmed_rms(z.iter().map(|&b| f64::from_bits(b)), mad)
-}
-
-/// The sigma of squared standardised residuals (as bits) by their median. Reorders `z`.
-fn mad_sigma(z: &mut [u64]) -> f64 {
+/// their MAD's sigma; with that sigma. Reorders `z`.
+fn trimmed_sigma(z: &mut [u64]) -> (f64, f64) {
     // The residuals are squared: the median's root is the median of their magnitudes.
-    f64::from_bits(median_bits(z)).sqrt() * MAD_TO_SIGMA
+    let mad = f64::from_bits(median_bits(z)).sqrt() * MAD_TO_SIGMA;
+    (trimmed_rms(z.iter().map(|&b| f64::from_bits(b)), mad), mad)
 }
 
 /// Gaussian truncated at 3 sigma: its RMS over its sigma, `sqrt(1 - 2 c phi(c) / (2 Phi(c) - 1))`

@@ -28,7 +28,6 @@ pub(super) fn trim_edge_rows(
     // standing off leaves no wall to keep: trimmed to two rows, such patches let other,
     // wrong planes decide some poses at 10 cm; the patch goes (an empty list).
     let (lo, hi) = rows_span_sorted(members, grid.cols);
-    let three = hi == lo + 2;
     if hi < lo + 2 {
         return None;
     }
@@ -54,7 +53,7 @@ pub(super) fn trim_edge_rows(
         params,
     };
     let (mut first, mut last) = (lo, hi);
-    if three {
+    if hi == lo + 2 {
         // A wall line and the floor line at its foot, 2-15 cm out, with a few points of the
         // third scan near the hinge axis: a "wall" 11.6 degrees off at 1 cm noise.
         return (rows.stands_off(lo, lo, hi) || rows.stands_off(hi, lo, hi)).then(Vec::new);

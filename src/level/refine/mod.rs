@@ -461,10 +461,8 @@ fn level_line_evidence(
         // Points of a model, or within reach of a wall's vertical plane (a wall line near
         // its foot lies at the floor's height within the provisional frame's tolerance).
         let mut taken = vec![false; grid.points.len()];
-        for m in models.iter() {
-            for &i in &m.members {
-                taken[i] = true;
-            }
+        for &i in models.iter().flat_map(|m| &m.members) {
+            taken[i] = true;
         }
         for (i, q) in lv.q.iter().enumerate() {
             let Some((q, d)) = q else { continue };
