@@ -2,6 +2,7 @@
 //! rows sorted by elevation (the paper's "scans as rows, equal bearings as columns").
 
 use super::FailCause;
+use super::eigen3::{UPPER_I, UPPER_J};
 use crate::geometry::{beam_origin, rot_y};
 use crate::scan::Scan;
 use nalgebra::{Point3, Vector3};
@@ -205,14 +206,7 @@ fn moments(p: &Vector3<f64>, d: &Vector3<f64>) -> Moments {
 
 /// `v v^T`'s upper triangle, laid out as in [`Moments`].
 fn outer_upper(v: &Vector3<f64>) -> [f64; 6] {
-    [
-        v.x * v.x,
-        v.x * v.y,
-        v.x * v.z,
-        v.y * v.y,
-        v.y * v.z,
-        v.z * v.z,
-    ]
+    std::array::from_fn(|t| v[UPPER_I[t]] * v[UPPER_J[t]])
 }
 
 impl PlaneAccumulator {
@@ -288,10 +282,6 @@ impl PlaneAccumulator {
         })
     }
 }
-
-/// Row and column of each entry of an upper triangle laid out as in [`Moments`].
-const UPPER_I: [usize; 6] = [0, 0, 0, 1, 1, 2];
-const UPPER_J: [usize; 6] = [0, 1, 2, 1, 2, 2];
 
 /// `v^T A v` for the symmetric `A` of upper triangle `a` (layout of [`Moments`]).
 fn quadratic_form(a: &[f64], v: &Vector3<f64>) -> f64 {
