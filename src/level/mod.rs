@@ -308,13 +308,8 @@ pub(crate) fn wall_mask_where(
             wall_mask[start..start + q.cols].fill(true);
         }
     }
-    let wall_patch: Vec<bool> = est
-        .patches
-        .iter()
-        .map(|p| p.kind == SurfaceKind::Wall)
-        .collect();
     for (mask, &l) in wall_mask.iter_mut().zip(&est.labels) {
-        *mask |= l != UNLABELLED && wall_patch[l as usize];
+        *mask |= l != UNLABELLED && est.patches[l as usize].kind == SurfaceKind::Wall;
     }
     wall_mask
 }

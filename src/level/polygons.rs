@@ -68,8 +68,7 @@ pub(crate) fn extract_quads_sized(
     rows: usize,
     cols: usize,
 ) -> Vec<Polygon> {
-    let qr = rows.max(2);
-    let qc = cols.max(2);
+    let (qr, qc) = (rows.max(2), cols.max(2));
     if grid.rows() < qr || grid.cols < qc {
         return Vec::new();
     }

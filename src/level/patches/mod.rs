@@ -51,8 +51,7 @@ pub fn seed_cols(grid: &PoseGrid, params: &LevelParams, sigma: f64) -> usize {
     // asks for no more than the quad width (low noise), so does the median, which then need
     // not be found. The median (element `mid` of the sorted ranges) is at least `t` when at
     // most `mid` ranges lie below `t`.
-    let valid = grid.points.iter().flatten().count();
-    let mid = valid / 2;
+    let mid = grid.points.iter().flatten().count() / 2;
     let slack = params.quad_cols.saturating_sub(2).max(1) as f64;
     let t = params.seed_span_sigmas * sigma / (slack * step).max(1e-300) * (1.0 + 1e-9);
     if t.is_finite() && want(t) <= params.quad_cols {

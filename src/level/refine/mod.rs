@@ -182,12 +182,8 @@ pub(crate) fn refine(
         let (level_members, near_level) = assign_levels(&f, &level_fits, &level_ok);
         // New walls are looked for once; later passes carry them as models.
         let mut walls = assign_walls(&f, &wall_fits, &near_level, pass == 0, seed_width);
-        let (mut models, walls_found) = models_of(
-            &f,
-            std::mem::take(&mut walls.members),
-            &level_fits,
-            level_members,
-        );
+        let wall_members = std::mem::take(&mut walls.members);
+        let (mut models, walls_found) = models_of(&f, wall_members, &level_fits, level_members);
         let flat_lines = level_line_evidence(&f, &walls, &mut models);
         let (sol, flat_lines) = solve_models(&f, &models, flat_lines)?;
         let change = sol.up.angle(&up);
