@@ -191,7 +191,7 @@ fn refit_rounds(
         if !level_support(grid, &members, params) {
             return None;
         }
-        let f = fit_members(grid, &members, s)?;
+        let f = grid.accumulate(&members).fit(s)?;
         if round + 1 == LEVEL_ROUNDS {
             return Some(f);
         }

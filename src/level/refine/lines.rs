@@ -135,7 +135,7 @@ pub(crate) fn lines_plane(
 ) -> Option<(PlaneFit, Vec<usize>)> {
     let mut members: Vec<usize> = lines.iter().flat_map(|(_, m)| m.iter().copied()).collect();
     members.sort_unstable();
-    Some((fit_members(grid, &members, s)?, members))
+    Some((grid.accumulate(&members).fit(s)?, members))
 }
 
 /// The plane `fit` through level lines' points `members` ([`lines_plane`]) as the floor or
@@ -166,7 +166,7 @@ pub(crate) fn one_plane(
             .filter(|&(j, _)| j != i)
             .flat_map(|(_, (_, m))| m.iter().copied())
             .collect();
-        fit_members(grid, &others, s).is_some_and(|fit| {
+        grid.accumulate(&others).fit(s).is_some_and(|fit| {
             line_offset_sigmas(grid, &lines[i].1, &fit, s, params.min_sigma) <= params.refine_k
         })
     })

@@ -395,7 +395,7 @@ fn models_of(
         if !spans_wall_rows(grid, &members, params) {
             continue;
         }
-        let Some(fit) = fit_members(grid, &members, sigma) else {
+        let Some(fit) = grid.accumulate(&members).fit(sigma) else {
             continue;
         };
         // A wall must stay a wall; what turned towards up was floor after all.
@@ -414,7 +414,7 @@ fn models_of(
         if !level_support(grid, &members, params) {
             continue;
         }
-        let Some(fit) = fit_members(grid, &members, sigma) else {
+        let Some(fit) = grid.accumulate(&members).fit(sigma) else {
             continue;
         };
         let kind = if f.centroid.coords.dot(&up) < 0.0 {

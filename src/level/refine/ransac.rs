@@ -31,7 +31,7 @@ pub fn level_start(
     if !level_support(grid, &members, params) {
         return None;
     }
-    let fit = fit_members(grid, &members, sigma)?;
+    let fit = grid.accumulate(&members).fit(sigma)?;
     if fit.normal.z.abs() < min_z {
         return None;
     }

@@ -34,7 +34,7 @@ pub(crate) fn without_standing_rows(
             .copied()
             .filter(|&i| !drop.contains(&grid.row(i)))
             .partition(|&i| grid.row(i) == edge);
-        let Some(fit) = fit_members(grid, &others, s) else {
+        let Some(fit) = grid.accumulate(&others).fit(s) else {
             continue;
         };
         if line_offset_sigmas(grid, &line, &fit, s, params.min_sigma) > params.refine_k {
@@ -45,10 +45,6 @@ pub(crate) fn without_standing_rows(
         .into_iter()
         .filter(|&i| !drop.contains(&grid.row(i)))
         .collect()
-}
-
-pub(crate) fn fit_members(grid: &PoseGrid, members: &[usize], sigma: f64) -> Option<PlaneFit> {
-    grid.accumulate(members).fit(sigma)
 }
 
 /// Rows holding at least `share` of the members each.
