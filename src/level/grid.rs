@@ -318,14 +318,8 @@ impl PlaneFit {
     /// with `sigma_n^2 = sigma^2 * mean (d . n)^2` the noise along the normal.
     pub(crate) fn normal_variance_along(&self, u: &Vector3<f64>, sigma: f64) -> f64 {
         let sn2 = (sigma * sigma * self.dn2).max(1e-12);
-        self.in_plane
-            .iter()
-            .map(|(l, e)| {
-                let c = u.dot(e);
-                c * c / l.max(1e-12)
-            })
-            .sum::<f64>()
-            * sn2
+        let share = |(l, e): &(f64, Vector3<f64>)| u.dot(e).powi(2) / l.max(1e-12);
+        self.in_plane.iter().map(share).sum::<f64>() * sn2
     }
 
     /// Observed over expected residual variance (1 for a clean planar patch); more than 1

@@ -272,7 +272,7 @@ fn segmented(
     sigma: f64,
     trig: Option<std::sync::Arc<[(f64, f64)]>>,
 ) -> LevelEstimate {
-    let quads = polygons::extract_quads(&grid, params, sigma);
+    let quads = polygons::extract_quads(&grid, params, sigma, params.quad_cols);
     let (patches, labels) = match params.estimator {
         Estimator::Robust => patches::grow_patches(&grid, &quads, params, sigma),
         Estimator::Paper => (Vec::new(), vec![UNLABELLED; grid.points.len()]),

@@ -4,7 +4,7 @@
 //! planes far more cheaply for a handful of scans).
 
 use super::grid::{GridPoint, PlaneAccumulator, PlaneFit, PoseGrid};
-use super::polygons::{Polygon, classify, extract_quads_sized};
+use super::polygons::{Polygon, classify, extract_quads};
 use super::{LevelParams, SurfaceKind, median_of, total_order_key};
 use nalgebra::{Point3, Vector3};
 
@@ -95,7 +95,7 @@ pub(crate) fn grow_patches(
     let three_row: &[Polygon] = if width == params.quad_cols {
         quads
     } else {
-        wide = extract_quads_sized(grid, params, sigma, params.quad_rows, width);
+        wide = extract_quads(grid, params, sigma, width);
         &wide
     };
     let mut members = Vec::new();
