@@ -232,12 +232,8 @@ pub(crate) fn widened_against_first(kept: &UpSolution, first: &UpSolution) -> Op
 /// disagree that much when one of them rests on a wrong segmentation, and which one is not
 /// known: traced poses ended 5-7 degrees off either way, with sigmas near one degree.
 pub(crate) fn widened_by_disagreement(kept: &UpSolution, other: &UpSolution) -> Option<UpSolution> {
-    widened_beyond(
-        kept,
-        other,
-        kept.cov + other.cov_in(&kept.basis),
-        DISAGREEMENT_SIGMAS,
-    )
+    let joint = kept.cov + other.cov_in(&kept.basis);
+    widened_beyond(kept, other, joint, DISAGREEMENT_SIGMAS)
 }
 
 /// `kept`, the first solution, with its covariance widened by its distance from `other`, a

@@ -77,12 +77,8 @@ pub(crate) fn row_pairs<T>(
     (0..cols * grid.rows().saturating_sub(1))
         .map(|i| {
             let j = i + cols;
-            Some(step(
-                grid.points[i].as_ref()?,
-                grid.points[j].as_ref()?,
-                i,
-                j,
-            ))
+            let (a, b) = (grid.points[i].as_ref()?, grid.points[j].as_ref()?);
+            Some(step(a, b, i, j))
         })
         .collect()
 }
