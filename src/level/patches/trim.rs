@@ -48,7 +48,6 @@ pub(super) fn trim_edge_rows(
         members,
         all,
         per_row: &per_row,
-        span: (lo, hi),
         sigma,
         params,
     };
@@ -72,14 +71,13 @@ pub(super) fn trim_edge_rows(
     Some(members.iter().copied().filter(kept).collect())
 }
 
-/// A patch's rows for [`trim_edge_rows`]: its members, their sums, each row's own sums and the
-/// rows spanned `span`.
+/// A patch's rows for [`trim_edge_rows`]: its members, their sums and each row's own sums (up
+/// to its highest row; those below its lowest are empty).
 struct EdgeRows<'a> {
     grid: &'a PoseGrid,
     members: &'a [usize],
     all: &'a PlaneAccumulator,
     per_row: &'a [PlaneAccumulator],
-    span: (usize, usize),
     sigma: f64,
     params: &'a LevelParams,
 }
@@ -91,7 +89,7 @@ impl EdgeRows<'_> {
     /// plane's misfit), as the doc of [`trim_edge_rows`] explains.
     fn stands_off(&self, row: usize, first: usize, last: usize) -> bool {
         let (params, s) = (self.params, self.sigma.max(self.params.min_sigma));
-        let others = (self.span.0..=self.span.1)
+        let others = (0..self.per_row.len())
             .filter(|&r| r == row || !(first..=last).contains(&r))
             .fold(*self.all, |acc, r| acc.minus(&self.per_row[r]));
         if others.n < params.min_patch_points {

@@ -294,9 +294,7 @@ fn assign_levels(
         };
         let band = level_band(f, height, lowest);
         if lowest || steps_as_ceiling(band.clone(), &f.steps.ceiling) {
-            for i in band {
-                near_level[i] = true;
-            }
+            band.for_each(|i| near_level[i] = true);
         }
     }
     (level_members, near_level)
