@@ -113,11 +113,8 @@ pub(crate) fn find_levels(
         // The window holds wall points too (a wall's foot, or a band of wall at one height
         // in a frame degrees off): the plane through most of its points, rather than through
         // all of them, starts the rounds.
-        let stepping: Vec<usize> = window
-            .iter()
-            .copied()
-            .filter(|&i| f.steps.levelish[i])
-            .collect();
+        let levelish = |i: &usize| f.steps.levelish[*i];
+        let stepping: Vec<usize> = window.iter().copied().filter(levelish).collect();
         let cos = params.refine_level_cos();
         let level = |n: &Vector3<f64>| n.dot(up).abs() >= cos;
         let members = sampled_plane(grid, &window, &stepping, level, s, params).unwrap_or(window);

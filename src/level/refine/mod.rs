@@ -111,15 +111,9 @@ pub(crate) struct Leveled {
 
 impl Leveled {
     fn new(grid: &PoseGrid, level_from_robot: &Rotation3<f64>) -> Self {
+        let level = |g: &GridPoint| (level_from_robot * g.p.coords, level_from_robot * g.dir);
         Leveled {
-            q: grid
-                .points
-                .iter()
-                .map(|g| {
-                    g.as_ref()
-                        .map(|g| (level_from_robot * g.p.coords, level_from_robot * g.dir))
-                })
-                .collect(),
+            q: grid.points.iter().map(|g| g.as_ref().map(level)).collect(),
         }
     }
 }
