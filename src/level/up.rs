@@ -271,8 +271,7 @@ fn tangent_basis(up: &Vector3<f64>) -> [Vector3<f64>; 2] {
     let t1 = (Vector3::x() - up * up.x)
         .try_normalize(1e-9)
         .unwrap_or_else(|| (Vector3::y() - up * up.y).normalize());
-    let t2 = up.cross(&t1);
-    [t1, t2]
+    [t1, up.cross(&t1)]
 }
 
 /// Iteratively reweighted least squares for up over plane fits with range noise `sigma` \[m\].

@@ -67,14 +67,11 @@ pub(crate) fn sampled_plane(
     // point.
     let k2 = params.refine_k * params.refine_k;
     let floor2 = params.min_sigma * params.min_sigma;
-    let on_plane = |g: &GridPoint, p0: &Point3<f64>, normal: &Vector3<f64>| {
-        let beyond = normal.dot(&(g.p - p0)).abs() - params.flat_margin;
-        beyond <= 0.0 || beyond * beyond <= k2 * (s * s * g.dir.dot(normal).powi(2) + floor2)
-    };
     let on = |i: usize, p0: &Point3<f64>, normal: &Vector3<f64>| {
-        grid.points[i]
-            .as_ref()
-            .is_some_and(|g| on_plane(g, p0, normal))
+        grid.points[i].as_ref().is_some_and(|g| {
+            let beyond = normal.dot(&(g.p - p0)).abs() - params.flat_margin;
+            beyond <= 0.0 || beyond * beyond <= k2 * (s * s * g.dir.dot(normal).powi(2) + floor2)
+        })
     };
     // Counted per hypothesis (most lose by far, and are given up early); only the best one's
     // points are gathered.

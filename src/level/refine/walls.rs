@@ -15,11 +15,8 @@ pub(crate) fn discover_lines(f: &Frame, candidate: &[bool], width: usize) -> Vec
     let min_points = params.min_patch_points.max(width);
     let k = params.refine_k;
     let point = |i: usize| -> Option<(Vector2<f64>, Vector2<f64>, f64)> {
-        if !candidate[i] {
-            return None;
-        }
-        let (q, d) = lv.q[i].as_ref()?;
-        Some((Vector2::new(q.x, q.y), Vector2::new(d.x, d.y), q.z))
+        let (q, d) = lv.q[i].as_ref().filter(|_| candidate[i])?;
+        Some((q.xy(), d.xy(), q.z))
     };
     let mut out = Vec::new();
     for r in 0..grid.rows() {
