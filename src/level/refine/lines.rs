@@ -89,9 +89,7 @@ fn lines_evidence(
     // alone are tried below.
     let full_lines = found.iter().filter(|l| full(l)).count();
     if full_lines > 0 && full_lines < found.len() && one_plane(grid, &found, s, params) {
-        if let Some(plane) =
-            lines_plane(grid, &found, s).and_then(|(fit, members)| level_plane(f, fit, members))
-        {
+        if let Some(plane) = lines_plane(grid, &found, s).and_then(|p| level_plane(f, p)) {
             return plane;
         }
     }
@@ -106,11 +104,11 @@ fn lines_evidence(
         // One floor's lines always fit one plane; a wall's line just above its foot and a
         // floor line at another bearing are skew (traced: a zigzag wall's foot 10 cm up,
         // taken with a floor line, pulled a pose 8 degrees off with a sigma of 0.4).
-        let Some((fit, members)) = lines_plane(grid, &found, s) else {
+        let Some(plane) = lines_plane(grid, &found, s) else {
             return LevelEvidence::None;
         };
-        let skew = skew_lines(&fit, s);
-        if let Some(plane) = level_plane(f, fit, members) {
+        let skew = skew_lines(&plane.0, s);
+        if let Some(plane) = level_plane(f, plane) {
             return plane;
         }
         if skew {
@@ -141,7 +139,7 @@ pub(crate) fn lines_plane(
 /// The plane `fit` through level lines' points `members` ([`lines_plane`]) as the floor or
 /// ceiling, when it fits them: within `refine_level_misfit` of the noise,
 /// near up, clear of the scanner, and with nothing seen through it.
-pub(crate) fn level_plane(f: &Frame, fit: PlaneFit, members: Vec<usize>) -> Option<LevelEvidence> {
+fn level_plane(f: &Frame, (fit, members): (PlaneFit, Vec<usize>)) -> Option<LevelEvidence> {
     let (params, s) = (f.params, f.s);
     (checks::refined_level(&fit, &f.up, s, params) && opaque(f.grid, &fit, s, params))
         .then_some(LevelEvidence::Plane(fit, members))
@@ -183,10 +181,7 @@ pub(crate) fn line_offset_sigmas(
     min_sigma: f64,
 ) -> f64 {
     let model = LevelModel::new(fit, s);
-    let mut sum = 0.0;
-    let mut var = 0.0;
-    let mut centre = Vector3::zeros();
-    let mut n = 0.0;
+    let (mut sum, mut var, mut centre, mut n) = (0.0, 0.0, Vector3::zeros(), 0.0);
     for g in members.iter().filter_map(|&i| grid.points[i].as_ref()) {
         sum += fit.normal.dot(&(g.p - fit.centroid));
         var += s * s * g.dir.dot(&fit.normal).powi(2) + min_sigma * min_sigma;
