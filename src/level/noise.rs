@@ -160,15 +160,14 @@ struct BearingSteps {
 impl BearingSteps {
     /// From the `(sin, cos)` of each bearing.
     fn new(sc: &[(f64, f64)]) -> Self {
-        let sin_diff = |i: usize, j: usize| sc[j].0 * sc[i].1 - sc[j].1 * sc[i].0;
-        let n = sc.len();
+        let sin_diff = |a: &(f64, f64), b: &(f64, f64)| b.0 * a.1 - b.1 * a.0;
         // Zero where a bearing has no neighbour on a side.
-        let (mut one, mut two) = (vec![0.0; n], vec![0.0; n]);
-        for i in 1..n {
-            one[i] = sin_diff(i - 1, i);
+        let (mut one, mut two) = (vec![0.0; sc.len()], vec![0.0; sc.len()]);
+        for (x, w) in one.iter_mut().skip(1).zip(sc.windows(2)) {
+            *x = sin_diff(&w[0], &w[1]);
         }
-        for i in 1..n.saturating_sub(1) {
-            two[i] = sin_diff(i - 1, i + 1);
+        for (x, w) in two.iter_mut().skip(1).zip(sc.windows(3)) {
+            *x = sin_diff(&w[0], &w[2]);
         }
         Self { one, two }
     }
