@@ -312,19 +312,12 @@ impl Growth<'_> {
             let c = i % cols;
             // Left, right, previous and next row; `usize::MAX` where the grid ends (cheaper in
             // this, the hottest loop of region growing, than Options).
-            let mut neighbours = [usize::MAX; 4];
-            if c > 0 {
-                neighbours[0] = i - 1;
-            }
-            if c + 1 < cols {
-                neighbours[1] = i + 1;
-            }
-            if i >= cols {
-                neighbours[2] = i - cols;
-            }
-            if i + cols < n {
-                neighbours[3] = i + cols;
-            }
+            let neighbours = [
+                if c > 0 { i - 1 } else { usize::MAX },
+                if c + 1 < cols { i + 1 } else { usize::MAX },
+                if i >= cols { i - cols } else { usize::MAX },
+                if i + cols < n { i + cols } else { usize::MAX },
+            ];
             for j in neighbours {
                 if j == usize::MAX || labels[j] != UNLABELLED {
                     continue;
