@@ -88,10 +88,8 @@ pub(crate) fn robust_obs<'a>(
 /// it is near level, explains its points and is opaque ([`level_plane_stands`]: sect. 5.3's
 /// floor and ceiling constraints must be real surfaces).
 pub fn level_fits(est: &LevelEstimate, params: &LevelParams) -> Vec<PlaneFit> {
-    let (Some(grid), true) = (
-        est.grid.as_ref(),
-        params.level_surfaces && params.estimator == Estimator::Robust,
-    ) else {
+    let used = params.level_surfaces && params.estimator == Estimator::Robust;
+    let Some(grid) = est.grid.as_ref().filter(|_| used) else {
         return Vec::new();
     };
     let sigma = est.range_sigma.max(params.min_sigma);

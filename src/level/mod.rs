@@ -201,10 +201,7 @@ fn range_sigma_with(scans: &[Scan], params: &LevelParams, trig: Option<&[(f64, f
     // (`noise::far_if_noisier`).
     let (mut given, mut ranged, mut ranges) = (Vec::new(), Vec::new(), Vec::new());
     for s in scans {
-        let Some(sigmas) = s.readings_sigma.as_ref() else {
-            continue;
-        };
-        for (i, v) in sigmas.iter().enumerate() {
+        for (i, v) in s.readings_sigma.iter().flatten().enumerate() {
             let Some(x) = v.filter(|x| x.is_finite() && *x >= 0.0) else {
                 continue;
             };
