@@ -144,14 +144,13 @@ fn quad_at(
     if fit.residual_ss > 0.99 * tol * tol && beyond(&fit.normal, &fit.centroid, tol) {
         return None;
     }
-    let area = 0.5 * diag.norm();
     Some(Polygon {
         row: r,
         col: c,
         rows: qr,
         cols: qc,
         corners,
-        area,
+        area: 0.5 * diag.norm(),
         kind: classify(&fit.normal, &fit.centroid, wall_cos),
         fit,
     })
