@@ -6,7 +6,7 @@
 //! patches run across a wall's foot onto the floor.
 
 use super::LevelEstimate;
-use super::patches::{Patch, UNLABELLED, rows_span_sorted};
+use super::patches::{Patch, labels_of, rows_span_sorted};
 use super::refine::Model;
 
 /// Replaces `est`'s patches and labels by the refined `models` (each a patch of its members;
@@ -16,25 +16,18 @@ pub(crate) fn adopt_refined(est: &mut LevelEstimate, models: Vec<Model>) {
     let Some(grid) = &est.grid else {
         return;
     };
-    let mut labels = vec![UNLABELLED; grid.points.len()];
     let patches: Vec<Patch> = models
         .into_iter()
         .filter(|m| !m.members.is_empty())
-        .enumerate()
-        .map(|(k, m)| {
-            for &i in &m.members {
-                labels[i] = k as u32;
-            }
-            Patch {
-                row_range: rows_span_sorted(&m.members, grid.cols),
-                fit: m.fit,
-                kind: m.kind,
-                members: m.members,
-            }
+        .map(|m| Patch {
+            row_range: rows_span_sorted(&m.members, grid.cols),
+            fit: m.fit,
+            kind: m.kind,
+            members: m.members,
         })
         .collect();
+    est.labels = labels_of(grid.points.len(), &patches);
     est.patches = patches;
-    est.labels = labels;
 }
 
 #[cfg(test)]
@@ -42,6 +35,7 @@ mod tests {
     use super::*;
     use crate::level::SurfaceKind;
     use crate::level::grid::{PlaneFit, PoseGrid};
+    use crate::level::patches::UNLABELLED;
     use crate::scan::Scan;
     use nalgebra::{Point3, Vector3};
 

@@ -400,7 +400,7 @@ fn quad_coplanar() {
                 0.1 * (r as f64 - 1.0),
             ))
         });
-        extract_quads(&grid, &p, sigma).len()
+        extract_quads(&grid, &p, sigma, p.quad_cols).len()
     };
     assert_eq!(quads(lo), 1);
     assert_eq!(quads(hi), 0);

@@ -18,16 +18,14 @@ pub(crate) fn sym_eigen3(a: &Matrix3<f64>) -> Eigen3 {
     sym_eigen3_upper(&upper_triangle(a))
 }
 
+/// Row and column of each entry of a symmetric matrix's upper triangle as laid out here and in
+/// the plane sums (xx, xy, xz, yy, yz, zz).
+pub(crate) const UPPER_I: [usize; 6] = [0, 0, 0, 1, 1, 2];
+pub(crate) const UPPER_J: [usize; 6] = [0, 1, 2, 1, 2, 2];
+
 /// A matrix's upper triangle (xx, xy, xz, yy, yz, zz).
 fn upper_triangle(a: &Matrix3<f64>) -> [f64; 6] {
-    [
-        a[(0, 0)],
-        a[(0, 1)],
-        a[(0, 2)],
-        a[(1, 1)],
-        a[(1, 2)],
-        a[(2, 2)],
-    ]
+    std::array::from_fn(|t| a[(UPPER_I[t], UPPER_J[t])])
 }
 
 /// [`sym_eigen3`] of the symmetric matrix with upper triangle `upper` (xx, xy, xz, yy, yz, zz).
@@ -90,13 +88,8 @@ fn null_vector(m: &[f64; 6], l: f64) -> Option<Vector3<f64>> {
     let r2 = Vector3::new(m[2], m[4], m[5] - l);
     let c = [r0.cross(&r1), r0.cross(&r2), r1.cross(&r2)];
     let norms = c.map(|v| v.norm_squared());
-    let best = if norms[0] >= norms[1] && norms[0] >= norms[2] {
-        0
-    } else if norms[1] >= norms[2] {
-        1
-    } else {
-        2
-    };
+    // The first of the largest.
+    let best = (1..3).fold(0, |b, k| if norms[k] > norms[b] { k } else { b });
     c[best].try_normalize(1e-150)
 }
 

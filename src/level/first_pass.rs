@@ -60,16 +60,13 @@ pub(crate) fn robust_obs<'a>(
     let misfit = |f: &PlaneFit| f.misfit_ratio(sigma.max(params.min_sigma)).max(1.0);
     let rows = est.grid.as_ref().map_or(0, PoseGrid::rows);
     let full_rows = params.quad_rows.min(rows).saturating_sub(1);
+    let level = |f: &'a PlaneFit| PlaneObs::level(f, misfit(f) * params.level_inflation);
     est.patches
         .iter()
         .filter(|p| p.kind == SurfaceKind::Wall)
         .filter(|p| p.row_range.1 - p.row_range.0 >= full_rows)
         .map(|p| PlaneObs::wall(&p.fit, misfit(&p.fit)))
-        .chain(
-            levels
-                .iter()
-                .map(|f| PlaneObs::level(f, misfit(f) * params.level_inflation)),
-        )
+        .chain(levels.iter().map(level))
         .collect()
 }
 
@@ -85,35 +82,26 @@ pub(crate) fn robust_obs<'a>(
 /// line is dropped: it fits that scan's own plane, whose normal is near the robot's z axis
 /// whatever the surface. From `level_steep_min_sigma` of noise up, so is a patch on two scan
 /// lines only (`LEVEL_MIN_ROWS_NOISY`).
+///
+/// So each patch's members that step like a level surface ([`level_stepping_members`]) are
+/// fitted without those on a steep surface ([`fit_without_steep`]), and the plane is kept when
+/// it is near level, explains its points and is opaque ([`level_plane_stands`]: sect. 5.3's
+/// floor and ceiling constraints must be real surfaces).
 pub fn level_fits(est: &LevelEstimate, params: &LevelParams) -> Vec<PlaneFit> {
-    let (Some(grid), true) = (
-        est.grid.as_ref(),
-        params.level_surfaces && params.estimator == Estimator::Robust,
-    ) else {
+    let used = params.level_surfaces && params.estimator == Estimator::Robust;
+    let Some(grid) = est.grid.as_ref().filter(|_| used) else {
         return Vec::new();
     };
     let sigma = est.range_sigma.max(params.min_sigma);
     est.patches
         .iter()
         .filter(|p| p.kind != SurfaceKind::Wall && p.fit.n >= params.min_level_points)
-        .filter_map(|p| clean_level_fit(grid, p, sigma, params))
+        .filter_map(|p| {
+            let kept = level_stepping_members(grid, p)?;
+            let fit = fit_without_steep(grid, &kept, sigma, params)?;
+            level_plane_stands(grid, &fit, sigma, params).then_some(fit)
+        })
         .collect()
-}
-
-/// One floor or ceiling patch cleaned for [`level_fits`] and refitted: its members that step
-/// like a level surface ([`level_stepping_members`]), fitted without those on a steep surface
-/// ([`fit_without_steep`]), kept when the plane is near level (within `max_wall_tilt_deg` of
-/// the robot's z axis), explains its points (`max_level_misfit`) and is opaque (sect. 5.3's
-/// floor and ceiling constraints must be real surfaces).
-pub(crate) fn clean_level_fit(
-    grid: &PoseGrid,
-    p: &Patch,
-    sigma: f64,
-    params: &LevelParams,
-) -> Option<PlaneFit> {
-    let kept = level_stepping_members(grid, p)?;
-    let fit = fit_without_steep(grid, &kept, sigma, params)?;
-    level_plane_stands(grid, &fit, sigma, params).then_some(fit)
 }
 
 /// [`Check::LevelMisfit`](super::checks::Check::LevelMisfit): whether a cleaned floor or

@@ -2,6 +2,7 @@
 //! rows sorted by elevation (the paper's "scans as rows, equal bearings as columns").
 
 use super::FailCause;
+use super::eigen3::{UPPER_I, UPPER_J};
 use crate::geometry::{beam_origin, rot_y};
 use crate::scan::Scan;
 use nalgebra::{Point3, Vector3};
@@ -205,14 +206,7 @@ fn moments(p: &Vector3<f64>, d: &Vector3<f64>) -> Moments {
 
 /// `v v^T`'s upper triangle, laid out as in [`Moments`].
 fn outer_upper(v: &Vector3<f64>) -> [f64; 6] {
-    [
-        v.x * v.x,
-        v.x * v.y,
-        v.x * v.z,
-        v.y * v.y,
-        v.y * v.z,
-        v.z * v.z,
-    ]
+    std::array::from_fn(|t| v[UPPER_I[t]] * v[UPPER_J[t]])
 }
 
 impl PlaneAccumulator {
@@ -254,25 +248,18 @@ impl PlaneAccumulator {
         out
     }
 
-    /// The weighted centroid and the upper triangle of the scatter about it (layout of
-    /// [`Moments`]).
-    fn scatter(&self) -> (Vector3<f64>, [f64; 6]) {
-        let nf = self.weight;
-        let c = Vector3::new(self.sums[SUM], self.sums[SUM + 1], self.sums[SUM + 2]) / nf;
-        let cv = [c.x, c.y, c.z];
-        let raw = std::array::from_fn(|t| self.sums[PP + t] - nf * cv[UPPER_I[t]] * cv[UPPER_J[t]]);
-        (c, raw)
-    }
-
     /// Fits the plane; `sigma` is the range noise \[m\] used for the bias correction (0 for none).
     pub fn fit(&self, sigma: f64) -> Option<PlaneFit> {
         if self.n < 3 || self.weight < 3.0 {
             return None;
         }
         let nf = self.weight;
-        // Upper triangles (xx, xy, xz, yy, yz, zz): the raw scatter about the centroid, and
-        // that minus the expected noise along the rays.
-        let (c, raw) = self.scatter();
+        // Upper triangles (layout of [`Moments`]): the raw scatter about the weighted centroid
+        // `c`, and that minus the expected noise along the rays.
+        let c = Vector3::new(self.sums[SUM], self.sums[SUM + 1], self.sums[SUM + 2]) / nf;
+        let cv = [c.x, c.y, c.z];
+        let raw: [f64; 6] =
+            std::array::from_fn(|t| self.sums[PP + t] - nf * cv[UPPER_I[t]] * cv[UPPER_J[t]]);
         let dd = &self.sums[DD..DD + 6];
         let k = sigma * sigma * (nf - 1.0) / nf;
         let corrected: [f64; 6] = std::array::from_fn(|t| raw[t] - dd[t] * k);
@@ -295,10 +282,6 @@ impl PlaneAccumulator {
         })
     }
 }
-
-/// Row and column of each entry of an upper triangle laid out as in [`Moments`].
-const UPPER_I: [usize; 6] = [0, 0, 0, 1, 1, 2];
-const UPPER_J: [usize; 6] = [0, 1, 2, 1, 2, 2];
 
 /// `v^T A v` for the symmetric `A` of upper triangle `a` (layout of [`Moments`]).
 fn quadratic_form(a: &[f64], v: &Vector3<f64>) -> f64 {
@@ -335,14 +318,8 @@ impl PlaneFit {
     /// with `sigma_n^2 = sigma^2 * mean (d . n)^2` the noise along the normal.
     pub(crate) fn normal_variance_along(&self, u: &Vector3<f64>, sigma: f64) -> f64 {
         let sn2 = (sigma * sigma * self.dn2).max(1e-12);
-        self.in_plane
-            .iter()
-            .map(|(l, e)| {
-                let c = u.dot(e);
-                c * c / l.max(1e-12)
-            })
-            .sum::<f64>()
-            * sn2
+        let share = |(l, e): &(f64, Vector3<f64>)| u.dot(e).powi(2) / l.max(1e-12);
+        self.in_plane.iter().map(share).sum::<f64>() * sn2
     }
 
     /// Observed over expected residual variance (1 for a clean planar patch); more than 1

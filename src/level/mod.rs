@@ -201,10 +201,7 @@ fn range_sigma_with(scans: &[Scan], params: &LevelParams, trig: Option<&[(f64, f
     // (`noise::far_if_noisier`).
     let (mut given, mut ranged, mut ranges) = (Vec::new(), Vec::new(), Vec::new());
     for s in scans {
-        let Some(sigmas) = s.readings_sigma.as_ref() else {
-            continue;
-        };
-        for (i, v) in sigmas.iter().enumerate() {
+        for (i, v) in s.readings_sigma.iter().flatten().enumerate() {
             let Some(x) = v.filter(|x| x.is_finite() && *x >= 0.0) else {
                 continue;
             };
@@ -272,7 +269,7 @@ fn segmented(
     sigma: f64,
     trig: Option<std::sync::Arc<[(f64, f64)]>>,
 ) -> LevelEstimate {
-    let quads = polygons::extract_quads(&grid, params, sigma);
+    let quads = polygons::extract_quads(&grid, params, sigma, params.quad_cols);
     let (patches, labels) = match params.estimator {
         Estimator::Robust => patches::grow_patches(&grid, &quads, params, sigma),
         Estimator::Paper => (Vec::new(), vec![UNLABELLED; grid.points.len()]),
@@ -308,13 +305,8 @@ pub(crate) fn wall_mask_where(
             wall_mask[start..start + q.cols].fill(true);
         }
     }
-    let wall_patch: Vec<bool> = est
-        .patches
-        .iter()
-        .map(|p| p.kind == SurfaceKind::Wall)
-        .collect();
     for (mask, &l) in wall_mask.iter_mut().zip(&est.labels) {
-        *mask |= l != UNLABELLED && wall_patch[l as usize];
+        *mask |= l != UNLABELLED && est.patches[l as usize].kind == SurfaceKind::Wall;
     }
     wall_mask
 }

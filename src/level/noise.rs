@@ -48,13 +48,11 @@ pub(crate) fn estimate_range_sigma_with(
         return None;
     }
     // The pooled estimate reorders its copy; `z` stays in step with `ranges` for the screen.
-    let mut all = z.clone();
-    let mad = mad_sigma(&mut all);
-    let pooled = trimmed_rms(all.iter().map(|&b| f64::from_bits(b)), mad);
+    let (pooled, mad) = trimmed_sigma(&mut z.clone());
     let halves = looks_heteroscedastic(&z, &ranges, mad)
         .then(|| split_at_median_range(&z, &ranges))
         .flatten()
-        .map(|(mut near, mut far)| (trimmed_sigma(&mut near), trimmed_sigma(&mut far)));
+        .map(|(mut near, mut far)| (trimmed_sigma(&mut near).0, trimmed_sigma(&mut far).0));
     Some(far_if_noisier(pooled, halves))
 }
 
@@ -116,16 +114,11 @@ pub(crate) fn split_at_median_range<T: Copy>(
 }
 
 /// The noise from squared standardised residuals (as bits): their trimmed RMS, started from
-/// their MAD. Reorders `z`.
-fn trimmed_sigma(z: &mut [u64]) -> f64 {
-    let mad = mad_sigma(z);
-    trimmed_rms(z.iter().map(|&b| f64::from_bits(b)), mad)
-}
-
-/// The sigma of squared standardised residuals (as bits) by their median. Reorders `z`.
-fn mad_sigma(z: &mut [u64]) -> f64 {
+/// their MAD's sigma; with that sigma. Reorders `z`.
+fn trimmed_sigma(z: &mut [u64]) -> (f64, f64) {
     // The residuals are squared: the median's root is the median of their magnitudes.
-    f64::from_bits(median_bits(z)).sqrt() * MAD_TO_SIGMA
+    let mad = f64::from_bits(median_bits(z)).sqrt() * MAD_TO_SIGMA;
+    (trimmed_rms(z.iter().map(|&b| f64::from_bits(b)), mad), mad)
 }
 
 /// Gaussian truncated at 3 sigma: its RMS over its sigma, `sqrt(1 - 2 c phi(c) / (2 Phi(c) - 1))`
@@ -167,22 +160,16 @@ struct BearingSteps {
 impl BearingSteps {
     /// From the `(sin, cos)` of each bearing.
     fn new(sc: &[(f64, f64)]) -> Self {
-        let sin_diff = |i: usize, j: usize| sc[j].0 * sc[i].1 - sc[j].1 * sc[i].0;
-        let n = sc.len();
-        Self {
-            one: (0..n)
-                .map(|i| if i > 0 { sin_diff(i - 1, i) } else { 0.0 })
-                .collect(),
-            two: (0..n)
-                .map(|i| {
-                    if i > 0 && i + 1 < n {
-                        sin_diff(i - 1, i + 1)
-                    } else {
-                        0.0
-                    }
-                })
-                .collect(),
+        let sin_diff = |a: &(f64, f64), b: &(f64, f64)| b.0 * a.1 - b.1 * a.0;
+        // Zero where a bearing has no neighbour on a side.
+        let (mut one, mut two) = (vec![0.0; sc.len()], vec![0.0; sc.len()]);
+        for (x, w) in one.iter_mut().skip(1).zip(sc.windows(2)) {
+            *x = sin_diff(&w[0], &w[1]);
         }
+        for (x, w) in two.iter_mut().skip(1).zip(sc.windows(3)) {
+            *x = sin_diff(&w[0], &w[2]);
+        }
+        Self { one, two }
     }
 }
 

@@ -55,21 +55,15 @@ pub(crate) fn classify(
 /// `coplanar_k * sigma` of its plane, and it is not close to a triangle. Walls, floors and
 /// ceilings are all returned (with their kind), so that failure detection can tell a robot
 /// facing the floor from one that sees nothing. Greedy per band: after a kept quad the next one
-/// starts on its right edge; after a rejected one, one column further right.
-pub(crate) fn extract_quads(grid: &PoseGrid, params: &LevelParams, sigma: f64) -> Vec<Polygon> {
-    extract_quads_sized(grid, params, sigma, params.quad_rows, params.quad_cols)
-}
-
-/// [`extract_quads`] with a given quad size (rows high, columns wide).
-pub(crate) fn extract_quads_sized(
+/// starts on its right edge; after a rejected one, one column further right. The quads are
+/// `quad_rows` high and `cols` wide (the paper's `quad_cols`, or a region-growing seed's width).
+pub(crate) fn extract_quads(
     grid: &PoseGrid,
     params: &LevelParams,
     sigma: f64,
-    rows: usize,
     cols: usize,
 ) -> Vec<Polygon> {
-    let qr = rows.max(2);
-    let qc = cols.max(2);
+    let (qr, qc) = (params.quad_rows.max(2), cols.max(2));
     if grid.rows() < qr || grid.cols < qc {
         return Vec::new();
     }
@@ -150,14 +144,13 @@ fn quad_at(
     if fit.residual_ss > 0.99 * tol * tol && beyond(&fit.normal, &fit.centroid, tol) {
         return None;
     }
-    let area = 0.5 * diag.norm();
     Some(Polygon {
         row: r,
         col: c,
         rows: qr,
         cols: qc,
         corners,
-        area,
+        area: 0.5 * diag.norm(),
         kind: classify(&fit.normal, &fit.centroid, wall_cos),
         fit,
     })

@@ -28,30 +28,31 @@ pub(crate) fn resegmented(
     {
         return (first, None);
     }
-    let mut result = first;
-    let refinement = refined_solution(est, levels, &result, params);
-    let confirmed = refinement.accepted.is_some();
-    // The solution kept and the other one of the two: the first when the refined one is
-    // kept, else the refined one, gated or not; none when the first failed.
-    let other = match refinement.accepted {
-        Some(refined) => std::mem::replace(&mut result, Ok(refined)).ok(),
-        None => refinement.raw,
+    let Some(Resegmented {
+        start,
+        refined,
+        rivals,
+    }) = refine_estimate(est, levels, &first, params)
+    else {
+        return (first, None);
     };
-    let widened = match (&result, other) {
-        (Ok(kept), Some(first)) if confirmed => widened_against_first(kept, &first),
-        (Ok(kept), Some(other)) => widened_unconfirmed(kept, &other),
-        // The refined solution stands alone: checked against where it started.
-        (Ok(kept), None) => refinement.start.and_then(|s| widened_from_start(kept, &s)),
-        (Err(_), _) => None,
+    // The solution kept and the distance that widens it: the refined one's from the first,
+    // or from where it started when it stands alone; else the first's from the refined one.
+    let accepted = refined_solution(est, &refined, &rivals, params);
+    let (kept, widened) = match (accepted, &first) {
+        (Some(kept), Ok(first)) => (kept, widened_against_first(&kept, first)),
+        (Some(kept), Err(_)) => (kept, widened_from_start(&kept, &start)),
+        (None, Ok(first)) => (*first, widened_unconfirmed(first, &refined.solution)),
+        (None, Err(_)) => return (first, None),
     };
     let result = match widened {
         // Only its sigma changed: the walls' spread was judged already.
         Some(widened) => acceptable(&widened, params, true)
             .map(|()| widened)
             .map_err(|_| FailCause::ResegmentationDisagrees),
-        None => result,
+        None => Ok(kept),
     };
-    (result, refinement.models)
+    (result, accepted.map(|_| refined.models))
 }
 
 /// [`Check::RefineAboveSigma`]: whether the first solution is re-segmented: when it failed,
@@ -161,36 +162,25 @@ pub(crate) fn blind_starts(
         .then(|| refine::start_lines(grid, steps, params, sigma))
         .filter(|lines| !lines.is_empty())
         .and_then(|lines| {
-            let mut obs = obs.clone();
-            obs.extend(
-                lines
-                    .iter()
-                    .map(|l| up::PlaneObs::level_line(l, params.level_line_inflation)),
-            );
+            let (mut obs, inflate) = (obs.clone(), params.level_line_inflation);
+            obs.extend(lines.iter().map(|l| up::PlaneObs::level_line(l, inflate)));
             up::up_robust(&obs, sigma_eff, params.iterations)
         });
     let level = refine::level_start(grid, steps, params, sigma);
     [walls, with_lines, level].into_iter().flatten().collect()
 }
 
-/// The refined solution when it passes the gate. When it does not, the first stands: the
+/// The solution of the `refined` model when it passes the gate, widened by its distance from
+/// `rivals` that pass as well ([`refine_estimate`]). When it does not, the first stands: the
 /// refined model sometimes keeps fewer points (ambiguous ones are left out), and letting its
 /// verdict overrule a first solution that passed failed 4-8% more poses at 10 cm for a
 /// small gain in the mean error (0.43 to 0.36 degrees at 5 scans).
 pub(crate) fn refined_solution(
     est: &LevelEstimate,
-    levels: &[PlaneFit],
-    first: &Result<UpSolution, FailCause>,
+    refined: &refine::Refined,
+    rivals: &[UpSolution],
     params: &LevelParams,
-) -> Refinement {
-    let Some(Resegmented {
-        start,
-        refined,
-        rivals,
-    }) = refine_estimate(est, levels, first, params)
-    else {
-        return Refinement::default();
-    };
+) -> Option<UpSolution> {
     let level_models = refined.models.iter().any(|m| m.kind != SurfaceKind::Wall);
     // Lines alone leave each direction of up to single lines, with nothing to check them
     // against: traced on a zigzag wall at 10 cm, three floor lines (no wall kept) leveled a
@@ -215,31 +205,14 @@ pub(crate) fn refined_solution(
     };
     // Another start's re-segmentation that passes the gate as well but lies far from this
     // one: two self-consistent readings of the pose, and which one is right is not known.
-    let accepted = accepted.and_then(|a| {
+    accepted.and_then(|a| {
         let widened = rivals.iter().fold(a, |kept, rival| {
             widened_by_disagreement(&kept, rival).unwrap_or(kept)
         });
         acceptable(&widened, params, true)
             .is_ok()
             .then_some(widened)
-    });
-    Refinement {
-        models: accepted.is_some().then_some(refined.models),
-        accepted,
-        raw: Some(refined.solution),
-        start: Some(start),
-    }
-}
-
-/// What re-segmentation gave: the refined solution when it passed the gate, the refined
-/// solution gated or not, the solution it started from, and the refined models when accepted.
-#[derive(Default)]
-pub(crate) struct Refinement {
-    pub(crate) accepted: Option<UpSolution>,
-    pub(crate) raw: Option<UpSolution>,
-    pub(crate) start: Option<UpSolution>,
-    /// The refined segmentation's models when its solution was accepted.
-    pub(crate) models: Option<Vec<refine::Model>>,
+    })
 }
 
 /// The re-segmented solution `kept`, widened by its disagreement with the first solution
@@ -259,12 +232,8 @@ pub(crate) fn widened_against_first(kept: &UpSolution, first: &UpSolution) -> Op
 /// disagree that much when one of them rests on a wrong segmentation, and which one is not
 /// known: traced poses ended 5-7 degrees off either way, with sigmas near one degree.
 pub(crate) fn widened_by_disagreement(kept: &UpSolution, other: &UpSolution) -> Option<UpSolution> {
-    widened_beyond(
-        kept,
-        other,
-        kept.cov + other.cov_in(&kept.basis),
-        DISAGREEMENT_SIGMAS,
-    )
+    let joint = kept.cov + other.cov_in(&kept.basis);
+    widened_beyond(kept, other, joint, DISAGREEMENT_SIGMAS)
 }
 
 /// `kept`, the first solution, with its covariance widened by its distance from `other`, a

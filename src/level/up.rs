@@ -143,29 +143,19 @@ impl PlaneObs<'_> {
     /// The residual directions of this evidence and their variances at the current `up`.
     fn terms(&self, up: &Vector3<f64>, sigma: f64) -> ([Term; 2], usize) {
         // The unit direction, perpendicular to `a`, in which an error of `a` moves `a . up`.
-        let across = |a: &Vector3<f64>| {
-            let in_plane = up - a * a.dot(up);
-            in_plane.try_normalize(1e-12).unwrap_or(*up)
-        };
-        match self.evidence {
+        let across = |a: &Vector3<f64>| (up - a * a.dot(up)).try_normalize(1e-12).unwrap_or(*up);
+        let inflated = |var: f64| (self.inflate * var).max(1e-14);
+        let (a, var) = match self.evidence {
             Evidence::Level(fit) => {
-                let var = |u: &Vector3<f64>| {
-                    (self.inflate * fit.normal_variance_along(u, sigma)).max(1e-14)
-                };
+                let var = |u: &Vector3<f64>| inflated(fit.normal_variance_along(u, sigma));
                 let [(_, e1), (_, e2)] = fit.in_plane;
-                ([(e1, var(&e1)), (e2, var(&e2))], 2)
+                return ([(e1, var(&e1)), (e2, var(&e2))], 2);
             }
-            Evidence::Wall(fit) => {
-                let n = &fit.normal;
-                let v = (self.inflate * fit.normal_variance_along(&across(n), sigma)).max(1e-14);
-                ([(*n, v), (*n, f64::INFINITY)], 1)
-            }
-            Evidence::LevelLine(l) => {
-                let d = &l.dir;
-                let v = (self.inflate * l.variance_along(&across(d), sigma)).max(1e-14);
-                ([(*d, v), (*d, f64::INFINITY)], 1)
-            }
-        }
+            Evidence::Wall(f) => (f.normal, f.normal_variance_along(&across(&f.normal), sigma)),
+            Evidence::LevelLine(l) => (l.dir, l.variance_along(&across(&l.dir), sigma)),
+        };
+        // One residual: the second term is padding.
+        ([(a, inflated(var)), (a, f64::INFINITY)], 1)
     }
 
     /// Squared Mahalanobis distance of `up` from this evidence's constraint, per residual.
@@ -281,8 +271,7 @@ fn tangent_basis(up: &Vector3<f64>) -> [Vector3<f64>; 2] {
     let t1 = (Vector3::x() - up * up.x)
         .try_normalize(1e-9)
         .unwrap_or_else(|| (Vector3::y() - up * up.y).normalize());
-    let t2 = up.cross(&t1);
-    [t1, t2]
+    [t1, up.cross(&t1)]
 }
 
 /// Iteratively reweighted least squares for up over plane fits with range noise `sigma` \[m\].

@@ -3,19 +3,15 @@
 
 use super::*;
 
-/// The patch's plane refitted with ray weights and, when it misfits, Cauchy weights on each
-/// point's residual over its own noise along the normal (`sigma |d . n|`), so that the few
-/// floor points caught at a wall's foot, all on one side of it, stop tilting the wall
-/// ([`ray_weighted_fit`]).
-pub(super) fn robust_fit(
-    grid: &PoseGrid,
-    members: &[usize],
-    fit: PlaneFit,
-    params: &LevelParams,
-    sigma: f64,
-) -> Option<PlaneFit> {
-    let points = members.iter().filter_map(|&i| grid.points[i].as_ref());
-    ray_weighted_fit(points, params, sigma, fit)
+impl Growth<'_> {
+    /// The plane `fit` of a patch's `members` refitted with ray weights and, when it misfits,
+    /// Cauchy weights on each point's residual over its own noise along the normal
+    /// (`sigma |d . n|`), so that the few floor points caught at a wall's foot, all on one side
+    /// of it, stop tilting the wall ([`ray_weighted_fit`]).
+    pub(super) fn robust_fit(&self, members: &[usize], fit: PlaneFit) -> Option<PlaneFit> {
+        let points = members.iter().filter_map(|&i| self.grid.points[i].as_ref());
+        ray_weighted_fit(points, self.params, self.sigma, fit)
+    }
 }
 
 /// Cauchy weight of a point's residual over its own noise along the normal.
@@ -45,7 +41,7 @@ pub(super) fn ray_tolerance(
 /// A plane refitted with each point weighted by the inverse variance of its range noise
 /// along the normal, `1 / (d . n)^2` (with `|d . n|` at least `ray_weight_floor`), normalised
 /// to a mean of one so that [`PlaneFit::normal_variance_along`] stays the weighted fit's
-/// variance; plus the Cauchy weights of [`robust_fit`] when the plane misfits. Points met at
+/// variance; plus the Cauchy weights of [`Growth::robust_fit`] when the plane misfits. Points met at
 /// an oblique incidence are the precise ones along the normal; an unweighted fit lets the
 /// head-on points' noise dominate. One pass, with the weights from the unweighted fit's normal:
 /// a second pass, with weights from the weighted normal, moved no statistic beyond its noise

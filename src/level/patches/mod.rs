@@ -4,7 +4,7 @@
 //! planes far more cheaply for a handful of scans).
 
 use super::grid::{GridPoint, PlaneAccumulator, PlaneFit, PoseGrid};
-use super::polygons::{Polygon, classify, extract_quads_sized};
+use super::polygons::{Polygon, classify, extract_quads};
 use super::{LevelParams, SurfaceKind, median_of, total_order_key};
 use nalgebra::{Point3, Vector3};
 
@@ -51,8 +51,7 @@ pub fn seed_cols(grid: &PoseGrid, params: &LevelParams, sigma: f64) -> usize {
     // asks for no more than the quad width (low noise), so does the median, which then need
     // not be found. The median (element `mid` of the sorted ranges) is at least `t` when at
     // most `mid` ranges lie below `t`.
-    let valid = grid.points.iter().flatten().count();
-    let mid = valid / 2;
+    let mid = grid.points.iter().flatten().count() / 2;
     let slack = params.quad_cols.saturating_sub(2).max(1) as f64;
     let t = params.seed_span_sigmas * sigma / (slack * step).max(1e-300) * (1.0 + 1e-9);
     if t.is_finite() && want(t) <= params.quad_cols {
@@ -96,7 +95,7 @@ pub(crate) fn grow_patches(
     let three_row: &[Polygon] = if width == params.quad_cols {
         quads
     } else {
-        wide = extract_quads_sized(grid, params, sigma, params.quad_rows, width);
+        wide = extract_quads(grid, params, sigma, width);
         &wide
     };
     let mut members = Vec::new();
@@ -105,13 +104,20 @@ pub(crate) fn grow_patches(
         patches.extend(growth.grow_seed(q, id, &mut labels, &mut members));
     }
     let split = growth.split_two_plane_patches(patches);
-    labels.fill(UNLABELLED);
-    for (id, p) in split.iter().enumerate() {
+    let labels = labels_of(grid.points.len(), &split);
+    (split, labels)
+}
+
+/// Per grid point (of `n`), the index of the patch among `patches` that holds it, or
+/// [`UNLABELLED`].
+pub(crate) fn labels_of(n: usize, patches: &[Patch]) -> Vec<u32> {
+    let mut labels = vec![UNLABELLED; n];
+    for (id, p) in patches.iter().enumerate() {
         for &i in &p.members {
             labels[i] = id as u32;
         }
     }
-    (split, labels)
+    labels
 }
 
 /// The seeds of [`grow_patches`] in the order they are tried (sect. 5.2's quads as seeds):
@@ -186,11 +192,9 @@ impl Growth<'_> {
             }
         }
         let mut fit = acc.fit(sigma)?;
+        self.flood(id, labels, members, &mut acc, &mut fit);
         let s_eff = sigma.max(params.min_sigma);
         let tol_at = |fit: &PlaneFit, g: &GridPoint| ray_tolerance(fit, g, s_eff, params);
-        flood(
-            grid, id, labels, members, &mut acc, &mut fit, &tol_at, sigma,
-        );
         // Release members that the final plane does not explain, then refit.
         fit = acc.fit(sigma).unwrap_or(fit);
         // Few are released: their sums come off the accumulator, rather than the kept ones'
@@ -261,13 +265,13 @@ impl Growth<'_> {
         if !still_a_patch(members) {
             return None;
         }
-        let fit = robust_fit(grid, members, first, params, sigma)?;
+        let fit = self.robust_fit(members, first)?;
         let fronted = without_front_row_ends(grid, members, &fit, params, sigma);
         let (members, fit) = match &fronted {
             Some(kept) if !still_a_patch(kept) => return None,
             Some(kept) => {
                 let first = grid.accumulate(kept).fit(sigma)?;
-                (&kept[..], robust_fit(grid, kept, first, params, sigma)?)
+                (&kept[..], self.robust_fit(kept, first)?)
             }
             None => (members, fit),
         };
@@ -284,56 +288,49 @@ impl Growth<'_> {
             row_range: (lo, hi),
         })
     }
-}
 
-/// The breadth-first growth of one patch (sect. 9's region growing): an unlabelled neighbour
-/// (left, right, previous or next row) of a member joins when within `tol_at` of the current
-/// plane `fit`, which is refitted each time the members grew by a third, so the plane follows
-/// the surface without a refit per point. The members not yet visited are the queue.
-#[allow(clippy::too_many_arguments)]
-fn flood(
-    grid: &PoseGrid,
-    id: u32,
-    labels: &mut [u32],
-    members: &mut Vec<usize>,
-    acc: &mut PlaneAccumulator,
-    fit: &mut PlaneFit,
-    tol_at: &impl Fn(&PlaneFit, &GridPoint) -> f64,
-    sigma: f64,
-) {
-    let (n, cols) = (grid.points.len(), grid.cols);
-    let mut refit_at = acc.n + acc.n / 3 + 1;
-    let mut next = 0;
-    while let Some(&i) = members.get(next) {
-        next += 1;
-        let c = i % cols;
-        // Left, right, previous and next row; `usize::MAX` where the grid ends (cheaper in
-        // this, the hottest loop of region growing, than Options).
-        let mut neighbours = [usize::MAX; 4];
-        if c > 0 {
-            neighbours[0] = i - 1;
-        }
-        if c + 1 < cols {
-            neighbours[1] = i + 1;
-        }
-        if i >= cols {
-            neighbours[2] = i - cols;
-        }
-        if i + cols < n {
-            neighbours[3] = i + cols;
-        }
-        for j in neighbours {
-            if j == usize::MAX || labels[j] != UNLABELLED {
-                continue;
-            }
-            let Some(g) = &grid.points[j] else { continue };
-            if fit.distance(&g.p).abs() <= tol_at(fit, g) {
-                labels[j] = id;
-                members.push(j);
-                acc.add(g);
-                if acc.n >= refit_at {
-                    *fit = acc.fit(sigma).unwrap_or(*fit);
-                    refit_at = acc.n + acc.n / 3 + 1;
+    /// The breadth-first growth of one patch (sect. 9's region growing): an unlabelled
+    /// neighbour (left, right, previous or next row) of a member joins when within
+    /// [`ray_tolerance`] of the current plane `fit`, which is refitted each time the members
+    /// grew by a third, so the plane follows the surface without a refit per point. The members
+    /// not yet visited are the queue.
+    fn flood(
+        &self,
+        id: u32,
+        labels: &mut [u32],
+        members: &mut Vec<usize>,
+        acc: &mut PlaneAccumulator,
+        fit: &mut PlaneFit,
+    ) {
+        let (grid, params, sigma) = (self.grid, self.params, self.sigma);
+        let s_eff = sigma.max(params.min_sigma);
+        let (n, cols) = (grid.points.len(), grid.cols);
+        let mut refit_at = acc.n + acc.n / 3 + 1;
+        let mut next = 0;
+        while let Some(&i) = members.get(next) {
+            next += 1;
+            let c = i % cols;
+            // Left, right, previous and next row; `usize::MAX` where the grid ends (cheaper in
+            // this, the hottest loop of region growing, than Options).
+            let neighbours = [
+                if c > 0 { i - 1 } else { usize::MAX },
+                if c + 1 < cols { i + 1 } else { usize::MAX },
+                if i >= cols { i - cols } else { usize::MAX },
+                if i + cols < n { i + cols } else { usize::MAX },
+            ];
+            for j in neighbours {
+                if j == usize::MAX || labels[j] != UNLABELLED {
+                    continue;
+                }
+                let Some(g) = &grid.points[j] else { continue };
+                if fit.distance(&g.p).abs() <= ray_tolerance(fit, g, s_eff, params) {
+                    labels[j] = id;
+                    members.push(j);
+                    acc.add(g);
+                    if acc.n >= refit_at {
+                        *fit = acc.fit(sigma).unwrap_or(*fit);
+                        refit_at = acc.n + acc.n / 3 + 1;
+                    }
                 }
             }
         }
@@ -347,20 +344,13 @@ pub(crate) fn plane_explained(fit: &PlaneFit, sigma: f64, params: &LevelParams) 
     fit.misfit_ratio(sigma.max(params.min_sigma)) <= params.split_misfit
 }
 
-/// [`rows_span`] of members in ascending order: their first and last.
+/// The lowest and highest rows of members in ascending order (rows grow with the grid index):
+/// their first's and last's; `(usize::MAX, 0)` for none.
 pub(crate) fn rows_span_sorted(members: &[usize], cols: usize) -> (usize, usize) {
     match (members.first(), members.last()) {
         (Some(&lo), Some(&hi)) => (lo / cols, hi / cols),
         _ => (usize::MAX, 0),
     }
-}
-
-fn rows_span(members: &[usize], cols: usize) -> (usize, usize) {
-    // Rows grow with the grid index: the lowest and highest rows are those of the lowest and
-    // highest index.
-    let lo = members.iter().min().map_or(usize::MAX, |&i| i / cols);
-    let hi = members.iter().max().map_or(0, |&i| i / cols);
-    (lo, hi)
 }
 
 /// [`Check::PatchMinPoints`](super::checks::Check::PatchMinPoints): the rows that ascending

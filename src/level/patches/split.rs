@@ -141,20 +141,12 @@ pub fn split_members(
     else {
         return whole;
     };
-    let (a, b) = (orders[which][..cut].to_vec(), orders[which][cut..].to_vec());
-    if !split_significant(
-        grid,
-        members.len(),
-        fit_all.residual_ss,
-        &a,
-        &b,
-        params,
-        sigma,
-    ) {
+    let (a, b) = orders[which].split_at(cut);
+    if !split_significant(grid, fit_all.residual_ss, a, b, params, sigma) {
         return whole;
     }
-    let mut out = split_members(grid, &a, params, sigma, depth - 1);
-    out.extend(split_members(grid, &b, params, sigma, depth - 1));
+    let mut out = split_members(grid, a, params, sigma, depth - 1);
+    out.extend(split_members(grid, b, params, sigma, depth - 1));
     out
 }
 
@@ -170,30 +162,27 @@ fn best_cut(
 ) -> Option<(f64, usize)> {
     let key = |i: usize| if by_row { grid.row(i) } else { i % grid.cols };
     let n = sorted.len();
-    // Prefix plane sums, and the rows spanned by every prefix and suffix.
+    // Prefix plane sums.
     let mut prefix = Vec::with_capacity(n + 1);
     let mut acc = PlaneAccumulator::default();
     prefix.push(acc);
-    let (mut pre_lo, mut pre_hi) = (vec![usize::MAX; n + 1], vec![0usize; n + 1]);
-    for (k, &i) in sorted.iter().enumerate() {
+    for &i in sorted {
         if let Some(g) = &grid.points[i] {
             acc.add(g);
         }
         prefix.push(acc);
-        pre_lo[k + 1] = pre_lo[k].min(grid.row(i));
-        pre_hi[k + 1] = pre_hi[k].max(grid.row(i));
     }
-    let (mut suf_lo, mut suf_hi) = (vec![usize::MAX; n + 1], vec![0usize; n + 1]);
-    for k in (0..n).rev() {
-        suf_lo[k] = suf_lo[k + 1].min(grid.row(sorted[k]));
-        suf_hi[k] = suf_hi[k + 1].max(grid.row(sorted[k]));
-    }
+    // The parts before and from `b` span two rows each when they reach past the run of the
+    // first member's row and of the last one's.
+    let row = |k: usize| grid.row(sorted[k]);
+    let first_other = (0..n).find(|&k| row(k) != row(0)).unwrap_or(n);
+    let last_other = (0..n).rev().find(|&k| row(k) != row(n - 1));
+    let two_rows = |b: usize| first_other < b && last_other.is_some_and(|k| k >= b);
     let half = params.min_patch_points / 2;
     let mut best: Option<(f64, usize)> = None;
     for b in half.max(1)..n.saturating_sub(half).max(1) {
         // Only where the key changes (column or row boundaries).
-        if key(sorted[b]) == key(sorted[b - 1]) || pre_hi[b] <= pre_lo[b] || suf_hi[b] <= suf_lo[b]
-        {
+        if key(sorted[b]) == key(sorted[b - 1]) || !two_rows(b) {
             continue;
         }
         let (Some(fl), Some(fr)) = (prefix[b].fit(sigma), acc.minus(&prefix[b]).fit(sigma)) else {
@@ -207,11 +196,11 @@ fn best_cut(
     best
 }
 
-/// Whether parts `a` and `b` of `n` members (one plane's RSS `rss1`) are two planes: each at
-/// least half a patch over two rows, and the F test of [`split_members`] above `split_f`.
+/// Whether parts `a` and `b` of one patch's members (one plane's RSS `rss1`) are two planes:
+/// each at least half a patch over two rows, and the F test of [`split_members`] above
+/// `split_f`.
 fn split_significant(
     grid: &PoseGrid,
-    n: usize,
     rss1: f64,
     a: &[usize],
     b: &[usize],
@@ -219,8 +208,7 @@ fn split_significant(
     sigma: f64,
 ) -> bool {
     let ok = |m: &[usize]| {
-        let (lo, hi) = rows_span(m, grid.cols);
-        m.len() >= params.min_patch_points / 2 && hi > lo
+        m.len() >= params.min_patch_points / 2 && m.iter().any(|&i| grid.row(i) != grid.row(m[0]))
     };
     if !ok(a) || !ok(b) {
         return false;
@@ -229,7 +217,8 @@ fn split_significant(
     else {
         return false;
     };
-    two_planes(rss1, fa.residual_ss + fb.residual_ss, n, params)
+    let rss2 = fa.residual_ss + fb.residual_ss;
+    two_planes(rss1, rss2, a.len() + b.len(), params)
 }
 
 /// [`Check::PatchSplitF`](crate::level::checks::Check::PatchSplitF): whether two planes of

@@ -28,7 +28,6 @@ pub(super) fn trim_edge_rows(
     // standing off leaves no wall to keep: trimmed to two rows, such patches let other,
     // wrong planes decide some poses at 10 cm; the patch goes (an empty list).
     let (lo, hi) = rows_span_sorted(members, grid.cols);
-    let three = hi == lo + 2;
     if hi < lo + 2 {
         return None;
     }
@@ -49,12 +48,11 @@ pub(super) fn trim_edge_rows(
         members,
         all,
         per_row: &per_row,
-        span: (lo, hi),
         sigma,
         params,
     };
     let (mut first, mut last) = (lo, hi);
-    if three {
+    if hi == lo + 2 {
         // A wall line and the floor line at its foot, 2-15 cm out, with a few points of the
         // third scan near the hinge axis: a "wall" 11.6 degrees off at 1 cm noise.
         return (rows.stands_off(lo, lo, hi) || rows.stands_off(hi, lo, hi)).then(Vec::new);
@@ -69,23 +67,17 @@ pub(super) fn trim_edge_rows(
     if (first, last) == (lo, hi) || !trimmed_rows_hold(&counts, all.n) {
         return None;
     }
-    Some(
-        members
-            .iter()
-            .copied()
-            .filter(|&i| (first..=last).contains(&grid.row(i)))
-            .collect(),
-    )
+    let kept = |i: &usize| (first..=last).contains(&grid.row(*i));
+    Some(members.iter().copied().filter(kept).collect())
 }
 
-/// A patch's rows for [`trim_edge_rows`]: its members, their sums, each row's own sums and the
-/// rows spanned `span`.
+/// A patch's rows for [`trim_edge_rows`]: its members, their sums and each row's own sums (up
+/// to its highest row; those below its lowest are empty).
 struct EdgeRows<'a> {
     grid: &'a PoseGrid,
     members: &'a [usize],
     all: &'a PlaneAccumulator,
     per_row: &'a [PlaneAccumulator],
-    span: (usize, usize),
     sigma: f64,
     params: &'a LevelParams,
 }
@@ -97,7 +89,7 @@ impl EdgeRows<'_> {
     /// plane's misfit), as the doc of [`trim_edge_rows`] explains.
     fn stands_off(&self, row: usize, first: usize, last: usize) -> bool {
         let (params, s) = (self.params, self.sigma.max(self.params.min_sigma));
-        let others = (self.span.0..=self.span.1)
+        let others = (0..self.per_row.len())
             .filter(|&r| r == row || !(first..=last).contains(&r))
             .fold(*self.all, |acc, r| acc.minus(&self.per_row[r]));
         if others.n < params.min_patch_points {

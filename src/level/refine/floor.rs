@@ -77,7 +77,7 @@ impl<'a> LevelModel<'a> {
 /// The floor and ceiling planes to assign from in frame `f`: the ones `given` unless `fresh`,
 /// else the densest height among the usable (`ok`) points below (floor) and above (ceiling)
 /// the scanner in the level frame, where at least
-/// `min_level_points` points lie within the tolerance of one height ([`densest_window`]),
+/// `min_level_points` points lie within the tolerance of one height ([`height_window`]),
 /// refitted in rounds ([`refit_rounds`]) and kept when level within `refine_max_tilt_deg` of
 /// up, explaining its points and clear of the scanner (sect. 5.3 takes floors and ceilings as
 /// the level constraints).
@@ -104,18 +104,17 @@ pub(crate) fn find_levels(
         if zs.len() < params.min_level_points {
             continue;
         }
-        let half = window_half(params, s, f.sigma_up);
-        let Some(window) = densest_window(&zs, half, params.min_level_points) else {
+        // The most populous window (the lowest such), when it holds `min_level_points`.
+        let min_points = params.min_level_points;
+        let Some((lo, hi)) = height_window(f, &zs, |n, most| n == most && n >= min_points) else {
             continue;
         };
+        let window: Vec<usize> = zs[lo..hi].iter().map(|&(_, i)| i).collect();
         // The window holds wall points too (a wall's foot, or a band of wall at one height
         // in a frame degrees off): the plane through most of its points, rather than through
         // all of them, starts the rounds.
-        let stepping: Vec<usize> = window
-            .iter()
-            .copied()
-            .filter(|&i| f.steps.levelish[i])
-            .collect();
+        let levelish = |i: &usize| f.steps.levelish[*i];
+        let stepping: Vec<usize> = window.iter().copied().filter(levelish).collect();
         let cos = params.refine_level_cos();
         let level = |n: &Vector3<f64>| n.dot(up).abs() >= cos;
         let members = sampled_plane(grid, &window, &stepping, level, s, params).unwrap_or(window);
@@ -146,29 +145,20 @@ pub(crate) fn height_candidates(
     zs
 }
 
-/// The grid indices of the most populous height window `2 half` wide over the ascending
-/// heights `zs` (the lowest such window), or `None` when it holds fewer than `min_points`.
-fn densest_window(zs: &[(f64, usize)], half: f64, min_points: usize) -> Option<Vec<usize>> {
-    let windows = height_windows(zs, half);
-    let most = windows.iter().map(|(lo, hi)| hi - lo).max().unwrap_or(0);
-    let (lo, hi) = windows
-        .into_iter()
-        .find(|(lo, hi)| hi - lo == most)
-        .unwrap_or((0, 0));
-    (hi - lo >= min_points).then(|| zs[lo..hi].iter().map(|&(_, i)| i).collect())
-}
-
-/// Half the height window of the floor and ceiling searches \[m\]: `refine_k` times the
-/// vertical tolerance of a typical grazing floor hit (`GRAZING_RAY_DZ` of the noise `s` and
-/// up's error `sigma_up` over `GRAZING_LEVER`), plus `flat_margin`.
-pub(crate) fn window_half(params: &LevelParams, s: f64, sigma_up: f64) -> f64 {
-    params.refine_k * (GRAZING_RAY_DZ * s + GRAZING_LEVER * sigma_up) + params.flat_margin
-}
-
-/// Per start `lo` over the ascending heights `zs`, the window `lo..hi` of the heights within
-/// `2 half` of `zs[lo]`: the one height-window scan behind the floor and ceiling searches
-/// ([`densest_window`] by height, `level_lines` by lines).
-pub(crate) fn height_windows(zs: &[(f64, usize)], half: f64) -> Vec<(usize, usize)> {
+/// The first height window over the ascending heights `zs` whose count `accept(count,
+/// densest)` takes, as `lo..hi`: per start `lo`, the heights within `2 half` of `zs[lo]`, where
+/// `half` is `refine_k` times the vertical tolerance of a typical grazing floor hit
+/// (`GRAZING_RAY_DZ` of the noise and up's error over `GRAZING_LEVER`), plus `flat_margin`. The
+/// one height-window scan behind the floor and ceiling searches (by height in [`find_levels`],
+/// by lines in `level_lines`).
+pub(crate) fn height_window(
+    f: &Frame,
+    zs: &[(f64, usize)],
+    accept: impl Fn(usize, usize) -> bool,
+) -> Option<(usize, usize)> {
+    let params = f.params;
+    let half =
+        params.refine_k * (GRAZING_RAY_DZ * f.s + GRAZING_LEVER * f.sigma_up) + params.flat_margin;
     let mut windows = Vec::with_capacity(zs.len());
     let mut hi = 0;
     for lo in 0..zs.len() {
@@ -177,7 +167,10 @@ pub(crate) fn height_windows(zs: &[(f64, usize)], half: f64) -> Vec<(usize, usiz
         }
         windows.push((lo, hi));
     }
+    let densest = windows.iter().map(|(lo, hi)| hi - lo).max().unwrap_or(0);
     windows
+        .into_iter()
+        .find(|&(lo, hi)| accept(hi - lo, densest))
 }
 
 /// `LEVEL_ROUNDS` rounds of refit and reassignment from `members`: the window's plane is only
@@ -195,7 +188,7 @@ fn refit_rounds(
         if !level_support(grid, &members, params) {
             return None;
         }
-        let f = fit_members(grid, &members, s)?;
+        let f = grid.accumulate(&members).fit(s)?;
         if round + 1 == LEVEL_ROUNDS {
             return Some(f);
         }

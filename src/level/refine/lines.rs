@@ -4,15 +4,6 @@
 
 use super::*;
 
-/// What [`level_lines`] works on: the pass's frame, the points that step like the surface
-/// sought, and those already taken.
-pub(crate) struct LineContext<'a> {
-    pub(crate) f: &'a Frame<'a>,
-    pub(crate) levelish: &'a [bool],
-    /// Points already in a wall or level model.
-    pub(crate) taken: &'a [bool],
-}
-
 /// Floor or ceiling evidence found by [`level_lines`].
 pub(crate) enum LevelEvidence {
     None,
@@ -37,45 +28,37 @@ pub(crate) enum LevelEvidence {
 /// `level_line_misfit` of its noise. With two or more scans, the lines
 /// are one plane (its lever arm is the distance between the lines) when their points fit one
 /// within `refine_level_misfit`; in a plane with a full line, a line of as few as
-/// [`PLANE_LINE_MIN_POINTS`] counts.
-pub(crate) fn level_lines(ctx: &LineContext, kind: SurfaceKind) -> LevelEvidence {
-    let (grid, params, s) = (ctx.f.grid, ctx.f.params, ctx.f.s);
-    let zs = height_candidates(&ctx.f.lv, kind == SurfaceKind::Floor, |i| {
-        ctx.levelish[i] && !ctx.taken[i]
-    });
+/// [`PLANE_LINE_MIN_POINTS`] counts. The `candidate`s, in frame `f`, are the points that step
+/// like the surface sought and that no wall or level model has taken.
+pub(crate) fn level_lines(
+    f: &Frame,
+    kind: SurfaceKind,
+    candidate: impl Fn(usize) -> bool,
+) -> LevelEvidence {
+    let (grid, params, s) = (f.grid, f.params, f.s);
+    let zs = height_candidates(&f.lv, kind == SurfaceKind::Floor, candidate);
     let min_points = params.level_line_min_points.max(3);
     if zs.len() < min_points {
         return LevelEvidence::None;
     }
-    let half = window_half(params, s, ctx.f.sigma_up);
-    let Some(height) = outermost_height(&zs, half, min_points) else {
+    // The outermost window that holds `min_points` and a third as many as the densest (a box
+    // top is not the floor); the surface's height key is its middle.
+    let Some((lo, hi)) = height_window(f, &zs, |n, most| n >= min_points && 3 * n >= most) else {
         return LevelEvidence::None;
     };
+    let height = zs[(lo + hi) / 2].0;
     let short = PLANE_LINE_MIN_POINTS.min(min_points);
-    let found: Vec<(LevelLine, Vec<usize>)> = rows_at_height(ctx, &zs, height)
+    let found: Vec<(LevelLine, Vec<usize>)> = rows_at_height(f, &zs, height)
         .into_iter()
-        .filter_map(|row| fit_line(grid, row, &ctx.f.up, Some(ctx.f.sigma_up), s, params, short))
+        .filter_map(|row| fit_line(grid, row, &f.up, Some(f.sigma_up), s, params, short))
         .collect();
-    lines_evidence(ctx, found, min_points)
-}
-
-/// The level surface's height key in [`level_lines`]: the middle of the outermost window
-/// `2 half` wide over the ascending keys `zs` that holds `min_points` and a third as many as
-/// the densest window (a box top is not the floor).
-fn outermost_height(zs: &[(f64, usize)], half: f64, min_points: usize) -> Option<f64> {
-    let counts = height_windows(zs, half);
-    let densest = counts.iter().map(|(lo, hi)| hi - lo).max().unwrap_or(0);
-    let &(lo, hi) = counts
-        .iter()
-        .find(|(lo, hi)| hi - lo >= min_points && 3 * (hi - lo) >= densest)?;
-    Some(zs[(lo + hi) / 2].0)
+    lines_evidence(f, found, min_points)
 }
 
 /// Per scan (grid row), the candidates `zs` within their own vertical tolerance of `height`:
 /// `refine_k` standard deviations of the range noise along the vertical and an error of up
 /// `sigma_up` at their horizontal distance, plus `flat_margin`.
-fn rows_at_height(ctx: &LineContext, zs: &[(f64, usize)], height: f64) -> Vec<Vec<usize>> {
-    let f = ctx.f;
+fn rows_at_height(f: &Frame, zs: &[(f64, usize)], height: f64) -> Vec<Vec<usize>> {
     let (params, s, k) = (f.params, f.s, f.params.refine_k);
     let mut rows: Vec<Vec<usize>> = vec![Vec::new(); f.grid.rows()];
     for &(z, i) in zs {
@@ -96,19 +79,17 @@ fn rows_at_height(ctx: &LineContext, zs: &[(f64, usize)], height: f64) -> Vec<Ve
 /// when two or more fit one ([`level_plane`]), else as lines when they are not skew beyond
 /// `LINES_PLANE_MISFIT`; nothing when they cannot be one floor.
 fn lines_evidence(
-    ctx: &LineContext,
+    f: &Frame,
     found: Vec<(LevelLine, Vec<usize>)>,
     min_points: usize,
 ) -> LevelEvidence {
-    let (grid, params, s) = (ctx.f.grid, ctx.f.params, ctx.f.s);
+    let (grid, params, s) = (f.grid, f.params, f.s);
     let full = |(l, _): &(LevelLine, Vec<usize>)| l.n >= min_points;
     // Short lines count only in a plane with a full one; without short lines, the full lines
     // alone are tried below.
     let full_lines = found.iter().filter(|l| full(l)).count();
     if full_lines > 0 && full_lines < found.len() && one_plane(grid, &found, s, params) {
-        if let Some(plane) =
-            lines_plane(grid, &found, s).and_then(|(fit, members)| level_plane(ctx.f, fit, members))
-        {
+        if let Some(plane) = lines_plane(grid, &found, s).and_then(|p| level_plane(f, p)) {
             return plane;
         }
     }
@@ -123,11 +104,11 @@ fn lines_evidence(
         // One floor's lines always fit one plane; a wall's line just above its foot and a
         // floor line at another bearing are skew (traced: a zigzag wall's foot 10 cm up,
         // taken with a floor line, pulled a pose 8 degrees off with a sigma of 0.4).
-        let Some((fit, members)) = lines_plane(grid, &found, s) else {
+        let Some(plane) = lines_plane(grid, &found, s) else {
             return LevelEvidence::None;
         };
-        let skew = skew_lines(&fit, s);
-        if let Some(plane) = level_plane(ctx.f, fit, members) {
+        let skew = skew_lines(&plane.0, s);
+        if let Some(plane) = level_plane(f, plane) {
             return plane;
         }
         if skew {
@@ -152,13 +133,13 @@ pub(crate) fn lines_plane(
 ) -> Option<(PlaneFit, Vec<usize>)> {
     let mut members: Vec<usize> = lines.iter().flat_map(|(_, m)| m.iter().copied()).collect();
     members.sort_unstable();
-    Some((fit_members(grid, &members, s)?, members))
+    Some((grid.accumulate(&members).fit(s)?, members))
 }
 
 /// The plane `fit` through level lines' points `members` ([`lines_plane`]) as the floor or
 /// ceiling, when it fits them: within `refine_level_misfit` of the noise,
 /// near up, clear of the scanner, and with nothing seen through it.
-pub(crate) fn level_plane(f: &Frame, fit: PlaneFit, members: Vec<usize>) -> Option<LevelEvidence> {
+fn level_plane(f: &Frame, (fit, members): (PlaneFit, Vec<usize>)) -> Option<LevelEvidence> {
     let (params, s) = (f.params, f.s);
     (checks::refined_level(&fit, &f.up, s, params) && opaque(f.grid, &fit, s, params))
         .then_some(LevelEvidence::Plane(fit, members))
@@ -183,7 +164,7 @@ pub(crate) fn one_plane(
             .filter(|&(j, _)| j != i)
             .flat_map(|(_, (_, m))| m.iter().copied())
             .collect();
-        fit_members(grid, &others, s).is_some_and(|fit| {
+        grid.accumulate(&others).fit(s).is_some_and(|fit| {
             line_offset_sigmas(grid, &lines[i].1, &fit, s, params.min_sigma) <= params.refine_k
         })
     })
@@ -200,10 +181,7 @@ pub(crate) fn line_offset_sigmas(
     min_sigma: f64,
 ) -> f64 {
     let model = LevelModel::new(fit, s);
-    let mut sum = 0.0;
-    let mut var = 0.0;
-    let mut centre = Vector3::zeros();
-    let mut n = 0.0;
+    let (mut sum, mut var, mut centre, mut n) = (0.0, 0.0, Vector3::zeros(), 0.0);
     for g in members.iter().filter_map(|&i| grid.points[i].as_ref()) {
         sum += fit.normal.dot(&(g.p - fit.centroid));
         var += s * s * g.dir.dot(&fit.normal).powi(2) + min_sigma * min_sigma;
@@ -311,21 +289,13 @@ pub(crate) fn start_lines(
     sigma: f64,
 ) -> Vec<LevelLine> {
     let s = sigma.max(params.min_sigma);
-    let cols = grid.cols;
+    let (cols, min_points) = (grid.cols, params.level_line_min_points);
     let mut out = Vec::new();
     for mask in [&steps.floor, &steps.ceiling] {
         let lines: Vec<(LevelLine, Vec<usize>)> = (0..grid.rows())
             .filter_map(|r| {
                 let idx: Vec<usize> = (r * cols..(r + 1) * cols).filter(|&i| mask[i]).collect();
-                fit_line(
-                    grid,
-                    idx,
-                    &Vector3::z(),
-                    None,
-                    s,
-                    params,
-                    params.level_line_min_points,
-                )
+                fit_line(grid, idx, &Vector3::z(), None, s, params, min_points)
             })
             .collect();
         // One floor is one plane: lines that cannot lie in one plane are not all on it, and

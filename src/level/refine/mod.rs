@@ -111,15 +111,9 @@ pub(crate) struct Leveled {
 
 impl Leveled {
     fn new(grid: &PoseGrid, level_from_robot: &Rotation3<f64>) -> Self {
+        let level = |g: &GridPoint| (level_from_robot * g.p.coords, level_from_robot * g.dir);
         Leveled {
-            q: grid
-                .points
-                .iter()
-                .map(|g| {
-                    g.as_ref()
-                        .map(|g| (level_from_robot * g.p.coords, level_from_robot * g.dir))
-                })
-                .collect(),
+            q: grid.points.iter().map(|g| g.as_ref().map(level)).collect(),
         }
     }
 }
@@ -182,12 +176,8 @@ pub(crate) fn refine(
         let (level_members, near_level) = assign_levels(&f, &level_fits, &level_ok);
         // New walls are looked for once; later passes carry them as models.
         let mut walls = assign_walls(&f, &wall_fits, &near_level, pass == 0, seed_width);
-        let (mut models, walls_found) = models_of(
-            &f,
-            std::mem::take(&mut walls.members),
-            &level_fits,
-            level_members,
-        );
+        let wall_members = std::mem::take(&mut walls.members);
+        let (mut models, walls_found) = models_of(&f, wall_members, &level_fits, level_members);
         let flat_lines = level_line_evidence(&f, &walls, &mut models);
         let (sol, flat_lines) = solve_models(&f, &models, flat_lines)?;
         let change = sol.up.angle(&up);
@@ -263,8 +253,7 @@ fn assign_levels(
     let level_models: Vec<LevelModel> = level_fits.iter().map(|l| LevelModel::new(l, s)).collect();
     for (i, g) in grid.points.iter().enumerate() {
         let Some(g) = g else { continue };
-        let mut reach = 0;
-        let mut which = 0;
+        let (mut reach, mut which) = (0, 0);
         for (m, model) in level_models.iter().enumerate() {
             let (d, sd) = model.distance_sd(g, s, params.min_sigma);
             if d <= k * sd {
@@ -299,9 +288,7 @@ fn assign_levels(
         };
         let band = level_band(f, height, lowest);
         if lowest || steps_as_ceiling(band.clone(), &f.steps.ceiling) {
-            for i in band {
-                near_level[i] = true;
-            }
+            band.for_each(|i| near_level[i] = true);
         }
     }
     (level_members, near_level)
@@ -400,7 +387,7 @@ fn models_of(
         if !spans_wall_rows(grid, &members, params) {
             continue;
         }
-        let Some(fit) = fit_members(grid, &members, sigma) else {
+        let Some(fit) = grid.accumulate(&members).fit(sigma) else {
             continue;
         };
         // A wall must stay a wall; what turned towards up was floor after all.
@@ -419,7 +406,7 @@ fn models_of(
         if !level_support(grid, &members, params) {
             continue;
         }
-        let Some(fit) = fit_members(grid, &members, sigma) else {
+        let Some(fit) = grid.accumulate(&members).fit(sigma) else {
             continue;
         };
         let kind = if f.centroid.coords.dot(&up) < 0.0 {
@@ -462,10 +449,8 @@ fn level_line_evidence(
         // Points of a model, or within reach of a wall's vertical plane (a wall line near
         // its foot lies at the floor's height within the provisional frame's tolerance).
         let mut taken = vec![false; grid.points.len()];
-        for m in models.iter() {
-            for &i in &m.members {
-                taken[i] = true;
-            }
+        for &i in models.iter().flat_map(|m| &m.members) {
+            taken[i] = true;
         }
         for (i, q) in lv.q.iter().enumerate() {
             let Some((q, d)) = q else { continue };
@@ -479,21 +464,12 @@ fn level_line_evidence(
                 lines.iter().any(|l| f.line_z2(l, q, d).is_some())
             };
         }
-        for kind in [SurfaceKind::Floor, SurfaceKind::Ceiling] {
+        let floor = (SurfaceKind::Floor, &steps.floor_line);
+        for (kind, levelish) in [floor, (SurfaceKind::Ceiling, &steps.ceiling)] {
             if models.iter().any(|m| m.kind == kind) {
                 continue;
             }
-            let levelish = if kind == SurfaceKind::Floor {
-                &steps.floor_line
-            } else {
-                &steps.ceiling
-            };
-            let ctx = LineContext {
-                f,
-                levelish,
-                taken: &taken,
-            };
-            match level_lines(&ctx, kind) {
+            match level_lines(f, kind, |i| levelish[i] && !taken[i]) {
                 LevelEvidence::None => {}
                 LevelEvidence::Lines(found) => flat_lines.extend(found),
                 LevelEvidence::Plane(fit, members) => models.push(Model { kind, fit, members }),
@@ -509,15 +485,11 @@ fn solve_models(
     models: &[Model],
     mut flat_lines: Vec<LevelLine>,
 ) -> Option<(UpSolution, Vec<LevelLine>)> {
-    let (s, params) = (f.s, f.params);
+    let (s, params, inflate) = (f.s, f.params, f.params.level_line_inflation);
     let obs: Vec<PlaneObs> = models
         .iter()
         .map(|m| m.obs(s, params))
-        .chain(
-            flat_lines
-                .iter()
-                .map(|l| PlaneObs::level_line(l, params.level_line_inflation)),
-        )
+        .chain(flat_lines.iter().map(|l| PlaneObs::level_line(l, inflate)))
         .collect();
     let sol = match up::up_robust(&obs, s, params.iterations) {
         Some(sol) => sol,

@@ -31,7 +31,7 @@ pub fn level_start(
     if !level_support(grid, &members, params) {
         return None;
     }
-    let fit = fit_members(grid, &members, sigma)?;
+    let fit = grid.accumulate(&members).fit(sigma)?;
     if fit.normal.z.abs() < min_z {
         return None;
     }
@@ -67,14 +67,11 @@ pub(crate) fn sampled_plane(
     // point.
     let k2 = params.refine_k * params.refine_k;
     let floor2 = params.min_sigma * params.min_sigma;
-    let on_plane = |g: &GridPoint, p0: &Point3<f64>, normal: &Vector3<f64>| {
-        let beyond = normal.dot(&(g.p - p0)).abs() - params.flat_margin;
-        beyond <= 0.0 || beyond * beyond <= k2 * (s * s * g.dir.dot(normal).powi(2) + floor2)
-    };
     let on = |i: usize, p0: &Point3<f64>, normal: &Vector3<f64>| {
-        grid.points[i]
-            .as_ref()
-            .is_some_and(|g| on_plane(g, p0, normal))
+        grid.points[i].as_ref().is_some_and(|g| {
+            let beyond = normal.dot(&(g.p - p0)).abs() - params.flat_margin;
+            beyond <= 0.0 || beyond * beyond <= k2 * (s * s * g.dir.dot(normal).powi(2) + floor2)
+        })
     };
     // Counted per hypothesis (most lose by far, and are given up early); only the best one's
     // points are gathered.
@@ -82,11 +79,8 @@ pub(crate) fn sampled_plane(
     for h in 0..START_HYPOTHESES {
         // Three points spread over the candidates: a fixed stride walk, no random state.
         let pick = |k: usize| sample[(h * (2 * k + 1) * 7 + k * n / 3) % n];
-        let (Some(pa), Some(pb), Some(pc)) = (
-            grid.points[pick(0)].as_ref(),
-            grid.points[pick(1)].as_ref(),
-            grid.points[pick(2)].as_ref(),
-        ) else {
+        let point = |k: usize| grid.points[pick(k)].as_ref();
+        let (Some(pa), Some(pb), Some(pc)) = (point(0), point(1), point(2)) else {
             continue;
         };
         let (u, v) = (pb.p - pa.p, pc.p - pa.p);
@@ -104,12 +98,8 @@ pub(crate) fn sampled_plane(
         }
     }
     let (_, p0, normal) = best?;
-    Some(
-        idx.iter()
-            .copied()
-            .filter(|&i| on(i, &p0, &normal))
-            .collect(),
-    )
+    let on_best = |i: &usize| on(*i, &p0, &normal);
+    Some(idx.iter().copied().filter(on_best).collect())
 }
 
 /// How many of `idx` satisfy `on`, when that beats `best` (more than it; anything beats

@@ -77,12 +77,8 @@ pub(crate) fn row_pairs<T>(
     (0..cols * grid.rows().saturating_sub(1))
         .map(|i| {
             let j = i + cols;
-            Some(step(
-                grid.points[i].as_ref()?,
-                grid.points[j].as_ref()?,
-                i,
-                j,
-            ))
+            let (a, b) = (grid.points[i].as_ref()?, grid.points[j].as_ref()?);
+            Some(step(a, b, i, j))
         })
         .collect()
 }
@@ -94,18 +90,20 @@ pub(crate) fn every_row_neighbour<T: Copy>(
     pairs: &[Option<T>],
     accept: impl Fn(T) -> bool,
 ) -> Vec<bool> {
-    let (cols, rows) = (grid.cols, grid.rows());
     (0..grid.points.len())
-        .map(|i| {
-            let r = grid.row(i);
-            let below = if r > 0 { pairs[i - cols] } else { None };
-            let above = if r + 1 < rows { pairs[i] } else { None };
-            match (below, above) {
-                (None, None) => false,
-                (a, b) => a.is_none_or(&accept) && b.is_none_or(&accept),
-            }
+        .map(|i| match row_steps(grid, pairs, i) {
+            (None, None) => false,
+            (a, b) => a.is_none_or(&accept) && b.is_none_or(&accept),
         })
         .collect()
+}
+
+/// Point `i`'s steps ([`row_pairs`]) to the rows below and above it, `None` past the grid.
+fn row_steps<T: Copy>(grid: &PoseGrid, pairs: &[Option<T>], i: usize) -> (Option<T>, Option<T>) {
+    let r = grid.row(i);
+    let below = if r > 0 { pairs[i - grid.cols] } else { None };
+    let above = if r + 1 < grid.rows() { pairs[i] } else { None };
+    (below, above)
 }
 
 /// Points that can belong to a floor or ceiling, judged against their neighbours in the same
@@ -142,9 +140,7 @@ pub(crate) fn flat_points(f: &Frame) -> Vec<bool> {
         .collect();
     (0..grid.points.len())
         .map(|i| {
-            let r = grid.row(i);
-            let below = if r > 0 { pairs[i - cols] } else { None };
-            let above = if r + 1 < rows { pairs[i] } else { None };
+            let (below, above) = row_steps(grid, &pairs, i);
             below != Some(false)
                 && above != Some(false)
                 && (below == Some(true) || above == Some(true))

@@ -23,9 +23,8 @@ pub(crate) fn without_standing_rows(
     if rows.len() < 3 {
         return members;
     }
-    let (first, last) = (rows[0], rows[rows.len() - 1]);
     let mut drop = Vec::new();
-    for edge in [first, last] {
+    for edge in [rows[0], rows[rows.len() - 1]] {
         // The others must still span two rows to make a plane.
         if rows.len() - drop.len() < 3 {
             break;
@@ -35,24 +34,17 @@ pub(crate) fn without_standing_rows(
             .copied()
             .filter(|&i| !drop.contains(&grid.row(i)))
             .partition(|&i| grid.row(i) == edge);
-        let Some(fit) = fit_members(grid, &others, s) else {
+        let Some(fit) = grid.accumulate(&others).fit(s) else {
             continue;
         };
         if line_offset_sigmas(grid, &line, &fit, s, params.min_sigma) > params.refine_k {
             drop.push(edge);
         }
     }
-    if drop.is_empty() {
-        return members;
-    }
     members
         .into_iter()
         .filter(|&i| !drop.contains(&grid.row(i)))
         .collect()
-}
-
-pub(crate) fn fit_members(grid: &PoseGrid, members: &[usize], sigma: f64) -> Option<PlaneFit> {
-    grid.accumulate(members).fit(sigma)
 }
 
 /// Rows holding at least `share` of the members each.

@@ -62,12 +62,7 @@ fn floor_evidence_within(grid: &PoseGrid, sigma_up: f64) -> LevelEvidence {
         k: params.refine_k,
         sigma_up,
     };
-    let ctx = LineContext {
-        f: &f,
-        levelish: &all,
-        taken: &none,
-    };
-    level_lines(&ctx, SurfaceKind::Floor)
+    level_lines(&f, SurfaceKind::Floor, |i| all[i] && !none[i])
 }
 
 /// Two scans' floor lines stand only when their points fit one plane. From a loose start

@@ -15,11 +15,8 @@ pub(crate) fn discover_lines(f: &Frame, candidate: &[bool], width: usize) -> Vec
     let min_points = params.min_patch_points.max(width);
     let k = params.refine_k;
     let point = |i: usize| -> Option<(Vector2<f64>, Vector2<f64>, f64)> {
-        if !candidate[i] {
-            return None;
-        }
-        let (q, d) = lv.q[i].as_ref()?;
-        Some((Vector2::new(q.x, q.y), Vector2::new(d.x, d.y), q.z))
+        let (q, d) = lv.q[i].as_ref().filter(|_| candidate[i])?;
+        Some((q.xy(), d.xy(), q.z))
     };
     let mut out = Vec::new();
     for r in 0..grid.rows() {
@@ -113,12 +110,7 @@ impl Line2 {
             return None;
         }
         let n = self.n as f64;
-        let c = self.sum / n;
-        let (a, b, d) = (
-            self.sxx / n - c.x * c.x,
-            self.sxy / n - c.x * c.y,
-            self.syy / n - c.y * c.y,
-        );
+        let (c, [a, b, d]) = self.scatter();
         // Minor axis of the 2x2 scatter [[a, b], [b, d]].
         let half = 0.5 * (a - d);
         let root = (half * half + b * b).sqrt();
@@ -139,14 +131,20 @@ impl Line2 {
         })
     }
 
+    /// The centroid, and the scatter about it per point (xx, xy, yy).
+    fn scatter(&self) -> (Vector2<f64>, [f64; 3]) {
+        let n = self.n as f64;
+        let c = self.sum / n;
+        let (xx, xy, yy) = (self.sxx / n, self.sxy / n, self.syy / n);
+        (c, [xx - c.x * c.x, xy - c.x * c.y, yy - c.y * c.y])
+    }
+
     /// Residual variance about `l` over what the noise explains.
     pub(crate) fn misfit(&self, l: &Line, s: f64, min_sigma: f64) -> f64 {
         let n = self.n as f64;
-        let c = self.sum / n;
+        let (_, [a, b, d]) = self.scatter();
         let (u, v) = (l.normal.x, l.normal.y);
-        let scatter = (self.sxx / n - c.x * c.x) * u * u
-            + 2.0 * (self.sxy / n - c.x * c.y) * u * v
-            + (self.syy / n - c.y * c.y) * v * v;
+        let scatter = a * u * u + 2.0 * b * u * v + d * v * v;
         let dn2 = (self.dxx * u * u + 2.0 * self.dxy * u * v + self.dyy * v * v) / n;
         let expected = s * s * dn2 + min_sigma * min_sigma;
         scatter * n / (n - 2.0).max(1.0) / expected
