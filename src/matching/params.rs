@@ -166,8 +166,11 @@ pub struct CheckParams {
     /// a room (tests/matching_icp.rs, the correction gate); 0.1 also refuses partial
     /// matches that help on the CARMEN Intel log (drift at 10 m 1.06% against 0.96%).
     pub max_free_scatter: f64,
-    /// With `Coarse::Auto`, the coarse search runs when fewer than this fraction of the
-    /// source points are inliers (residual within the kernel scale) [-]. Default 0.8.
+    /// With `Coarse::Auto`, the coarse search runs when the share of source points that are
+    /// inliers (residual within the kernel scale) falls below this fraction of the median
+    /// share of the run's last 16 accepted matches (of 1 before there are 16) [-]. Default
+    /// 0.8. Relative, because the share depends on the sensor and the place more than on the
+    /// basin ICP found (`matcher/trigger.rs`).
     pub coarse_trigger_fraction: f64,
     /// Largest accepted distance between the match and the odometry guess \[m\]. Default 0.6
     /// (the coarse search's 0.4 m window and ICP's reach beyond it).

@@ -64,18 +64,28 @@ impl Matcher {
                 (run(start).and_then(|r| self.check(r)), true)
             }
             Coarse::Auto => {
+                let share = |r: &IcpResult| r.inliers as f64 / points.len().max(1) as f64;
+                // Every accepted match's share joins the run's recent level.
+                let accepted = |result: Result<IcpResult, FallbackReason>| {
+                    let result = result.and_then(|r| self.check(r));
+                    if let Ok(r) = &result {
+                        self.trigger.borrow_mut().record(share(r));
+                    }
+                    result
+                };
                 let first = run(guess);
-                let looks_good = matches!(&first, Ok(r) if self.check(*r).is_ok()
-                    && r.inliers as f64 >= p.checks.coarse_trigger_fraction * points.len() as f64);
+                let threshold = (self.trigger.borrow()).threshold(p.checks.coarse_trigger_fraction);
+                let looks_good =
+                    matches!(&first, Ok(r) if self.check(*r).is_ok() && share(r) >= threshold);
                 if looks_good {
-                    return (first.and_then(|r| self.check(r)), false);
+                    return (accepted(first), false);
                 }
                 let Some(start) = coarse_search(guess) else {
-                    return (first.and_then(|r| self.check(r)), false);
+                    return (accepted(first), false);
                 };
                 // The search kept the guess itself: ICP from there is the first run again.
                 if same_pose(&start, &guess) {
-                    return (first.and_then(|r| self.check(r)), true);
+                    return (accepted(first), true);
                 }
                 let second = run(start);
                 let better = match (&first, &second) {
@@ -89,7 +99,7 @@ impl Matcher {
                     (Err(_), Ok(_)) => second,
                     _ => first,
                 };
-                (better.and_then(|r| self.check(r)), true)
+                (accepted(better), true)
             }
         }
     }

@@ -6,6 +6,7 @@
 //! trustworthy the step falls back to the odometry and the report says why (CSM issue #17).
 
 mod align;
+mod trigger;
 
 use super::correlative::CorrelativeScratch;
 use super::covariance::{fuse, inflation, rays_per_degree, rotate_into};
@@ -67,6 +68,8 @@ pub struct Matcher {
     rays_per_degree: f64,
     /// The coarse search's buffers, reused from scan to scan.
     correlative: RefCell<CorrelativeScratch>,
+    /// The run's recent inlier shares, which decide when `Coarse::Auto` searches.
+    trigger: RefCell<trigger::CoarseTrigger>,
     /// Pairwise: the current scan as a reference, when the match the other way built it; it
     /// becomes the next keyframe instead of being built again.
     built: Option<ScanReference>,
@@ -83,6 +86,7 @@ impl Matcher {
             keyframe_covariance: Matrix3::zeros(),
             rays_per_degree: 0.0,
             correlative: RefCell::new(CorrelativeScratch::default()),
+            trigger: RefCell::default(),
             built: None,
         }
     }
