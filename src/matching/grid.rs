@@ -385,6 +385,9 @@ impl PointGrid {
         (best, limit): (&mut u32, &mut f64),
         cursor: &mut TileCursor,
     ) {
+        if ring == 1 {
+            return self.search_ring1(q, (kx, ky), (fx, fy, gx, gy), (best, limit), cursor);
+        }
         let c = self.cell;
         // Distance along one axis from q to the cell `d` cells away (0 for its own).
         let gap = |d: i32, low: f64, high: f64| match d {
@@ -409,18 +412,56 @@ impl PointGrid {
                 if ex * ex + ey2 >= *limit || x < self.lo.0 || x > self.hi.0 {
                     continue;
                 }
-                let mut at = self.head((x, y), cursor);
-                while at != END {
-                    let p = self.points[at as usize].0;
-                    let (ddx, ddy) = (p.x - q.x, p.y - q.y);
-                    let d2 = ddx * ddx + ddy * ddy;
-                    if d2 < *limit {
-                        *best = at;
-                        *limit = d2;
-                    }
-                    at = self.next[at as usize];
-                }
+                let at = self.head((x, y), cursor);
+                self.walk(at, q, (&mut *best, &mut *limit));
             }
+        }
+    }
+
+    /// `search_ring` for ring 1 (the one most queries end with), its eight cells listed: the
+    /// same cells and tests in the same order (a gap of one cell less is the edge distance
+    /// itself; `x + 0.0` differs from `x` only for -0, whose square is the same).
+    #[inline]
+    fn search_ring1(
+        &self,
+        q: &Point2<f64>,
+        (kx, ky): (i32, i32),
+        (fx, fy, gx, gy): (f64, f64, f64, f64),
+        (best, limit): (&mut u32, &mut f64),
+        cursor: &mut TileCursor,
+    ) {
+        let ends = [(-1, fx), (0, 0.0), (1, gx)];
+        let sides = [(-1, fx), (1, gx)];
+        for (dy, ey) in [(-1, fy), (0, 0.0), (1, gy)] {
+            let ey2 = ey * ey;
+            let y = ky + dy;
+            if ey2 >= *limit || y < self.lo.1 || y > self.hi.1 {
+                continue;
+            }
+            let cells: &[(i32, f64)] = if dy == 0 { &sides } else { &ends };
+            for &(dx, ex) in cells {
+                let x = kx + dx;
+                if ex * ex + ey2 >= *limit || x < self.lo.0 || x > self.hi.0 {
+                    continue;
+                }
+                let at = self.head((x, y), cursor);
+                self.walk(at, q, (&mut *best, &mut *limit));
+            }
+        }
+    }
+
+    /// Tries the points of the chain from `at`, keeping the nearest below `limit`.
+    #[inline]
+    fn walk(&self, mut at: u32, q: &Point2<f64>, (best, limit): (&mut u32, &mut f64)) {
+        while at != END {
+            let p = self.points[at as usize].0;
+            let (ddx, ddy) = (p.x - q.x, p.y - q.y);
+            let d2 = ddx * ddx + ddy * ddy;
+            if d2 < *limit {
+                *best = at;
+                *limit = d2;
+            }
+            at = self.next[at as usize];
         }
     }
 }
