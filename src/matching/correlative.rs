@@ -318,16 +318,6 @@ impl Table {
         }
     }
 
-    #[inline]
-    fn value(&self, table: &[f32], (cx, cy): (i64, i64), ox: i64, oy: i64) -> f32 {
-        let (x, y) = (cx + ox, cy + oy);
-        if x >= 0 && y >= 0 && x < self.width && y < self.height {
-            table[(y * self.width + x) as usize]
-        } else {
-            0.0
-        }
-    }
-
     /// The most a point at `cell` can add at any offset of the block from `(ox, oy)`: the
     /// low-resolution value there, or 1 (every cell's largest value) where the block starts
     /// before the table's first row or column but reaches into it.
@@ -351,21 +341,22 @@ impl Table {
     }
 
     /// Adds one point's values at every offset of `offsets` to `sums`; a point outside the
-    /// table adds nothing. A point whose offsets all stay inside the table needs no bounds
-    /// test per offset.
+    /// table adds nothing. Row by row: one slice of the table per row. Offsets whose cell lies
+    /// outside the table add nothing there, and are skipped: a sum starts at +0 and only adds
+    /// values >= 0, so adding 0 would leave it the same float.
     #[inline]
     fn add_point(&self, table: &[f32], (cx, cy): (i64, i64), offsets: &Offsets, sums: &mut [f32]) {
         let (lo, hi, bottom, top) = offsets.extent;
         if cx + hi < 0 || cy + top < 0 || cx + lo >= self.width || cy + bottom >= self.height {
             return;
         }
+        let (n, step) = (offsets.per_row, offsets.step);
+        if n == 0 {
+            return;
+        }
         if cx + lo >= 0 && cy + bottom >= 0 && cx + hi < self.width && cy + top < self.height {
-            // Row by row: one slice of the table per row, no test per offset.
+            // Every offset inside: no test per row.
             let base = cy * self.width + cx;
-            let (n, step) = (offsets.per_row, offsets.step);
-            if n == 0 {
-                return;
-            }
             for (row, &start) in sums.chunks_exact_mut(n).zip(&offsets.row_starts) {
                 let cells = &table[(base + start) as usize..][..(n - 1) * step + 1];
                 if step == 1 {
@@ -378,9 +369,48 @@ impl Table {
                     }
                 }
             }
+            return;
+        }
+        // The offsets k (x = cx + lo + k step) whose cells lie inside the table's columns.
+        let x0 = cx + lo;
+        let step_i = step as i64;
+        let k_lo = if x0 >= 0 {
+            0
         } else {
-            for (sum, &(ox, oy)) in sums.iter_mut().zip(&offsets.xy) {
-                *sum += self.value(table, (cx, cy), ox, oy);
+            ((-x0 + step_i - 1) / step_i) as usize
+        };
+        let k_hi = if cx + hi < self.width {
+            n
+        } else {
+            ((self.width - 1 - x0) / step_i + 1) as usize
+        };
+        if k_lo >= k_hi {
+            return;
+        }
+        let inside_y = cy + bottom >= 0 && cy + top < self.height;
+        for ((row, &start), xy) in sums
+            .chunks_exact_mut(n)
+            .zip(&offsets.row_starts)
+            .zip(offsets.xy.iter().step_by(n))
+        {
+            if !inside_y {
+                let y = cy + xy.1;
+                if y < 0 || y >= self.height {
+                    continue;
+                }
+            }
+            // `start` is the row's first offset in the cell array (`oy * width + lo`).
+            let first = cy * self.width + cx + start + k_lo as i64 * step_i;
+            let cells = &table[first as usize..][..(k_hi - k_lo - 1) * step + 1];
+            let row = &mut row[k_lo..k_hi];
+            if step == 1 {
+                for (sum, &v) in row.iter_mut().zip(cells) {
+                    *sum += v;
+                }
+            } else {
+                for (k, sum) in row.iter_mut().enumerate() {
+                    *sum += cells[k * step];
+                }
             }
         }
     }

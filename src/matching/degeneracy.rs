@@ -6,7 +6,7 @@ use super::icp::IcpResult;
 use super::params::MatcherParams;
 use super::reference::estimate_lines;
 use super::report::FallbackReason;
-use super::solve::{Remap, symmetric_eigen_2x2};
+use super::solve::{Remap, symmetric_eigenvalues_2x2};
 use crate::geometry::Pose2;
 use nalgebra::{Matrix2, Point2, Vector2};
 
@@ -52,7 +52,7 @@ pub(crate) fn slides_as_the_scan_does(
     {
         scatter += line.normal * line.normal.transpose();
     }
-    let (_, largest, _) = symmetric_eigen_2x2(&scatter);
+    let (_, largest) = symmetric_eigenvalues_2x2(&scatter);
     let (s, c) = r.pose.theta.sin_cos();
     let axis = m.basis.column(0);
     let t = Vector2::new(c * axis.x + s * axis.y, -s * axis.x + c * axis.y);

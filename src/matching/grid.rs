@@ -67,6 +67,14 @@ const FAR: f64 = 1e5;
 /// No point: an empty cell's head, a chain's end, a tile not allocated.
 const END: u32 = u32::MAX;
 
+/// Largest dense tile directory (entries): a grid whose tiles span more falls back to the
+/// hash alone (a scan's or a building's grid needs a few hundred to a few thousand).
+const MAX_DIRECTORY: i64 = 1 << 14;
+
+/// Tiles of margin the dense directory gets on each side when it grows, so a growing map
+/// rebuilds it only now and then.
+const DIRECTORY_MARGIN: i32 = 2;
+
 /// Tile and voxel keys are small integers: one multiply spreads them over the hash's bits (both ends:
 /// the table takes its bucket from the low bits and its tag from the high ones). SipHash,
 /// the standard default, guards against chosen keys, which costs several times more here.
@@ -152,6 +160,14 @@ pub(crate) struct PointGrid {
     /// Smallest and largest occupied cell per axis: a search that has covered them is done.
     lo: (i32, i32),
     hi: (i32, i32),
+    /// The tiles of `index` again, densely over a box of tile keys (from `directory_lo`,
+    /// `directory_size` tiles per axis), `END` where there is none: a query looks a tile up
+    /// with one subtraction and one load, not a hash probe. `directory_all`: every tile is in
+    /// it (else the box grew too big and lookups outside it go to the hash).
+    directory: Vec<u32>,
+    directory_lo: (i32, i32),
+    directory_size: (i32, i32),
+    directory_all: bool,
 }
 
 impl Default for PointGrid {
@@ -178,7 +194,61 @@ impl PointGrid {
             next: Vec::new(),
             lo: (i32::MAX, i32::MAX),
             hi: (i32::MIN, i32::MIN),
+            directory: Vec::new(),
+            directory_lo: (0, 0),
+            directory_size: (0, 0),
+            directory_all: true,
         }
+    }
+
+    /// The index of tile `t` in the directory, if the directory's box holds it.
+    #[inline]
+    fn directory_slot(&self, t: (i32, i32)) -> Option<usize> {
+        let (x, y) = (
+            t.0.wrapping_sub(self.directory_lo.0),
+            t.1.wrapping_sub(self.directory_lo.1),
+        );
+        ((x as u32) < self.directory_size.0 as u32 && (y as u32) < self.directory_size.1 as u32)
+            .then(|| (y as usize) * self.directory_size.0 as usize + x as usize)
+    }
+
+    /// Records new tile `t` (index `tile`) in the directory, rebuilding it over the box of
+    /// all tiles (with a margin) when `t` lies outside its box. Once the box has grown too big
+    /// it stays as it is: tiles outside it are found in the hash alone.
+    fn add_to_directory(&mut self, t: (i32, i32), tile: u32) {
+        if let Some(slot) = self.directory_slot(t) {
+            self.directory[slot] = tile;
+            return;
+        }
+        if !self.directory_all {
+            return;
+        }
+        let (mut lo, mut hi) = (t, t);
+        for k in self.index.keys() {
+            lo = (lo.0.min(k.0), lo.1.min(k.1));
+            hi = (hi.0.max(k.0), hi.1.max(k.1));
+        }
+        let lo = (lo.0 - DIRECTORY_MARGIN, lo.1 - DIRECTORY_MARGIN);
+        let size = (
+            i64::from(hi.0) - i64::from(lo.0) + 1 + i64::from(DIRECTORY_MARGIN),
+            i64::from(hi.1) - i64::from(lo.1) + 1 + i64::from(DIRECTORY_MARGIN),
+        );
+        if size.0 * size.1 > MAX_DIRECTORY {
+            // Too spread out: keep the old box, which no longer holds every tile.
+            self.directory_all = false;
+            return;
+        }
+        self.directory_lo = lo;
+        self.directory_size = (size.0 as i32, size.1 as i32);
+        self.directory.clear();
+        self.directory.resize((size.0 * size.1) as usize, END);
+        let index = std::mem::take(&mut self.index);
+        for (&k, &v) in &index {
+            if let Some(slot) = self.directory_slot(k) {
+                self.directory[slot] = v;
+            }
+        }
+        self.index = index;
     }
 
     fn key(&self, p: &Point2<f64>) -> (i32, i32) {
@@ -199,11 +269,16 @@ impl PointGrid {
         }
         let key = self.key(&p);
         let tile_key = (key.0 >> TILE_BITS, key.1 >> TILE_BITS);
-        let tiles = &mut self.tiles;
-        let tile = *self.index.entry(tile_key).or_insert_with(|| {
-            tiles.push([END; (TILE * TILE) as usize]);
-            (tiles.len() - 1) as u32
-        });
+        let tile = match self.index.get(&tile_key) {
+            Some(&tile) => tile,
+            None => {
+                let tile = self.tiles.len() as u32;
+                self.tiles.push([END; (TILE * TILE) as usize]);
+                self.index.insert(tile_key, tile);
+                self.add_to_directory(tile_key, tile);
+                tile
+            }
+        };
         let head = &mut self.tiles[tile as usize][Self::slot(key)];
         self.next.push(*head);
         *head = self.points.len() as u32;
@@ -218,7 +293,11 @@ impl PointGrid {
         let tile_key = (key.0 >> TILE_BITS, key.1 >> TILE_BITS);
         if cursor.key != tile_key {
             cursor.key = tile_key;
-            cursor.tile = self.index.get(&tile_key).copied().unwrap_or(END);
+            cursor.tile = match self.directory_slot(tile_key) {
+                Some(slot) => self.directory[slot],
+                None if self.directory_all => END,
+                None => self.index.get(&tile_key).copied().unwrap_or(END),
+            };
         }
         if cursor.tile == END {
             return END;
@@ -306,6 +385,9 @@ impl PointGrid {
         (best, limit): (&mut u32, &mut f64),
         cursor: &mut TileCursor,
     ) {
+        if ring == 1 {
+            return self.search_ring1(q, (kx, ky), (fx, fy, gx, gy), (best, limit), cursor);
+        }
         let c = self.cell;
         // Distance along one axis from q to the cell `d` cells away (0 for its own).
         let gap = |d: i32, low: f64, high: f64| match d {
@@ -330,18 +412,56 @@ impl PointGrid {
                 if ex * ex + ey2 >= *limit || x < self.lo.0 || x > self.hi.0 {
                     continue;
                 }
-                let mut at = self.head((x, y), cursor);
-                while at != END {
-                    let p = self.points[at as usize].0;
-                    let (ddx, ddy) = (p.x - q.x, p.y - q.y);
-                    let d2 = ddx * ddx + ddy * ddy;
-                    if d2 < *limit {
-                        *best = at;
-                        *limit = d2;
-                    }
-                    at = self.next[at as usize];
-                }
+                let at = self.head((x, y), cursor);
+                self.walk(at, q, (&mut *best, &mut *limit));
             }
+        }
+    }
+
+    /// `search_ring` for ring 1 (the one most queries end with), its eight cells listed: the
+    /// same cells and tests in the same order (a gap of one cell less is the edge distance
+    /// itself; `x + 0.0` differs from `x` only for -0, whose square is the same).
+    #[inline]
+    fn search_ring1(
+        &self,
+        q: &Point2<f64>,
+        (kx, ky): (i32, i32),
+        (fx, fy, gx, gy): (f64, f64, f64, f64),
+        (best, limit): (&mut u32, &mut f64),
+        cursor: &mut TileCursor,
+    ) {
+        let ends = [(-1, fx), (0, 0.0), (1, gx)];
+        let sides = [(-1, fx), (1, gx)];
+        for (dy, ey) in [(-1, fy), (0, 0.0), (1, gy)] {
+            let ey2 = ey * ey;
+            let y = ky + dy;
+            if ey2 >= *limit || y < self.lo.1 || y > self.hi.1 {
+                continue;
+            }
+            let cells: &[(i32, f64)] = if dy == 0 { &sides } else { &ends };
+            for &(dx, ex) in cells {
+                let x = kx + dx;
+                if ex * ex + ey2 >= *limit || x < self.lo.0 || x > self.hi.0 {
+                    continue;
+                }
+                let at = self.head((x, y), cursor);
+                self.walk(at, q, (&mut *best, &mut *limit));
+            }
+        }
+    }
+
+    /// Tries the points of the chain from `at`, keeping the nearest below `limit`.
+    #[inline]
+    fn walk(&self, mut at: u32, q: &Point2<f64>, (best, limit): (&mut u32, &mut f64)) {
+        while at != END {
+            let p = self.points[at as usize].0;
+            let (ddx, ddy) = (p.x - q.x, p.y - q.y);
+            let d2 = ddx * ddx + ddy * ddy;
+            if d2 < *limit {
+                *best = at;
+                *limit = d2;
+            }
+            at = self.next[at as usize];
         }
     }
 }
@@ -381,6 +501,32 @@ mod tests {
                     brute(&points, &q, max_d2),
                     "query {q:?} within {max_d2}"
                 );
+            }
+        }
+    }
+
+    #[test]
+    fn nearest_matches_brute_force_beyond_the_dense_directory() {
+        // Two clusters 5 km apart: the directory cannot span both, so it keeps the first
+        // cluster's box; new tiles inside that box still go into it, the far ones only into
+        // the hash.
+        let mut points: Vec<Point2<f64>> = (0..60)
+            .map(|i| Point2::new(0.37 * i as f64, 0.21 * i as f64))
+            .collect();
+        points.extend((0..60).map(|i| Point2::new(5000.0 + 0.3 * i as f64, -4000.0)));
+        points.extend((0..60).map(|i| Point2::new(-0.29 * i as f64, 3.0 - 0.17 * i as f64)));
+        let mut grid = PointGrid::default();
+        for (i, p) in points.iter().enumerate() {
+            grid.insert(*p, i as u32);
+        }
+        assert!(!grid.directory_all);
+        for q in points.iter().step_by(7) {
+            for d in [Point2::new(0.1, -0.05), Point2::new(-0.6, 0.3)] {
+                let q = Point2::new(q.x + d.x, q.y + d.y);
+                for max_d2 in [0.01, 0.25, f64::INFINITY] {
+                    let got = grid.nearest_within(&q, max_d2).map(|h| (h.item, h.dist2));
+                    assert_eq!(got, brute(&points, &q, max_d2), "query {q:?}");
+                }
             }
         }
     }

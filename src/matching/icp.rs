@@ -8,7 +8,7 @@
 
 use super::covariance::Sandwich;
 use super::reference::Target;
-use super::solve::{Remap, Remapped, RigidSolver, symmetric_eigen_2x2};
+use super::solve::{Remap, Remapped, RigidSolver, minor_axis_2x2, symmetric_eigenvalues_2x2};
 use crate::geometry::{Pose2, wrap_angle};
 use nalgebra::{Matrix2, Matrix3, Point2, Vector2, Vector3};
 
@@ -269,7 +269,7 @@ fn icp_solving(
 fn solve(
     solver: &RigidSolver,
     remap: Option<&Remap>,
-    scatter: Option<(f64, Vector2<f64>)>,
+    scatter: Option<(f64, Matrix2<f64>)>,
     pose: &Pose2,
 ) -> Result<(Pose2, Option<Remapped>), super::solve::SolveError> {
     let Some(remap) = remap else {
@@ -277,7 +277,7 @@ fn solve(
     };
     let sliding = scatter
         .filter(|(ratio, _)| *ratio < remap.min_constraint_ratio)
-        .map(|(_, minor)| minor);
+        .map(|(_, scatter)| minor_axis_2x2(&scatter));
     let (next, how) = solver.solve_remapped(remap, pose, sliding)?;
     Ok((next, Some(how)))
 }
@@ -452,8 +452,9 @@ fn weight(residual: f64, params: &IcpParams) -> f64 {
     }
 }
 
-/// `λ_min / λ_max` of the kept pairs' normal scatter `Σ n nᵀ` and its minor axis (unit).
-fn normal_scatter(pairs: &[Pair]) -> Option<(f64, Vector2<f64>)> {
+/// `λ_min / λ_max` of the kept pairs' normal scatter `Σ n nᵀ`, and the scatter (whose minor
+/// axis only a remapped solve of a weak scatter needs: it costs an `atan2` and a `sin_cos`).
+fn normal_scatter(pairs: &[Pair]) -> Option<(f64, Matrix2<f64>)> {
     let mut scatter = Matrix2::zeros();
     let mut any = false;
     for (n, _) in pairs.iter().filter_map(|p| p.line) {
@@ -463,8 +464,8 @@ fn normal_scatter(pairs: &[Pair]) -> Option<(f64, Vector2<f64>)> {
     if !any {
         return None;
     }
-    let (lo, hi, minor) = symmetric_eigen_2x2(&scatter);
-    Some((if hi > 0.0 { lo.max(0.0) / hi } else { 0.0 }, minor))
+    let (lo, hi) = symmetric_eigenvalues_2x2(&scatter);
+    Some((if hi > 0.0 { lo.max(0.0) / hi } else { 0.0 }, scatter))
 }
 
 #[cfg(test)]

@@ -37,6 +37,40 @@ struct Voxel {
     count: u32,
     normal_sum: Vector2<f64>,
     normal_count: u32,
+    /// The mean point and the averaged line, as `nearest_within` answers them: kept up to
+    /// date as points arrive (a voxel is asked far more often than it changes).
+    mean: Point2<f64>,
+    line: Option<Line>,
+}
+
+impl Voxel {
+    fn new(p: Point2<f64>, normal: Option<Vector2<f64>>) -> Self {
+        let mut voxel = Self {
+            sum: p.coords,
+            count: 1,
+            normal_sum: normal.unwrap_or_else(Vector2::zeros),
+            normal_count: u32::from(normal.is_some()),
+            mean: p,
+            line: None,
+        };
+        voxel.update();
+        voxel
+    }
+
+    /// Recomputes the mean and the line from the sums.
+    fn update(&mut self) {
+        let mean = Point2::from(self.sum / self.count as f64);
+        // Normals that disagree (two sides of a thin wall, a corner) cancel out: keep the
+        // average only when it is clearly one direction.
+        self.line = (self.normal_count > 0)
+            .then(|| self.normal_sum / self.normal_count as f64)
+            .filter(|n| n.norm() > 0.8)
+            .map(|n| Line {
+                normal: n.normalize(),
+                anchor: mean,
+            });
+        self.mean = mean;
+    }
 }
 
 /// A voxel map of world-frame points with normals, searchable through a grid.
@@ -89,6 +123,7 @@ impl VoxelMap {
                         voxel.normal_sum += n;
                         voxel.normal_count += 1;
                     }
+                    voxel.update();
                 }
                 None => {
                     let slot = self.voxels.len() as u32;
@@ -99,12 +134,7 @@ impl VoxelMap {
                     }
                     self.grid.insert(p, slot);
                     self.index.insert(key, slot);
-                    self.voxels.push(Voxel {
-                        sum: p.coords,
-                        count: 1,
-                        normal_sum: normal.unwrap_or_else(Vector2::zeros),
-                        normal_count: u32::from(normal.is_some()),
-                    });
+                    self.voxels.push(Voxel::new(p, normal));
                 }
             }
         }
@@ -112,10 +142,7 @@ impl VoxelMap {
 
     /// Every voxel's mean point, for drawing.
     pub fn points(&self) -> Vec<Point2<f64>> {
-        self.voxels
-            .iter()
-            .map(|v| Point2::from(v.sum / v.count as f64))
-            .collect()
+        self.voxels.iter().map(|v| v.mean).collect()
     }
 }
 
@@ -127,16 +154,7 @@ impl Target for VoxelMap {
         let reach = max_d2.sqrt() + self.params.voxel_size * std::f64::consts::SQRT_2;
         let hit = self.grid.nearest_within(p, reach * reach * (1.0 + 1e-9))?;
         let voxel = self.voxels.get(hit.item as usize)?;
-        let mean = Point2::from(voxel.sum / voxel.count as f64);
-        // Normals that disagree (two sides of a thin wall, a corner) cancel out: keep the
-        // average only when it is clearly one direction.
-        let line = (voxel.normal_count > 0)
-            .then(|| voxel.normal_sum / voxel.normal_count as f64)
-            .filter(|n| n.norm() > 0.8)
-            .map(|n| Line {
-                normal: n.normalize(),
-                anchor: mean,
-            });
+        let (mean, line) = (voxel.mean, voxel.line);
         let dist2 = (mean - p).norm_squared();
         (dist2 <= max_d2).then_some(Neighbour {
             point: mean,

@@ -6,7 +6,7 @@
 //! and the flattest fit wins.
 
 use super::grid::{PointGrid, scan_cell};
-use super::solve::symmetric_eigen_2x2;
+use super::solve::{minor_axis_2x2, symmetric_eigenvalues_2x2};
 use nalgebra::{Matrix2, Point2, Vector2};
 
 /// The nearest reference point to a query.
@@ -94,10 +94,12 @@ pub fn estimate_lines(
                 .filter(|(a, b)| b - a >= 2)
                 .filter_map(|(a, b)| line_fit(&points[a..=b]))
                 .min_by(|x, y| x.1.total_cmp(&y.1))?;
-            let (mut normal, thickness, centroid) = best;
+            let (scatter, thickness, centroid) = best;
             if thickness > params.max_thickness {
                 return None;
             }
+            // Only the flattest fit's normal is needed: its axis is taken from its scatter.
+            let mut normal = minor_axis_2x2(&scatter);
             if normal.dot(&(sensor - points[i])) < 0.0 {
                 normal = -normal;
             }
@@ -107,8 +109,9 @@ pub fn estimate_lines(
         .collect()
 }
 
-/// Total-least-squares line through `pts`: (unit normal, thickness sqrt(λ_min/λ_max), centroid).
-fn line_fit(pts: &[Point2<f64>]) -> Option<(Vector2<f64>, f64, Point2<f64>)> {
+/// Total-least-squares line through `pts`: (scatter, whose minor axis is the unit normal;
+/// thickness sqrt(λ_min/λ_max); centroid).
+fn line_fit(pts: &[Point2<f64>]) -> Option<(Matrix2<f64>, f64, Point2<f64>)> {
     let k = pts.len() as f64;
     let mean = pts.iter().fold(Vector2::zeros(), |acc, p| acc + p.coords) / k;
     let mut cov = Matrix2::zeros();
@@ -116,12 +119,12 @@ fn line_fit(pts: &[Point2<f64>]) -> Option<(Vector2<f64>, f64, Point2<f64>)> {
         let d = p.coords - mean;
         cov += d * d.transpose();
     }
-    let (lmin, lmax, normal) = symmetric_eigen_2x2(&cov);
+    let (lmin, lmax) = symmetric_eigenvalues_2x2(&cov);
     if lmax <= 0.0 {
         return None;
     }
     let thickness = (lmin.max(0.0) / lmax).sqrt();
-    Some((normal, thickness, Point2::from(mean)))
+    Some((cov, thickness, Point2::from(mean)))
 }
 
 /// One scan as a match target: its points, their local lines and a grid over them.
