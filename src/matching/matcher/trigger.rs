@@ -28,8 +28,12 @@ impl CoarseTrigger {
         if self.recent.len() < HISTORY {
             return ratio;
         }
-        let mut shares: Vec<f64> = self.recent.iter().copied().collect();
-        let mid = shares.len() / 2;
+        // A copy on the stack: the median is taken once per scan, without allocating.
+        let mut shares = [0.0; HISTORY];
+        for (s, &r) in shares.iter_mut().zip(&self.recent) {
+            *s = r;
+        }
+        let mid = HISTORY / 2;
         let (_, median, _) = shares.select_nth_unstable_by(mid, f64::total_cmp);
         ratio * *median
     }
