@@ -350,7 +350,7 @@ pub fn symmetric_eigen_2x2(m: &Matrix2<f64>) -> (f64, f64, Vector2<f64>) {
 /// `(λ_min, λ_max)` of [`symmetric_eigen_2x2`] alone (the same arithmetic, so the same values),
 /// for callers that need the axis of only some of their matrices: it costs an `atan2` and a
 /// `sin_cos`.
-pub fn symmetric_eigenvalues_2x2(m: &Matrix2<f64>) -> (f64, f64) {
+pub(crate) fn symmetric_eigenvalues_2x2(m: &Matrix2<f64>) -> (f64, f64) {
     let (a, b, c) = (m[(0, 0)], 0.5 * (m[(0, 1)] + m[(1, 0)]), m[(1, 1)]);
     let mean = 0.5 * (a + c);
     let radius = (0.5 * (a - c)).hypot(b);
@@ -358,7 +358,7 @@ pub fn symmetric_eigenvalues_2x2(m: &Matrix2<f64>) -> (f64, f64) {
 }
 
 /// The unit eigenvector of λ_min of [`symmetric_eigen_2x2`].
-pub fn minor_axis_2x2(m: &Matrix2<f64>) -> Vector2<f64> {
+pub(crate) fn minor_axis_2x2(m: &Matrix2<f64>) -> Vector2<f64> {
     let (a, b, c) = (m[(0, 0)], 0.5 * (m[(0, 1)] + m[(1, 0)]), m[(1, 1)]);
     // The major axis is at angle phi = atan2(2b, a - c) / 2; the minor one is perpendicular.
     let phi = 0.5 * (2.0 * b).atan2(a - c);

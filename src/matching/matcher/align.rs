@@ -74,7 +74,10 @@ impl Matcher {
                     result
                 };
                 let first = run(guess);
-                let threshold = (self.trigger.borrow()).threshold(p.checks.coarse_trigger_fraction);
+                let threshold = self
+                    .trigger
+                    .borrow()
+                    .threshold(p.checks.coarse_trigger_fraction);
                 let looks_good =
                     matches!(&first, Ok(r) if self.check(*r).is_ok() && share(r) >= threshold);
                 if looks_good {
