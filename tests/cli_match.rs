@@ -445,6 +445,56 @@ fn eval_real_scores_a_log_against_its_poses() {
     let one_metre: f64 = drift[2].split('/').next().unwrap().trim().parse().unwrap();
     assert!(one_metre < 0.5, "{table}");
     assert_eq!(&drift[3..7], &["-", "-", "-", "-"], "{table}");
+
+    // With --out, the three trajectories as TUM files (evo's format), one line per scan at
+    // the log's timestamps; the reference is the log's own poses.
+    let dir = std::env::temp_dir().join(format!("levelscan-real-out-{}", std::process::id()));
+    let out = bin()
+        .args(["eval", "real"])
+        .arg(&file.0)
+        .arg("--out")
+        .arg(&dir)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let stem = file
+        .0
+        .file_name()
+        .unwrap()
+        .to_string_lossy()
+        .replace(".log", "");
+    let read = |kind: &str| -> Vec<Vec<f64>> {
+        let path = dir.join(format!("{stem}.{kind}.tum"));
+        std::fs::read_to_string(&path)
+            .unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+            .lines()
+            .map(|l| l.split(' ').map(|v| v.parse().unwrap()).collect())
+            .collect()
+    };
+    let (reference, matched, odometry) = (read("reference"), read("matched"), read("odometry"));
+    assert_eq!(
+        (reference.len(), matched.len(), odometry.len()),
+        (25, 25, 25)
+    );
+    for (k, ((r, m), o)) in reference.iter().zip(&matched).zip(&odometry).enumerate() {
+        assert_eq!(r.len(), 8);
+        assert_eq!((r[0], m[0], o[0]), (k as f64, k as f64, k as f64));
+        assert!(
+            (r[1] - 0.05 * k as f64).abs() < 1e-12 && r[2] == 0.0,
+            "{r:?}"
+        );
+        // The matcher is within a few millimetres of the reference, odometry is not exact.
+        assert!(
+            (m[1] - r[1]).hypot(m[2] - r[2]) < 0.01,
+            "{k}: {m:?} against {r:?}"
+        );
+    }
+    assert!(odometry.iter().zip(&reference).any(|(o, r)| o[1] != r[1]));
+    let _ = std::fs::remove_dir_all(&dir);
 }
 
 #[test]

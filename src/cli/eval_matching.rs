@@ -185,7 +185,9 @@ pub struct RealArgs {
     pub seed: u64,
     #[command(flatten)]
     pub odometry: super::OdometryNoiseArgs,
-    /// Directory for `real.md` and `real.json`; none written when absent.
+    /// Directory for `real.md`, `real.json` and each log's reference, matched and odometry
+    /// trajectories (`NAME.reference.tum`, `NAME.matched.tum`, `NAME.odometry.tum`: TUM, as
+    /// evo reads); none written when absent.
     #[arg(long)]
     pub out: Option<PathBuf>,
     #[command(flatten)]
@@ -209,6 +211,7 @@ fn load_real_log(
             .map_or(name.clone(), |n| n.to_string_lossy().into_owned()),
         points: Vec::new(),
         reference: Vec::new(),
+        times: Vec::new(),
     };
     let bag = input.survey.is_some();
     let mut last_sequence = None;
@@ -232,6 +235,9 @@ fn load_real_log(
         })?;
         log.points.push(scan_points(&scan, ranges));
         log.reference.push(reference.to_pose2());
+        let index = log.times.len() as f64;
+        log.times
+            .push(scan.timestamp.map_or(index, |t| t.seconds()));
     }
     Ok(log)
 }
@@ -240,6 +246,10 @@ pub fn run_real(args: RealArgs) -> anyhow::Result<()> {
     let params = args.options.params()?;
     let noise = args.odometry.params()?;
     let mut results: Vec<RealResult> = Vec::new();
+    if let Some(dir) = &args.out {
+        std::fs::create_dir_all(dir)
+            .with_context(|| format!("{}: cannot create", dir.display()))?;
+    }
     for path in &args.logs {
         let bar = super::progress::spinner(&format!("eval real: {}", path.display()));
         let log = load_real_log(
@@ -263,14 +273,37 @@ pub fn run_real(args: RealArgs) -> anyhow::Result<()> {
                 .find(|d| d.length == 10.0)
                 .map_or("-".into(), |d| format!("{:.2}%", d.translation_percent))
         );
+        if let Some(dir) = &args.out {
+            write_trajectories(dir, &log, &result)?;
+        }
         results.push(result);
     }
     let table = real_table(&results);
     write_stdout(&table, &args.logs)?;
     if let Some(dir) = &args.out {
-        std::fs::create_dir_all(dir)
-            .with_context(|| format!("{}: cannot create", dir.display()))?;
         write_tables(dir, "real", &table, &results)?;
+    }
+    Ok(())
+}
+
+/// The log's reference, matched and perturbed-odometry trajectories as TUM files in `dir`
+/// (`NAME.reference.tum`, `NAME.matched.tum`, `NAME.odometry.tum`), for `evo` and the like.
+fn write_trajectories(
+    dir: &std::path::Path,
+    log: &RealLog,
+    result: &RealResult,
+) -> anyhow::Result<()> {
+    let stem = log.name.trim_end_matches(".gz").trim_end_matches(".log");
+    for (kind, poses) in [
+        ("reference", &log.reference),
+        ("matched", &result.estimate),
+        ("odometry", &result.odometry_poses),
+    ] {
+        let mut text = Vec::new();
+        for (t, pose) in log.times.iter().zip(poses) {
+            levelscan::formats::write_tum(&mut text, *t, pose)?;
+        }
+        write_file(&dir.join(format!("{stem}.{kind}.tum")), &text)?;
     }
     Ok(())
 }

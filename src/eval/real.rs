@@ -26,6 +26,8 @@ pub struct RealLog {
     pub points: Vec<Vec<Point2<f64>>>,
     /// Each scan's reference (corrected) pose.
     pub reference: Vec<Pose2>,
+    /// Each scan's time \[s\] (the log's timestamp, else its index), for the trajectories.
+    pub times: Vec<f64>,
 }
 
 /// What the experiment found on one log.
@@ -50,6 +52,12 @@ pub struct RealResult {
     pub fallbacks: usize,
     /// Scans where the coarse search ran.
     pub coarse: usize,
+    /// The matched and the perturbed-odometry trajectories, one pose per scan (written as TUM
+    /// files beside the tables, for `evo`; not in the JSON).
+    #[serde(skip)]
+    pub estimate: Vec<Pose2>,
+    #[serde(skip)]
+    pub odometry_poses: Vec<Pose2>,
 }
 
 /// Perturbs the reference into odometry (seeded), matches the log, scores both.
@@ -90,6 +98,8 @@ pub fn evaluate_real(
             .filter(|r| matches!(r.status, MatchStatus::Fallback(_)))
             .count(),
         coarse: reports.iter().filter(|r| r.coarse).count(),
+        estimate,
+        odometry_poses: odo,
     })
 }
 
@@ -143,10 +153,12 @@ mod tests {
                     .collect()
             })
             .collect();
+        let times = (0..reference.len()).map(|i| i as f64).collect();
         let log = RealLog {
             name: "box".into(),
             points,
             reference,
+            times,
         };
         let r = evaluate_real(
             &log,
