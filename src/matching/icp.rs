@@ -203,6 +203,7 @@ fn icp_solving(
     let mut result = IcpResult::before_any_iteration(pose);
     // The pose the last kept pairs were associated at: their residuals and Jacobians are there.
     let mut associated_at = pose;
+    let mut cycle = CycleWatch::default();
     for iteration in 1..=params.max_iterations {
         associate(source, target, &pose, params, &mut pairs);
         if pairs.is_empty() {
@@ -251,6 +252,9 @@ fn icp_solving(
         result.pose = pose;
         if step_xy < params.epsilon_xy && step_theta < params.epsilon_theta {
             result.converged = true;
+            break;
+        }
+        if cycle.ends(associated_at, result.residual, &pose, params) {
             break;
         }
     }
@@ -349,6 +353,53 @@ fn associate(
             line,
             residual,
         });
+    }
+}
+
+/// ICP maps the pose it associated at to the pose the solve gives; with discrete
+/// associations and trimming that map can fall into a limit cycle instead of a fixed point
+/// (on the CARMEN Intel log 29 of 909 scans ran to the iteration limit between two or four
+/// poses that repeated exactly, their kept pairs' count alternating by a few). Once the solve
+/// returns to within the convergence thresholds of a pose already associated at, the cycle
+/// is known: the run goes on until it is at the cycle's pose whose kept pairs have the least
+/// RMS residual and stops there, so the answer does not depend on where in the cycle the
+/// iteration limit would have fallen, and the rest of the limit's iterations are not spent.
+#[derive(Default)]
+struct CycleWatch {
+    /// The last poses associated at, with their kept pairs' RMS residual, oldest first.
+    recent: Vec<(Pose2, f64)>,
+    /// Once a cycle is seen: the member to stop at.
+    stop_at: Option<Pose2>,
+}
+
+/// Cycles up to this long are found \[iterations\] (those seen are two and four long).
+const CYCLE_MEMORY: usize = 8;
+
+impl CycleWatch {
+    /// After an iteration that associated at `at` (kept pairs' RMS `residual`) and solved
+    /// `next`: whether the run should stop here.
+    fn ends(&mut self, at: Pose2, residual: f64, next: &Pose2, params: &IcpParams) -> bool {
+        let same = |a: &Pose2, b: &Pose2| {
+            (a.translation() - b.translation()).norm() < params.epsilon_xy
+                && wrap_angle(a.theta - b.theta).abs() < params.epsilon_theta
+        };
+        if let Some(best) = self.stop_at {
+            return same(&at, &best);
+        }
+        if self.recent.len() == CYCLE_MEMORY {
+            self.recent.remove(0);
+        }
+        self.recent.push((at, residual));
+        let Some(start) = self.recent.iter().position(|(p, _)| same(p, next)) else {
+            return false;
+        };
+        let best = self.recent[start..]
+            .iter()
+            .min_by(|a, b| a.1.total_cmp(&b.1))
+            .map(|(p, _)| *p)
+            .unwrap_or(at);
+        self.stop_at = Some(best);
+        same(&at, &best)
     }
 }
 
@@ -478,6 +529,35 @@ mod tests {
             q: Point2::origin(),
             line: None,
             residual: r,
+        }
+    }
+
+    #[test]
+    fn a_limit_cycle_stops_at_its_member_of_least_residual() {
+        let params = IcpParams::default();
+        let (a, b, c) = (
+            Pose2::new(0.0, 0.0, 0.0),
+            Pose2::new(0.01, 0.0, 0.001),
+            Pose2::new(0.02, 0.0, 0.0),
+        );
+        // A -> B -> A: B has the smaller residual and is where the run stands: stop now.
+        let mut watch = CycleWatch::default();
+        assert!(!watch.ends(a, 0.2, &b, &params));
+        assert!(watch.ends(b, 0.1, &a, &params));
+        // A -> B -> C -> A with A the best: on to A, then stop.
+        let mut watch = CycleWatch::default();
+        assert!(!watch.ends(a, 0.1, &b, &params));
+        assert!(!watch.ends(b, 0.3, &c, &params));
+        assert!(!watch.ends(c, 0.2, &a, &params));
+        assert!(!watch.ends(b, 0.3, &c, &params));
+        assert!(!watch.ends(c, 0.2, &a, &params));
+        assert!(watch.ends(a, 0.1, &b, &params));
+        // Poses that keep moving (by more than the thresholds) never stop the run.
+        let mut watch = CycleWatch::default();
+        for k in 0..40 {
+            let at = Pose2::new(1e-4 * k as f64, 0.0, 0.0);
+            let next = Pose2::new(1e-4 * (k + 1) as f64, 0.0, 0.0);
+            assert!(!watch.ends(at, 0.1, &next, &params));
         }
     }
 
