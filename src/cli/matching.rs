@@ -266,6 +266,7 @@ impl MatchOptions {
                 max_range: self.match_max_range(),
             },
             symmetric: !self.one_way,
+            local_tolerance_factor: MatcherParams::default().local_tolerance_factor,
             odometry_prior: self.odometry_prior.then_some(OdometryPrior {
                 trans_per_m: self.prior_trans,
                 trans_const: self.prior_trans_min,

@@ -207,7 +207,7 @@ impl Matcher {
                 &guess,
             );
         }
-        let (result, coarse) = self.align(points, &keyframe.reference, guess);
+        let (result, coarse) = self.align(points, &keyframe.reference, guess, &self.params.icp);
         let (result, current) = match result {
             Ok(r) => {
                 let (r, current) = self.symmetrize(points, &keyframe.reference, r);
@@ -289,7 +289,8 @@ impl Matcher {
         let mut local_ok: Option<IcpResult> = None;
         if let Some(kf) = self.keyframe.as_ref() {
             let local_guess = kf.estimate.between(&guess);
-            let (local, used_coarse) = self.align(points, &kf.reference, local_guess);
+            let (local, used_coarse) =
+                self.align(points, &kf.reference, local_guess, &self.local_params());
             coarse = used_coarse;
             if let Ok(r) = local {
                 start = kf.estimate.compose(&r.pose);
