@@ -1,96 +1,94 @@
 #!/usr/bin/env python3
-"""How much of the drift `eval real` measures is the reference's own error.
+"""How much of `eval real`'s drift a reference's own per-pose jitter explains.
 
-Reads `levelscan match` outputs (JSON Lines with `estimate` and `true_pose` per scan, the
-reference being a SLAM-corrected CARMEN log) and splits each step's difference against the
-reference into two parts by their autocorrelation: error of the reference poses that is
-independent from pose to pose ("white jitter", sigma_r per pose) makes consecutive step
-differences anti-correlated (lag-1 covariance -sigma_r^2), while an error that is independent
-from step to step (the matcher's, or the reference's own random walk) does not. Then it draws
-the white jitter alone onto the reference and measures the drift over 10 m (KITTI-style, as
-src/eval/drift.rs does): the drift any matcher, even a perfect one, shows against this reference.
+usage: scripts/reference_jitter.py DIR NAME [NAME ...]
+  DIR holds `levelscan eval real LOG --out DIR`'s TUM files NAME.reference.tum, NAME.matched.tum.
 
-Usage: scripts/reference_jitter.py MATCH.jsonl [MATCH.jsonl ...]
-e.g.   levelscan match intel-corrected.log.gz --mode pairwise -o intel.jsonl
+The step differences d_k = (reference step k)^-1 (matched step k), in the step's frame, are
+differenced jitter e_{k+1} - e_k plus the matcher's own error; white jitter of variance s^2 gives
+them a lag-1 autocovariance of -s^2, which the matcher's independent errors do not change. Steps
+over four MADs are left out. A perfect matcher scored against the reference perturbed by that
+jitter (five Monte Carlo draws on the log's own path) gives the drift at 10 m the jitter alone
+causes. Standard library only.
 """
-import json
 import math
 import random
-import statistics
 import sys
 
 
+def load(path):
+    poses = []
+    for line in open(path):
+        v = [float(x) for x in line.split()]
+        poses.append((v[1], v[2], 2.0 * math.atan2(v[6], v[7])))
+    return poses
+
+
 def wrap(a):
-    return (a + math.pi) % (2 * math.pi) - math.pi
+    return (a + math.pi) % (2.0 * math.pi) - math.pi
 
 
 def between(a, b):
-    """b in a's frame (x, y, heading)."""
-    dx, dy = b[0] - a[0], b[1] - a[1]
     c, s = math.cos(a[2]), math.sin(a[2])
+    dx, dy = b[0] - a[0], b[1] - a[1]
     return (c * dx + s * dy, -s * dx + c * dy, wrap(b[2] - a[2]))
 
 
-def drift_percent(est, ref, length):
-    """Mean translational error of segments `length` metres of reference path long [%]."""
+def compose(a, d):
+    c, s = math.cos(a[2]), math.sin(a[2])
+    return (a[0] + c * d[0] - s * d[1], a[1] + s * d[0] + c * d[1], wrap(a[2] + d[2]))
+
+
+def drift(estimate, reference, length):
+    """Mean translational error over `length` m of reference path [%] (as eval real's)."""
     dist = [0.0]
-    for p, q in zip(ref, ref[1:]):
-        dist.append(dist[-1] + math.hypot(q[0] - p[0], q[1] - p[1]))
+    for k in range(1, len(reference)):
+        dist.append(dist[-1] + math.hypot(reference[k][0] - reference[k - 1][0],
+                                          reference[k][1] - reference[k - 1][1]))
     total, n, end = 0.0, 0, 0
-    for start in range(len(ref)):
+    for start in range(len(reference)):
         end = max(end, start)
-        while end < len(ref) and dist[end] - dist[start] < length:
+        while end < len(reference) and dist[end] - dist[start] < length:
             end += 1
-        if end == len(ref):
+        if end == len(reference):
             break
-        t, m = between(ref[start], ref[end]), between(est[start], est[end])
-        e = between(t, m)
-        total += math.hypot(e[0], e[1]) / length
+        err = between(between(reference[start], reference[end]),
+                      between(estimate[start], estimate[end]))
+        total += math.hypot(err[0], err[1]) / length
         n += 1
-    return 100 * total / n
+    return 100.0 * total / n
 
 
-def split(est, ref):
-    """(white jitter per pose, step-independent part) per component x [m], y [m], heading [rad]."""
-    d = []
-    for k in range(len(est) - 1):
-        a, b = between(est[k], est[k + 1]), between(ref[k], ref[k + 1])
-        d.append((a[0] - b[0], a[1] - b[1], wrap(a[2] - b[2])))
-    out = []
-    for j in range(3):
-        x = [v[j] for v in d]
-        med = statistics.median(x)
-        mad = 1.4826 * statistics.median(abs(v - med) for v in x)
-        # Gross mismatches (beyond 6 robust sigmas) would dominate both moments: zeroed.
-        x = [v - med if abs(v - med) < 6 * mad else 0.0 for v in x]
-        var = sum(v * v for v in x) / len(x)
-        lag1 = sum(a * b for a, b in zip(x, x[1:])) / len(x)
-        white = math.sqrt(max(-lag1, 0.0))
-        out.append((white, math.sqrt(max(var - 2 * white * white, 0.0))))
-    return out
+def jitter_sigmas(reference, matched):
+    steps = [between(between(reference[k], reference[k + 1]), between(matched[k], matched[k + 1]))
+             for k in range(len(reference) - 1)]
+    sigmas = []
+    for axis in range(3):
+        x = [d[axis] for d in steps]
+        mad = sorted(abs(a) for a in x)[len(x) // 2] * 1.4826
+        pairs = [(a, b) for a, b in zip(x, x[1:]) if abs(a) < 4 * mad and abs(b) < 4 * mad]
+        lag1 = sum(a * b for a, b in pairs) / len(pairs)
+        sigmas.append(math.sqrt(max(-lag1, 0.0)))
+    return sigmas
 
 
 def main():
-    rng = random.Random(1)
-    print("| file | drift 10 m | white jitter x, y [mm], heading [deg] | step-independent x, y [mm], heading [deg] | drift 10 m of the white jitter alone |")
-    print("|---|---:|---|---|---:|")
-    for path in sys.argv[1:]:
-        recs = [json.loads(line) for line in open(path)]
-        est = [r["estimate"] for r in recs]
-        ref = [r["true_pose"] for r in recs]
-        (wx, sx), (wy, sy), (wt, st) = split(est, ref)
-        floor = statistics.mean(
-            drift_percent(
-                [(p[0] + rng.gauss(0, wx), p[1] + rng.gauss(0, wy), p[2] + rng.gauss(0, wt)) for p in ref],
-                ref,
-                10.0,
-            )
-            for _ in range(20)
-        )
-        print(
-            f"| {path} | {drift_percent(est, ref, 10.0):.2f}% | {wx * 1e3:.1f}, {wy * 1e3:.1f}, {math.degrees(wt):.2f} "
-            f"| {sx * 1e3:.1f}, {sy * 1e3:.1f}, {math.degrees(st):.2f} | {floor:.2f}% |"
-        )
+    if len(sys.argv) < 3:
+        sys.exit(__doc__)
+    directory = sys.argv[1]
+    for name in sys.argv[2:]:
+        reference = load(f"{directory}/{name}.reference.tum")
+        matched = load(f"{directory}/{name}.matched.tum")
+        sx, sy, st = jitter_sigmas(reference, matched)
+        floors = []
+        for seed in range(5):
+            rnd = random.Random(seed)
+            jittered = [compose(p, (rnd.gauss(0, sx), rnd.gauss(0, sy), rnd.gauss(0, st)))
+                        for p in reference]
+            floors.append(drift(reference, jittered, 10.0))
+        print(f"{name}: jitter per pose {100 * sx:.2f} / {100 * sy:.2f} cm, "
+              f"{math.degrees(st):.3f} deg; drift at 10 m from it alone "
+              f"{sum(floors) / len(floors):.2f}%, matched {drift(matched, reference, 10.0):.2f}%")
 
 
 if __name__ == "__main__":
