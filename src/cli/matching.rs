@@ -58,8 +58,9 @@ pub struct MatchOptions {
     /// long logs) or pairwise (each scan against the previous).
     //
     // Over 10 m of path on the CARMEN Intel, ACES, CSAIL and Freiburg 079 logs (`eval real
-    // --seed N`, mean over seeds 1-10) metascan drifts 0.84, 1.02, 1.16 and 0.92% against
-    // pairwise's 0.89, 1.45, 1.35 and 1.04%. One default for `match` and `eval real`; `eval matching` runs both.
+    // --seed N`, mean over seeds 1-10) metascan drifts 0.86, 0.99, 1.16 and 0.90% against
+    // pairwise's 0.89, 1.45, 1.35 and 1.04%. One default for `match` and `eval real`; `eval
+    // matching` runs both.
     #[arg(long, value_enum, default_value = "metascan")]
     pub mode: ModeArg,
     /// ICP metric: point-to-point (icp) or point-to-line (plicp).
