@@ -406,9 +406,9 @@ impl CycleWatch {
 /// Buffers of `trim`, kept over one ICP run's iterations.
 #[derive(Default)]
 struct Trimming {
-    /// (residual, index) of each pair: sorting these moves 16 bytes per swap, not a pair.
+    /// (residual, index) of each pair: unique keys (the index breaks ties), so the order
+    /// they are put in is the same whichever way it is found.
     order: Vec<(u64, u32)>,
-    sorted: Vec<Pair>,
     /// `ξ^λ` for every overlap `count / n` from the first kept, for the last `n` seen (pair
     /// counts repeat from iteration to iteration near convergence; the same `powf`, so the
     /// same values).
@@ -417,9 +417,11 @@ struct Trimming {
 }
 
 impl Trimming {
-    /// Sorts pairs by residual and returns how many to keep: the overlap ξ >= `min_overlap`
-    /// that minimises `e(ξ) / ξ^λ`, e being the mean squared residual of the best ξ·N pairs
-    /// (Chetverikov et al. 2002, "FTrICP").
+    /// Keeps the overlap ξ >= `min_overlap` of the pairs with the smallest residuals that
+    /// minimises `e(ξ) / ξ^λ`, e being the mean squared residual of the best ξ·N pairs
+    /// (Chetverikov et al. 2002, "FTrICP"), in their association order; returns how many.
+    /// The smallest `min_overlap` share is always kept, so only its sum matters: it is
+    /// selected (linear time), and only the rest is sorted.
     fn trim(&mut self, pairs: &mut Vec<Pair>, params: &IcpParams) -> usize {
         let n = pairs.len();
         if params.min_overlap >= 1.0 {
@@ -433,12 +435,9 @@ impl Trimming {
                 .enumerate()
                 .map(|(i, p)| (p.residual.to_bits(), i as u32)),
         );
-        self.order.sort_unstable_by_key(|k| k.0);
-        self.sorted.clear();
-        self.sorted
-            .extend(self.order.iter().map(|&(_, i)| pairs[i as usize]));
-        std::mem::swap(pairs, &mut self.sorted);
         let first = ((params.min_overlap * n as f64).ceil() as usize).clamp(1, n);
+        self.order.select_nth_unstable(first - 1);
+        self.order[first..].sort_unstable();
         let lambda = params.overlap_lambda;
         let key = Some((n, first, lambda.to_bits()));
         if self.powers_of != key {
@@ -449,14 +448,12 @@ impl Trimming {
             }));
             self.powers_of = key;
         }
-        let mut sum = 0.0;
+        let squared = |&(bits, _): &(u64, u32)| f64::from_bits(bits).powi(2);
+        let mut sum: f64 = self.order[..first - 1].iter().map(squared).sum();
         let mut best = (f64::INFINITY, n);
-        for (k, pair) in pairs.iter().enumerate() {
-            sum += pair.residual * pair.residual;
+        for (k, entry) in self.order.iter().enumerate().skip(first - 1) {
+            sum += squared(entry);
             let count = k + 1;
-            if count < first {
-                continue;
-            }
             // A floor on e keeps noise-free data from preferring the smallest overlap.
             let e = (sum / count as f64).max(1e-12);
             let psi = e / self.powers[k];
@@ -464,6 +461,13 @@ impl Trimming {
                 best = (psi, count);
             }
         }
+        let last_kept = self.order[best.1 - 1];
+        let mut index = 0u32;
+        pairs.retain(|p| {
+            let kept = (p.residual.to_bits(), index) <= last_kept;
+            index += 1;
+            kept
+        });
         best.1
     }
 }
@@ -558,6 +562,53 @@ mod tests {
             let at = Pose2::new(1e-4 * k as f64, 0.0, 0.0);
             let next = Pose2::new(1e-4 * (k + 1) as f64, 0.0, 0.0);
             assert!(!watch.ends(at, 0.1, &next, &params));
+        }
+    }
+
+    /// FTrICP's choice the plain way: every pair sorted, every prefix's mean square.
+    fn trimmed_by_sorting(residuals: &[f64], params: &IcpParams) -> Vec<usize> {
+        let n = residuals.len();
+        let mut order: Vec<usize> = (0..n).collect();
+        order.sort_by(|&a, &b| residuals[a].total_cmp(&residuals[b]).then(a.cmp(&b)));
+        let first = ((params.min_overlap * n as f64).ceil() as usize).clamp(1, n);
+        let (mut sum, mut best) = (0.0, (f64::INFINITY, n));
+        for (k, &i) in order.iter().enumerate() {
+            sum += residuals[i] * residuals[i];
+            let count = k + 1;
+            let xi = count as f64 / n as f64;
+            let psi = (sum / count as f64).max(1e-12) / xi.powf(params.overlap_lambda);
+            if count >= first && psi < best.0 {
+                best = (psi, count);
+            }
+        }
+        let mut kept = order[..best.1].to_vec();
+        kept.sort_unstable();
+        kept
+    }
+
+    proptest::proptest! {
+        #[test]
+        fn trimming_keeps_what_sorting_every_pair_keeps_in_association_order(
+            residuals in proptest::collection::vec(0.0f64..0.3, 1..400),
+            outliers in proptest::collection::vec(0.3f64..2.0, 0..60),
+        ) {
+            let mut all = residuals.clone();
+            // Outliers spread through the scan, as real ones are.
+            for (k, r) in outliers.iter().enumerate() {
+                let at = (k * 7919) % (all.len() + 1);
+                all.insert(at, *r);
+            }
+            let params = IcpParams::default();
+            let mut pairs: Vec<Pair> = all
+                .iter()
+                .enumerate()
+                .map(|(i, &r)| Pair { p: Point2::new(i as f64, 0.0), ..pair(r) })
+                .collect();
+            let kept = Trimming::default().trim(&mut pairs, &params);
+            let want = trimmed_by_sorting(&all, &params);
+            proptest::prop_assert_eq!(kept, want.len());
+            let got: Vec<usize> = pairs.iter().map(|p| p.p.x as usize).collect();
+            proptest::prop_assert_eq!(got, want);
         }
     }
 
