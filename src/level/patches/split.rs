@@ -135,24 +135,25 @@ pub fn split_members(
     };
     let orders = [false, true].map(|by_row| in_order(grid, members, by_row));
     // The least two-plane RSS over both orderings, ties to the first ordering and boundary.
-    let Some((_, which, cut)) = (0..2)
+    let Some((rss2, which, cut)) = (0..2)
         .filter_map(|w| best_cut(grid, &orders[w], w == 1, params, sigma).map(|(r, b)| (r, w, b)))
         .min_by(|x, y| x.0.total_cmp(&y.0))
     else {
         return whole;
     };
-    let (a, b) = orders[which].split_at(cut);
-    if !split_significant(grid, fit_all.residual_ss, a, b, params, sigma) {
+    // The cut's parts hold half a patch each over two rows ([`best_cut`]): the F test decides.
+    if !two_planes(fit_all.residual_ss, rss2, members.len(), params) {
         return whole;
     }
+    let (a, b) = orders[which].split_at(cut);
     let mut out = split_members(grid, a, params, sigma, depth - 1);
     out.extend(split_members(grid, b, params, sigma, depth - 1));
     out
 }
 
 /// The cut of one member ordering (`by_row`, else by column) that [`split_members`] takes:
-/// where the key changes and both parts span two rows, the one of least two-plane RSS (ties
-/// to the first), as (RSS, boundary index).
+/// where the key changes and both parts hold half a patch over two rows, the one of least
+/// two-plane RSS (ties to the first), as (RSS, boundary index).
 fn best_cut(
     grid: &PoseGrid,
     sorted: &[usize],
@@ -194,31 +195,6 @@ fn best_cut(
         }
     }
     best
-}
-
-/// Whether parts `a` and `b` of one patch's members (one plane's RSS `rss1`) are two planes:
-/// each at least half a patch over two rows, and the F test of [`split_members`] above
-/// `split_f`.
-fn split_significant(
-    grid: &PoseGrid,
-    rss1: f64,
-    a: &[usize],
-    b: &[usize],
-    params: &LevelParams,
-    sigma: f64,
-) -> bool {
-    let ok = |m: &[usize]| {
-        m.len() >= params.min_patch_points / 2 && m.iter().any(|&i| grid.row(i) != grid.row(m[0]))
-    };
-    if !ok(a) || !ok(b) {
-        return false;
-    }
-    let (Some(fa), Some(fb)) = (grid.accumulate(a).fit(sigma), grid.accumulate(b).fit(sigma))
-    else {
-        return false;
-    };
-    let rss2 = fa.residual_ss + fb.residual_ss;
-    two_planes(rss1, rss2, a.len() + b.len(), params)
 }
 
 /// [`Check::PatchSplitF`](crate::level::checks::Check::PatchSplitF): whether two planes of
