@@ -90,29 +90,6 @@ pub(super) fn bent_across_rows(
     chi2 / dof > 1.0 + params.max_row_bend_sigmas * (2.0 / dof).sqrt()
 }
 
-/// Drops members farther than `tol` from the members' plane, then makes the patch.
-impl Growth<'_> {
-    pub(super) fn release_and_make(&self, members: &[usize]) -> Option<Patch> {
-        let (grid, sigma, tol) = (self.grid, self.sigma, self.tol);
-        let fit = grid.accumulate(members).fit(sigma)?;
-        let mut acc = PlaneAccumulator::default();
-        let kept: Vec<usize> = members
-            .iter()
-            .copied()
-            .filter(|&i| {
-                grid.points[i].as_ref().is_some_and(|g| {
-                    let near = fit.distance(&g.p).abs() <= tol;
-                    if near {
-                        acc.add(g);
-                    }
-                    near
-                })
-            })
-            .collect();
-        self.make_patch(&kept, acc)
-    }
-}
-
 /// Splits a patch's members into planes while two planes explain them significantly better
 /// than one: the best split by column (walls meet at corners, which are column ranges) or by
 /// row (contiguous splits only: freely reassigning points would split one noisy plane into two
