@@ -57,17 +57,13 @@ impl LevelLine {
         let corrected = scatter - dd * (sigma * sigma * (nf - 1.0) / nf);
         let eig = super::eigen3::sym_eigen3(&corrected);
         let dir = eig.vectors[2].try_normalize(1e-300)?;
-        // Each point's squared position along the line, `t_i^2`.
-        let t2: Vec<f64> = points
-            .iter()
-            .map(|(p, _)| dir.dot(&(p.coords - c)).powi(2))
-            .collect();
-        let spread: f64 = t2.iter().sum();
-        let spread_dd: Matrix3<f64> = points
-            .iter()
-            .zip(&t2)
-            .map(|((_, d), t2)| outer(*d) * *t2)
-            .sum();
+        // Each point's squared position along the line, `t_i^2`, alone and on its ray's `d d^T`.
+        let (mut spread, mut spread_dd) = (0.0, Matrix3::zeros());
+        for (p, d) in points {
+            let t2 = dir.dot(&(p.coords - c)).powi(2);
+            spread += t2;
+            spread_dd += outer(*d) * t2;
+        }
         (spread > 0.0).then_some(LevelLine {
             dir,
             centroid: nalgebra::Point3::from(c),

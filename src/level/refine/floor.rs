@@ -133,14 +133,14 @@ pub(crate) fn height_candidates(
     keep: impl Fn(usize) -> bool,
 ) -> Vec<(f64, usize)> {
     let key = |z: f64| if floor { z } else { -z };
-    let mut zs: Vec<(f64, usize)> =
-        lv.q.iter()
-            .enumerate()
-            .filter_map(|(i, q)| {
-                let (q, _) = q.as_ref()?;
-                (keep(i) && key(q.z) < -MIN_LEVEL_DISTANCE).then_some((key(q.z), i))
-            })
-            .collect();
+    let mut zs: Vec<(f64, usize)> = lv
+        .iter()
+        .enumerate()
+        .filter_map(|(i, q)| {
+            let (q, _) = q.as_ref()?;
+            (keep(i) && key(q.z) < -MIN_LEVEL_DISTANCE).then_some((key(q.z), i))
+        })
+        .collect();
     zs.sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
     zs
 }
@@ -211,7 +211,7 @@ fn refit_rounds(
 /// above, when it lies beyond `MIN_LEVEL_DISTANCE` from the scanner on that side.
 pub(crate) fn extreme_height(lv: &Leveled, lowest: bool) -> Option<f64> {
     let sign = if lowest { 1.0 } else { -1.0 };
-    let mut z: Vec<f64> = lv.q.iter().flatten().map(|(q, _)| sign * q.z).collect();
+    let mut z: Vec<f64> = lv.iter().flatten().map(|(q, _)| sign * q.z).collect();
     if z.len() < 50 {
         return None;
     }
@@ -229,7 +229,7 @@ pub(crate) fn level_band<'a>(
     above: bool,
 ) -> impl Iterator<Item = usize> + Clone + 'a {
     let (s, k) = (f.s, f.k);
-    f.lv.q.iter().enumerate().filter_map(move |(i, q)| {
+    f.lv.iter().enumerate().filter_map(move |(i, q)| {
         let (q, d) = q.as_ref()?;
         let lever = q.xy().norm() * f.sigma_up;
         let band = k * (s * s * d.z * d.z + lever * lever).sqrt() + f.params.flat_margin;

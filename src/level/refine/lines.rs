@@ -62,7 +62,7 @@ fn rows_at_height(f: &Frame, zs: &[(f64, usize)], height: f64) -> Vec<Vec<usize>
     let (params, s, k) = (f.params, f.s, f.params.refine_k);
     let mut rows: Vec<Vec<usize>> = vec![Vec::new(); f.grid.rows()];
     for &(z, i) in zs {
-        let Some((q, d)) = f.lv.q[i].as_ref() else {
+        let Some((q, d)) = f.lv[i].as_ref() else {
             continue;
         };
         let lever = q.xy().norm() * f.sigma_up;

@@ -105,17 +105,11 @@ struct Line {
 }
 
 /// Every valid grid point in the provisional level frame: position and ray direction.
-pub(crate) struct Leveled {
-    q: Vec<Option<(Vector3<f64>, Vector3<f64>)>>,
-}
+pub(crate) type Leveled = Vec<Option<(Vector3<f64>, Vector3<f64>)>>;
 
-impl Leveled {
-    fn new(grid: &PoseGrid, level_from_robot: &Rotation3<f64>) -> Self {
-        let level = |g: &GridPoint| (level_from_robot * g.p.coords, level_from_robot * g.dir);
-        Leveled {
-            q: grid.points.iter().map(|g| g.as_ref().map(level)).collect(),
-        }
-    }
+fn leveled(grid: &PoseGrid, level_from_robot: &Rotation3<f64>) -> Leveled {
+    let level = |g: &GridPoint| (level_from_robot * g.p.coords, level_from_robot * g.dir);
+    grid.points.iter().map(|g| g.as_ref().map(level)).collect()
 }
 
 fn line_of(fit: &PlaneFit, level_from_robot: &Rotation3<f64>) -> Option<Line> {
@@ -158,7 +152,7 @@ pub(crate) fn refine(
             grid,
             params,
             steps,
-            lv: Leveled::new(grid, &level_from_robot),
+            lv: leveled(grid, &level_from_robot),
             level_from_robot,
             up,
             s,
@@ -326,7 +320,7 @@ fn assign_walls(
         .filter_map(|w| line_of(w, &f.level_from_robot))
         .collect();
     let candidate: Vec<bool> = (0..grid.points.len())
-        .map(|i| lv.q[i].is_some() && !near_level[i] && !f.steps.levelish[i])
+        .map(|i| lv[i].is_some() && !near_level[i] && !f.steps.levelish[i])
         .collect();
     if discover {
         lines.extend(discover_lines(f, &candidate, seed_width));
@@ -336,7 +330,7 @@ fn assign_walls(
     let mut wall_members: Vec<Vec<usize>> = vec![Vec::new(); lines.len()];
     // Candidates within reach of a line (the floor and ceiling lines below keep off them).
     let mut in_reach = vec![false; grid.points.len()];
-    for (i, q) in lv.q.iter().enumerate() {
+    for (i, q) in lv.iter().enumerate() {
         let Some((q, d)) = q else { continue };
         if !candidate[i] {
             continue;
@@ -452,7 +446,7 @@ fn level_line_evidence(
         for &i in models.iter().flat_map(|m| &m.members) {
             taken[i] = true;
         }
-        for (i, q) in lv.q.iter().enumerate() {
+        for (i, q) in lv.iter().enumerate() {
             let Some((q, d)) = q else { continue };
             if taken[i] {
                 continue;

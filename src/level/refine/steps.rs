@@ -121,7 +121,7 @@ pub(crate) fn flat_points(f: &Frame) -> Vec<bool> {
     let rows = grid.rows();
     // Some(true) flat, Some(false) steep, None neither or no neighbour.
     let pair = |i: usize, j: usize| -> Option<bool> {
-        let ((a, da), (b, db)) = (lv.q[i].as_ref()?, lv.q[j].as_ref()?);
+        let ((a, da), (b, db)) = (lv[i].as_ref()?, lv[j].as_ref()?);
         let dz2 = (a.z - b.z).powi(2);
         let dxy2 = (a.xy() - b.xy()).norm_squared();
         let var = s * s * (da.z * da.z + db.z * db.z)

@@ -15,7 +15,7 @@ pub(crate) fn discover_lines(f: &Frame, candidate: &[bool], width: usize) -> Vec
     let min_points = params.min_patch_points.max(width);
     let k = params.refine_k;
     let point = |i: usize| -> Option<(Vector2<f64>, Vector2<f64>, f64)> {
-        let (q, d) = lv.q[i].as_ref().filter(|_| candidate[i])?;
+        let (q, d) = lv[i].as_ref().filter(|_| candidate[i])?;
         Some((q.xy(), d.xy(), q.z))
     };
     let mut out = Vec::new();
