@@ -45,6 +45,7 @@ pub use ransac::level_start;
 use ransac::*;
 use steps::*;
 pub use steps::{LevelSteps, level_steps};
+pub(crate) use steps::{row_pairs, row_steps};
 pub(crate) use support::supported_rows;
 use support::*;
 use walls::*;

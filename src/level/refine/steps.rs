@@ -99,7 +99,11 @@ pub(crate) fn every_row_neighbour<T: Copy>(
 }
 
 /// Point `i`'s steps ([`row_pairs`]) to the rows below and above it, `None` past the grid.
-fn row_steps<T: Copy>(grid: &PoseGrid, pairs: &[Option<T>], i: usize) -> (Option<T>, Option<T>) {
+pub(crate) fn row_steps<T: Copy>(
+    grid: &PoseGrid,
+    pairs: &[Option<T>],
+    i: usize,
+) -> (Option<T>, Option<T>) {
     let r = grid.row(i);
     let below = if r > 0 { pairs[i - grid.cols] } else { None };
     let above = if r + 1 < grid.rows() { pairs[i] } else { None };
