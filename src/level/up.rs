@@ -291,12 +291,8 @@ pub(crate) fn up_robust(planes: &[PlaneObs], sigma: f64, iterations: usize) -> O
     let singles: Vec<Vector3<f64>> = planes.iter().filter_map(|p| p.single()).collect();
     for (i, a) in singles.iter().enumerate() {
         for b in &singles[i + 1..] {
-            let c = a.cross(b);
             // Nearly parallel normals propose nothing reliable.
-            if c.norm() < PARALLEL_PROPOSAL_SIN {
-                continue;
-            }
-            candidates.push(c.normalize());
+            candidates.extend(a.cross(b).try_normalize(PARALLEL_PROPOSAL_SIN));
         }
     }
     let loss = |up: &Vector3<f64>| -> f64 {

@@ -245,11 +245,8 @@ pub(crate) fn fit_line(
         if kept.len() == idx.len() || round + 1 == LINE_ROUNDS {
             // Points still going after the last round: no line. (All kept, they are the
             // `min_points` or more checked above.)
-            if kept.len() < idx.len() {
-                return None;
-            }
-            let chi2: f64 = pts.iter().map(|(p, d)| z2(p, d)).map(|(a, b)| a + b).sum();
-            if line_misfits(chi2, pts.len(), params) {
+            let chi2 = || pts.iter().map(|(p, d)| z2(p, d)).map(|(a, b)| a + b).sum();
+            if kept.len() < idx.len() || line_misfits(chi2(), pts.len(), params) {
                 return None;
             }
             // A floor line is level in the provisional frame, within that frame's

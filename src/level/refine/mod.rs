@@ -377,24 +377,15 @@ fn models_of(
 ) -> (Vec<Model>, usize) {
     let (grid, params, up, s, sigma, k, sigma_up) =
         (f.grid, f.params, f.up, f.s, f.sigma, f.k, f.sigma_up);
-    let mut models: Vec<Model> = Vec::new();
-    for members in wall_members {
-        if !spans_wall_rows(grid, &members, params) {
-            continue;
-        }
-        let Some(fit) = grid.accumulate(&members).fit(sigma) else {
-            continue;
-        };
+    let wall = |members: Vec<usize>| {
+        let fit = spans_wall_rows(grid, &members, params)
+            .then(|| grid.accumulate(&members).fit(sigma))
+            .flatten()?;
         // A wall must stay a wall; what turned towards up was floor after all.
-        if fit.normal.dot(&up).abs() > params.wall_cos() {
-            continue;
-        }
-        models.push(Model {
-            kind: SurfaceKind::Wall,
-            fit,
-            members,
-        });
-    }
+        let kind = SurfaceKind::Wall;
+        (fit.normal.dot(&up).abs() <= params.wall_cos()).then_some(Model { kind, fit, members })
+    };
+    let mut models: Vec<Model> = wall_members.into_iter().filter_map(wall).collect();
     let walls_found = models.len();
     for (f, members) in level_fits.iter().zip(level_members) {
         let members = without_standing_rows(grid, members, s, params);

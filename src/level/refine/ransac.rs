@@ -31,10 +31,10 @@ pub fn level_start(
     if !level_support(grid, &members, params) {
         return None;
     }
-    let fit = grid.accumulate(&members).fit(sigma)?;
-    if fit.normal.z.abs() < min_z {
-        return None;
-    }
+    let fit = grid
+        .accumulate(&members)
+        .fit(sigma)
+        .filter(|f| f.normal.z.abs() >= min_z)?;
     let sol = up::up_robust(&[PlaneObs::level(&fit, 1.0)], s, params.iterations)?;
     if !three_rows_support(grid, &members) {
         let loose = Matrix2::identity() * (MAX_SIGMA_UP * MAX_SIGMA_UP);
