@@ -87,10 +87,8 @@ impl EdgeRows<'_> {
         let others = (0..self.per_row.len())
             .filter(|&r| r == row || !(first..=last).contains(&r))
             .fold(*self.all, |acc, r| acc.minus(&self.per_row[r]));
-        if others.n < params.min_patch_points {
-            return false;
-        }
-        let Some(fit) = others.fit(self.sigma) else {
+        let enough = others.n >= params.min_patch_points;
+        let Some(fit) = others.fit(self.sigma).filter(|_| enough) else {
             return false;
         };
         let (mut sum, mut var, mut at, mut n) = (0.0, 0.0, Vector3::zeros(), 0.0);

@@ -185,10 +185,7 @@ fn refit_rounds(
     s: f64,
 ) -> Option<PlaneFit> {
     for round in 0..LEVEL_ROUNDS {
-        if !level_support(grid, &members, params) {
-            return None;
-        }
-        let f = grid.accumulate(&members).fit(s)?;
+        let f = supported_level_fit(grid, &members, params, s)?;
         if round + 1 == LEVEL_ROUNDS {
             return Some(f);
         }

@@ -154,20 +154,18 @@ pub(crate) fn one_plane(
     s: f64,
     params: &LevelParams,
 ) -> bool {
-    if lines.len() < 3 {
-        return true;
-    }
-    (0..lines.len()).all(|i| {
-        let others: Vec<usize> = lines
-            .iter()
-            .enumerate()
-            .filter(|&(j, _)| j != i)
-            .flat_map(|(_, (_, m))| m.iter().copied())
-            .collect();
-        grid.accumulate(&others).fit(s).is_some_and(|fit| {
-            line_offset_sigmas(grid, &lines[i].1, &fit, s, params.min_sigma) <= params.refine_k
+    lines.len() < 3
+        || (0..lines.len()).all(|i| {
+            let others: Vec<usize> = lines
+                .iter()
+                .enumerate()
+                .filter(|&(j, _)| j != i)
+                .flat_map(|(_, (_, m))| m.iter().copied())
+                .collect();
+            grid.accumulate(&others).fit(s).is_some_and(|fit| {
+                line_offset_sigmas(grid, &lines[i].1, &fit, s, params.min_sigma) <= params.refine_k
+            })
         })
-    })
 }
 
 /// How far, in standard deviations, a line's points lie from a plane on average: the mean

@@ -387,29 +387,22 @@ fn models_of(
     };
     let mut models: Vec<Model> = wall_members.into_iter().filter_map(wall).collect();
     let walls_found = models.len();
-    for (f, members) in level_fits.iter().zip(level_members) {
+    let level = |(f, members): (&PlaneFit, Vec<usize>)| {
         let members = without_standing_rows(grid, members, s, params);
-        if !level_support(grid, &members, params) {
-            continue;
-        }
-        let Some(fit) = grid.accumulate(&members).fit(sigma) else {
-            continue;
-        };
+        let fit = supported_level_fit(grid, &members, params, sigma)?;
         let kind = if f.centroid.coords.dot(&up) < 0.0 {
             SurfaceKind::Floor
         } else {
             SurfaceKind::Ceiling
         };
-        if !checks::refined_level(&fit, &up, s, params)
+        let stands = checks::refined_level(&fit, &up, s, params)
             // Over two scans it must agree with up (one leveled a pose 7 degrees off
             // with a sigma of 0.1); over three, it may overrule a wrong start.
-            || (!three_rows_support(grid, &members) && level_z2(&fit, &up, s, sigma_up) > k * k)
-            || !opaque(grid, &fit, s, params)
-        {
-            continue;
-        }
-        models.push(Model { kind, fit, members });
-    }
+            && (three_rows_support(grid, &members) || level_z2(&fit, &up, s, sigma_up) <= k * k)
+            && opaque(grid, &fit, s, params);
+        stands.then_some(Model { kind, fit, members })
+    };
+    models.extend(level_fits.iter().zip(level_members).filter_map(level));
     (models, walls_found)
 }
 

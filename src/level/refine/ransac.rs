@@ -28,13 +28,8 @@ pub fn level_start(
     let min_z = MAX_TILT_DEG.to_radians().cos();
     let members = sampled_plane(grid, &idx, &idx, |n| n.z.abs() >= min_z, s, params)?;
     let members = without_standing_rows(grid, members, s, params);
-    if !level_support(grid, &members, params) {
-        return None;
-    }
-    let fit = grid
-        .accumulate(&members)
-        .fit(sigma)
-        .filter(|f| f.normal.z.abs() >= min_z)?;
+    let fit =
+        supported_level_fit(grid, &members, params, sigma).filter(|f| f.normal.z.abs() >= min_z)?;
     let sol = up::up_robust(&[PlaneObs::level(&fit, 1.0)], s, params.iterations)?;
     if !three_rows_support(grid, &members) {
         let loose = Matrix2::identity() * (MAX_SIGMA_UP * MAX_SIGMA_UP);

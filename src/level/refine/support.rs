@@ -75,6 +75,20 @@ pub(crate) fn level_support(grid: &PoseGrid, members: &[usize], params: &LevelPa
     members.len() >= params.min_level_points && rows_supported(grid, members, LEVEL_ROW_SHARE) >= 2
 }
 
+/// The plane (at range noise `sigma`) of a floor's or ceiling's `members` that can make one
+/// ([`level_support`]).
+pub(crate) fn supported_level_fit(
+    grid: &PoseGrid,
+    members: &[usize],
+    params: &LevelParams,
+    sigma: f64,
+) -> Option<PlaneFit> {
+    let supported = level_support(grid, members, params);
+    supported
+        .then(|| grid.accumulate(members).fit(sigma))
+        .flatten()
+}
+
 /// Whether a level plane spans three scans. Two scan lines that meet are coplanar whatever
 /// they lie on (a floor line and a wall's foot line), so a plane over two scans fits well and
 /// can still lean by degrees: it is no evidence of its own that its points are one surface.
