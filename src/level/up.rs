@@ -325,10 +325,7 @@ pub(crate) fn up_robust(planes: &[PlaneObs], sigma: f64, iterations: usize) -> O
         }
     }
     // The result is held to the same limit.
-    if up.z < MAX_TILT.cos() {
-        return None;
-    }
-    Some(solution_at(up, planes, sigma, true))
+    within_max_tilt(&up).then(|| solution_at(up, planes, sigma, true))
 }
 
 /// [`Check::MaxTilt`](super::checks::Check::MaxTilt): whether a unit `up` (`z >= 0`) lies

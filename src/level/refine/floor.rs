@@ -74,28 +74,17 @@ impl<'a> LevelModel<'a> {
     }
 }
 
-/// The floor and ceiling planes to assign from in frame `f`: the ones `given` unless `fresh`,
-/// else the densest height among the usable (`ok`) points below (floor) and above (ceiling)
-/// the scanner in the level frame, where at least
+/// The floor and ceiling planes to assign from in frame `f`: the densest height among the
+/// usable (`ok`) points below (floor) and above (ceiling) the scanner in the level frame, where
+/// at least
 /// `min_level_points` points lie within the tolerance of one height ([`height_window`]),
 /// refitted in rounds ([`refit_rounds`]) and kept when level within `refine_max_tilt_deg` of
 /// up, explaining its points and clear of the scanner (sect. 5.3 takes floors and ceilings as
 /// the level constraints).
-pub(crate) fn find_levels(
-    f: &Frame,
-    ok: &[bool],
-    given: &[PlaneFit],
-    fresh: bool,
-) -> Vec<PlaneFit> {
+pub(crate) fn find_levels(f: &Frame, ok: &[bool]) -> Vec<PlaneFit> {
     let (grid, params, up, s) = (f.grid, f.params, &f.up, f.s);
-    let below = |l: &PlaneFit| l.centroid.coords.dot(up) < 0.0;
     let mut out: Vec<PlaneFit> = Vec::new();
     for floor in [true, false] {
-        if !fresh {
-            // Later passes carry what the first found, and look for nothing new.
-            out.extend(given.iter().find(|l| below(l) == floor).copied());
-            continue;
-        }
         let mut zs = height_candidates(&f.lv, floor, |i| ok[i]);
         if !floor {
             // By height, ascending, as for the floor.

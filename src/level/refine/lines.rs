@@ -104,11 +104,10 @@ fn lines_evidence(
         // One floor's lines always fit one plane; a wall's line just above its foot and a
         // floor line at another bearing are skew (traced: a zigzag wall's foot 10 cm up,
         // taken with a floor line, pulled a pose 8 degrees off with a sigma of 0.4).
-        let Some(plane) = lines_plane(grid, &found, s) else {
-            return LevelEvidence::None;
-        };
-        let skew = skew_lines(&plane.0, s);
-        if let Some(plane) = level_plane(f, plane) {
+        // No plane at all is as bad.
+        let plane = lines_plane(grid, &found, s);
+        let skew = plane.as_ref().is_none_or(|p| skew_lines(&p.0, s));
+        if let Some(plane) = plane.and_then(|p| level_plane(f, p)) {
             return plane;
         }
         if skew {

@@ -162,16 +162,17 @@ pub(crate) fn refine(
             sigma_up,
         };
         let level_ok = flat_points(&f);
-        if params.level_surfaces {
+        if params.level_surfaces && pass == 0 {
             // The first pass looks for the floor and ceiling afresh in its level frame (the
-            // region-grown ones can have run up a wall's foot); later passes carry them.
-            level_fits = find_levels(&f, &level_ok, &level_fits, pass == 0);
+            // region-grown ones can have run up a wall's foot); later passes carry them and
+            // look for nothing new.
+            level_fits = find_levels(&f, &level_ok);
         }
         // 2. Points assigned to the floor and ceiling, then to walls; 3. the models refitted.
         let (level_members, near_level) = assign_levels(&f, &level_fits, &level_ok);
         // New walls are looked for once; later passes carry them as models.
-        let mut walls = assign_walls(&f, &wall_fits, &near_level, pass == 0, seed_width);
-        let wall_members = std::mem::take(&mut walls.members);
+        let (walls, wall_members) =
+            assign_walls(&f, &wall_fits, &near_level, pass == 0, seed_width);
         let (mut models, walls_found) = models_of(&f, wall_members, &level_fits, level_members);
         let flat_lines = level_line_evidence(&f, &walls, &mut models);
         let (sol, flat_lines) = solve_models(&f, &models, flat_lines)?;
@@ -298,11 +299,10 @@ pub(crate) fn steps_as_ceiling(band: impl Iterator<Item = usize>, ceiling: &[boo
 
 /// Points assigned to walls: the walls' lines (`wall_fits` in this frame, merged, and with
 /// `discover` the lines found in each leveled scan), the wall candidates (not near a level
-/// surface, not stepping like one), and each line's members.
+/// surface, not stepping like one); with each line's members.
 struct WallAssignment {
     lines: Vec<Line>,
     candidate: Vec<bool>,
-    members: Vec<Vec<usize>>,
     /// Candidates within reach of a line (the floor and ceiling lines keep off them).
     in_reach: Vec<bool>,
 }
@@ -313,7 +313,7 @@ fn assign_walls(
     near_level: &[bool],
     discover: bool,
     seed_width: usize,
-) -> WallAssignment {
+) -> (WallAssignment, Vec<Vec<usize>>) {
     let (grid, lv) = (f.grid, &f.lv);
     // Walls: merge those that are one wall, then assign by horizontal distance.
     let mut lines: Vec<Line> = wall_fits
@@ -359,12 +359,12 @@ fn assign_walls(
         }
         wall_members[m].push(i);
     }
-    WallAssignment {
+    let walls = WallAssignment {
         lines,
         candidate,
-        members: wall_members,
         in_reach,
-    }
+    };
+    (walls, wall_members)
 }
 
 /// The refitted models: walls that span `refine_min_rows` scans and stay walls, then the
