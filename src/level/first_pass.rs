@@ -161,20 +161,11 @@ fn level_stepping_members(grid: &PoseGrid, p: &Patch, steps: &[Option<f64>]) -> 
     Some(p.members.iter().copied().filter(|&i| kept(i)).collect())
 }
 
-/// Whether grid point `i`'s range hardly changes to a neighbouring scan's (member or not;
-/// `steps` in units of `r de`): it lies on a steep surface with it. A wall line at the foot of a
-/// wall joins a floor patch through the floor line below it (their step is a floor's), but
-/// the wall above it gives it away.
-fn on_steep(grid: &PoseGrid, steps: &[Option<f64>], i: usize) -> bool {
-    let (below, above) = refine::row_steps(grid, steps, i);
-    [below, above].into_iter().flatten().any(|x| x.abs() <= 1.0)
-}
-
 /// The plane of the `kept` members, over at least `min_level_points` points and enough scan
 /// lines (`LEVEL_MIN_ROWS_NOISY` from `level_steep_min_sigma` of noise, else 2). From that
 /// noise up (or below it on two scan lines only, where a wall's
 /// line and a floor line still pass for one plane when parallel), a plane that only the
-/// points on a steep surface ([`on_steep`]) make, over a fifth of them, is no floor: a floor
+/// points on a steep surface make, over a fifth of them, is no floor: a floor
 /// line and a wall's line at its foot, coplanar within the noise.
 fn fit_without_steep(
     grid: &PoseGrid,
@@ -198,7 +189,15 @@ fn fit_without_steep(
     let mut rows_flat = vec![0usize; grid.rows()];
     for (i, g) in kept_points() {
         all.add(g);
-        if veto && !on_steep(grid, steps, i) {
+        // On a steep surface: its range hardly changes to a neighbouring scan's (member or
+        // not; `steps` in units of `r de`). A wall line at the foot of a wall joins a floor
+        // patch through the floor line below it (their step is a floor's), but the wall above
+        // it gives it away.
+        let on_steep = || {
+            let (below, above) = refine::row_steps(grid, steps, i);
+            [below, above].into_iter().flatten().any(|x| x.abs() <= 1.0)
+        };
+        if veto && !on_steep() {
             flat.add(g);
             rows_flat[grid.row(i)] += 1;
         }

@@ -160,14 +160,6 @@ impl PlaneObs<'_> {
         z2_of(&terms[..k], up)
     }
 
-    /// The direction this evidence proposes for up on its own, if any: a level plane's normal.
-    fn proposal(&self) -> Option<Vector3<f64>> {
-        match self.evidence {
-            Evidence::Level(f) => Some(f.normal),
-            _ => None,
-        }
-    }
-
     /// Its share of the unweighted start matrix: the constrained directions' outer products,
     /// weighted by the points behind them.
     fn start_matrix(&self) -> Matrix3<f64> {
@@ -284,7 +276,12 @@ pub(crate) fn up_robust(planes: &[PlaneObs], sigma: f64, iterations: usize) -> O
     if constraints < 2 {
         return None;
     }
-    let mut candidates: Vec<Vector3<f64>> = planes.iter().filter_map(|p| p.proposal()).collect();
+    // A level plane proposes its normal.
+    let level = |p: &PlaneObs| match p.evidence {
+        Evidence::Level(f) => Some(f.normal),
+        _ => None,
+    };
+    let mut candidates: Vec<Vector3<f64>> = planes.iter().filter_map(level).collect();
     let start: Matrix3<f64> = planes.iter().map(|p| p.start_matrix()).sum();
     candidates.extend(smallest_eigenvector(&start));
     // Walls and level lines: each pair proposes the direction normal to both.

@@ -110,7 +110,13 @@ pub fn split_members(
     let Some(fit_all) = grid.accumulate(members).fit(sigma) else {
         return whole;
     };
-    let orders = [false, true].map(|by_row| in_order(grid, members, by_row));
+    // Column-major and row-major, ties by grid index, as a sort by `(column or row, index)`
+    // would give: ascending grid index is row-major, and a stable sort of that by column is
+    // column-major.
+    let by_row = ascending(members);
+    let mut by_column = by_row.clone();
+    by_column.sort_by_key(|&i| i % grid.cols);
+    let orders = [by_column, by_row];
     // The least two-plane RSS over both orderings, ties to the first ordering and boundary.
     let Some((rss2, which, cut)) = (0..2)
         .filter_map(|w| best_cut(grid, &orders[w], w == 1, params, sigma).map(|(r, b)| (r, w, b)))

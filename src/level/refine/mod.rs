@@ -273,13 +273,10 @@ fn assign_levels(
     // degrees off vertical, leveled a pose 7 degrees off with a sigma of 1.4). Without such
     // steps the highest points are the tops of walls, which keep them.
     for (lowest, side) in [(true, -1.0), (false, 1.0)] {
-        if level_fits
+        let modelled = level_fits
             .iter()
-            .any(|l| l.centroid.coords.dot(&up) * side > 0.0)
-        {
-            continue;
-        }
-        let Some(height) = extreme_height(lv, lowest) else {
+            .any(|l| l.centroid.coords.dot(&up) * side > 0.0);
+        let Some(height) = (!modelled).then(|| extreme_height(lv, lowest)).flatten() else {
             continue;
         };
         let band = level_band(f, height, lowest);
