@@ -90,9 +90,6 @@ pub(crate) fn find_levels(f: &Frame, ok: &[bool]) -> Vec<PlaneFit> {
             // By height, ascending, as for the floor.
             zs = zs.into_iter().rev().map(|(z, i)| (-z, i)).collect();
         }
-        if zs.len() < params.min_level_points {
-            continue;
-        }
         // The most populous window (the lowest such), when it holds `min_level_points`.
         let min_points = params.min_level_points;
         let Some((lo, hi)) = height_window(f, &zs, |n, most| n == most && n >= min_points) else {

@@ -38,9 +38,6 @@ pub(crate) fn level_lines(
     let (grid, params, s) = (f.grid, f.params, f.s);
     let zs = height_candidates(&f.lv, kind == SurfaceKind::Floor, candidate);
     let min_points = params.level_line_min_points.max(3);
-    if zs.len() < min_points {
-        return LevelEvidence::None;
-    }
     // The outermost window that holds `min_points` and a third as many as the densest (a box
     // top is not the floor); the surface's height key is its middle.
     let Some((lo, hi)) = height_window(f, &zs, |n, most| n >= min_points && 3 * n >= most) else {

@@ -23,22 +23,15 @@ pub(crate) fn discover_lines(f: &Frame, candidate: &[bool], width: usize) -> Vec
         let row = r * cols;
         let mut c = 0;
         while c + width <= cols {
-            let mut acc = Line2::default();
-            let mut unusable = None;
-            for j in c..c + width {
-                match point(row + j) {
-                    Some((p, d, z)) => acc.add(&p, &d, z),
-                    None => {
-                        unusable = Some(j);
-                        break;
-                    }
-                }
-            }
-            // Every seed over an unusable ray fails: the next one starts past it.
-            if let Some(j) = unusable {
+            let seed = c..c + width;
+            // Every seed over an unusable ray fails: the next one starts past the last one.
+            if let Some(j) = seed.clone().rev().find(|&j| point(row + j).is_none()) {
                 c = j + 1;
                 continue;
             }
+            let mut acc = Line2::default();
+            let seed_points = seed.filter_map(|j| point(row + j));
+            seed_points.for_each(|(p, d, z)| acc.add(&p, &d, z));
             let Some(mut line) = acc
                 .line()
                 .filter(|l| acc.misfit(l, s, params.min_sigma) <= SEED_MISFIT)
