@@ -95,14 +95,12 @@ pub fn level_fits(est: &LevelEstimate, params: &LevelParams) -> Vec<PlaneFit> {
     let sigma = est.range_sigma.max(params.min_sigma);
     // Signed scan-to-scan range steps in units of `r de` (elevation step `de`), pair `i`
     // joining point `i` to the one above it (`refine::row_pairs`).
-    let steps: Vec<Option<f64>> = refine::row_pairs(grid, |a, b, i, j| {
+    let steps = refine::row_pairs(grid, |i, j| {
+        let (a, b) = (grid.points[i].as_ref()?, grid.points[j].as_ref()?);
         let de = grid.elevation[grid.row(j)] - grid.elevation[grid.row(i)];
         let scale = 0.5 * (a.range + b.range) * de;
         (scale.abs() > 1e-9).then(|| (b.range - a.range) / scale)
-    })
-    .into_iter()
-    .map(Option::flatten)
-    .collect();
+    });
     est.patches
         .iter()
         .filter(|p| p.kind != SurfaceKind::Wall && p.fit.n >= params.min_level_points)

@@ -40,7 +40,8 @@ pub fn level_steps(grid: &PoseGrid, params: &LevelParams, sigma: f64) -> LevelSt
     let two_ranges = std::f64::consts::SQRT_2 * sigma.max(params.min_sigma);
     let margin = params.refine_step_k * two_ranges;
     // +1 a floor's step, -1 a ceiling's, 0 neither; beside it the same by sign alone.
-    let pairs = row_pairs(grid, |a, b, i, j| {
+    let pairs = row_pairs(grid, |i, j| {
+        let (a, b) = (grid.points[i].as_ref()?, grid.points[j].as_ref()?);
         let de = grid.elevation[grid.row(j)] - grid.elevation[grid.row(i)];
         let change = (b.range - a.range) * de.signum() * a.dir.x.signum();
         let bound = 0.5 * (a.range + b.range) * de.abs() + margin;
@@ -53,7 +54,7 @@ pub fn level_steps(grid: &PoseGrid, params: &LevelParams, sigma: f64) -> LevelSt
                 0
             }
         };
-        (side(bound), side(bound.min(LINE_STEP_SIGMAS * two_ranges)))
+        Some((side(bound), side(bound.min(LINE_STEP_SIGMAS * two_ranges))))
     });
     // A wall point above or below a floor point steps far to it, but not to its other
     // neighbour on the wall: every neighbour must agree. (Each test is its own closure, so
@@ -66,20 +67,16 @@ pub fn level_steps(grid: &PoseGrid, params: &LevelParams, sigma: f64) -> LevelSt
     }
 }
 
-/// `step(a, b, i, j)` for each point `a` (index `i`) and the point `b` (index `j`) above it in
-/// the next row, `None` where either is missing: each column pair of adjacent rows once,
-/// pair `i` joining point `i` to the one above.
+/// `step(i, j)` for each grid index `i` and the index `j` above it in the next row (`None`
+/// where there is no step, as where either point is missing): each column pair of adjacent
+/// rows once, pair `i` joining point `i` to the one above.
 pub(crate) fn row_pairs<T>(
     grid: &PoseGrid,
-    step: impl Fn(&GridPoint, &GridPoint, usize, usize) -> T,
+    step: impl Fn(usize, usize) -> Option<T>,
 ) -> Vec<Option<T>> {
     let cols = grid.cols;
     (0..cols * grid.rows().saturating_sub(1))
-        .map(|i| {
-            let j = i + cols;
-            let (a, b) = (grid.points[i].as_ref()?, grid.points[j].as_ref()?);
-            Some(step(a, b, i, j))
-        })
+        .map(|i| step(i, i + cols))
         .collect()
 }
 
@@ -121,8 +118,6 @@ pub(crate) fn row_steps<T: Copy>(
 pub(crate) fn flat_points(f: &Frame) -> Vec<bool> {
     let (grid, lv, s, min_sigma, sigma_up, k) =
         (f.grid, &f.lv, f.s, f.params.min_sigma, f.sigma_up, f.k);
-    let cols = grid.cols;
-    let rows = grid.rows();
     // Some(true) flat, Some(false) steep, None neither or no neighbour.
     let pair = |i: usize, j: usize| -> Option<bool> {
         let ((a, da), (b, db)) = (lv[i].as_ref()?, lv[j].as_ref()?);
@@ -139,9 +134,7 @@ pub(crate) fn flat_points(f: &Frame) -> Vec<bool> {
             None
         }
     };
-    let pairs: Vec<Option<bool>> = (0..cols * rows.saturating_sub(1))
-        .map(|i| pair(i, i + cols))
-        .collect();
+    let pairs = row_pairs(grid, pair);
     (0..grid.points.len())
         .map(|i| {
             let (below, above) = row_steps(grid, &pairs, i);
