@@ -44,8 +44,7 @@ pub(crate) fn solve(
             up::up_robust(&obs, sigma_eff, params.iterations).ok_or(FailCause::NoUp)?
         }
     };
-    acceptable(&sol, params, !levels.is_empty())?;
-    Ok(sol)
+    acceptable(&sol, params, !levels.is_empty()).map(|()| sol)
 }
 
 /// The robust estimator's observations: wall patches over three or more scans (a plane

@@ -13,11 +13,7 @@ use super::*;
 pub(crate) fn opaque(grid: &PoseGrid, fit: &PlaneFit, s: f64, params: &LevelParams) -> bool {
     let model = LevelModel::new(fit, s);
     // Away from the scanner, which sits at the robot frame's origin.
-    let normal = if fit.normal.dot(&fit.centroid.coords) < 0.0 {
-        -fit.normal
-    } else {
-        fit.normal
-    };
+    let normal = fit.normal * fit.normal.dot(&fit.centroid.coords).signum();
     let beyond = grid
         .points
         .iter()

@@ -34,10 +34,10 @@ pub(crate) fn without_standing_rows(
             .copied()
             .filter(|&i| !drop.contains(&grid.row(i)))
             .partition(|&i| grid.row(i) == edge);
-        let Some(fit) = grid.accumulate(&others).fit(s) else {
-            continue;
+        let off = |fit: PlaneFit| {
+            line_offset_sigmas(grid, &line, &fit, s, params.min_sigma) > params.refine_k
         };
-        if line_offset_sigmas(grid, &line, &fit, s, params.min_sigma) > params.refine_k {
+        if grid.accumulate(&others).fit(s).is_some_and(off) {
             drop.push(edge);
         }
     }
