@@ -206,11 +206,13 @@ pub(crate) fn fit_line(
 ) -> Option<(LevelLine, Vec<usize>)> {
     let min_points = min_points.max(3);
     let ms2 = params.min_sigma * params.min_sigma;
+    // Valid points only (all are, as the callers pick them), so that `pts` below runs with `idx`.
+    idx.retain(|&i| grid.points[i].is_some());
     for round in 0..LINE_ROUNDS {
         if idx.len() < min_points {
             return None;
         }
-        let pts: Vec<(nalgebra::Point3<f64>, Vector3<f64>)> = idx
+        let pts: Vec<(Point3<f64>, Vector3<f64>)> = idx
             .iter()
             .filter_map(|&i| grid.points[i].as_ref().map(|g| (g.p, g.dir)))
             .collect();
@@ -218,7 +220,7 @@ pub(crate) fn fit_line(
         // Across the line: vertical-ish and horizontal-ish unit directions.
         let v1 = (up - line.dir * line.dir.dot(up)).try_normalize(1e-12)?;
         let v2 = line.dir.cross(&v1);
-        let z2 = |p: &nalgebra::Point3<f64>, d: &Vector3<f64>| {
+        let z2 = |p: &Point3<f64>, d: &Vector3<f64>| {
             let r = p - line.centroid;
             let r = r - line.dir * line.dir.dot(&r);
             let a = r.dot(&v1).powi(2) / (s * s * d.dot(&v1).powi(2) + ms2);
@@ -226,34 +228,25 @@ pub(crate) fn fit_line(
             (a, b)
         };
         let k2 = params.refine_k * params.refine_k;
-        let kept: Vec<usize> = idx
-            .iter()
-            .copied()
-            .filter(|&i| {
-                grid.points[i].as_ref().is_some_and(|g| {
-                    let (a, b) = z2(&g.p, &g.dir);
-                    a <= k2 && b <= k2
-                })
-            })
+        let z: Vec<(f64, f64)> = pts.iter().map(|(p, d)| z2(p, d)).collect();
+        let kept: Vec<usize> = (0..idx.len())
+            .filter(|&k| z[k].0 <= k2 && z[k].1 <= k2)
+            .map(|k| idx[k])
             .collect();
         if kept.len() == idx.len() || round + 1 == LINE_ROUNDS {
             // Points still going after the last round: no line. (All kept, they are the
             // `min_points` or more checked above.)
-            let chi2 = || pts.iter().map(|(p, d)| z2(p, d)).map(|(a, b)| a + b).sum();
-            if kept.len() < idx.len() || line_misfits(chi2(), pts.len(), params) {
+            let chi2 = z.iter().map(|(a, b)| a + b).sum();
+            if kept.len() < idx.len() || line_misfits(chi2, pts.len(), params) {
                 return None;
             }
             // A floor line is level in the provisional frame, within that frame's
             // uncertainty and its own: a wall's line that passes near the floor's height
             // (a scan meeting a far wall near its foot) slopes, and taken as level it pulled
             // poses 6-7 degrees off with sigmas under one degree.
-            if let Some(sigma_up) = sigma_up {
-                let slope = line.dir.dot(up);
-                if slope * slope > k2 * (line.variance_along(&v1, s) + sigma_up * sigma_up) {
-                    return None;
-                }
-            }
-            return Some((line, idx));
+            let slope = line.dir.dot(up);
+            let sloping = |su: f64| slope * slope > k2 * (line.variance_along(&v1, s) + su * su);
+            return (!sigma_up.is_some_and(sloping)).then_some((line, idx));
         }
         idx = kept;
     }
