@@ -151,9 +151,8 @@ impl PoseGrid {
     /// The plane sums of the valid points among `members` (grid indices), in their order.
     pub(crate) fn accumulate(&self, members: &[usize]) -> PlaneAccumulator {
         let mut acc = PlaneAccumulator::default();
-        for g in members.iter().filter_map(|&i| self.points[i].as_ref()) {
-            acc.add(g);
-        }
+        let points = members.iter().filter_map(|&i| self.points[i].as_ref());
+        points.for_each(|g| acc.add(g));
         acc
     }
 

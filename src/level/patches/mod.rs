@@ -193,9 +193,7 @@ impl Growth<'_> {
         self.flood(id, labels, members, &mut acc, &mut fit);
         let made = self.release_and_make(members, &acc, |i| labels[i] = UNLABELLED);
         if made.is_none() {
-            for &i in members.iter() {
-                labels[i] = UNLABELLED;
-            }
+            members.iter().for_each(|&i| labels[i] = UNLABELLED);
         }
         made
     }

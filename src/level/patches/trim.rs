@@ -195,16 +195,13 @@ pub(super) fn without_front_row_ends(
         dropped |= left + right > 0;
         start += len;
     }
-    if !dropped {
-        return None;
-    }
-    Some(
+    let kept = || {
         members
             .iter()
             .zip(&keep)
             .filter_map(|(&i, &k)| k.then_some(i))
-            .collect(),
-    )
+    };
+    dropped.then(|| kept().collect())
 }
 
 /// Length of the leading run of `residuals` whose sum (with their variances) stands out most in

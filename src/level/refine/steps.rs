@@ -135,12 +135,10 @@ pub(crate) fn flat_points(f: &Frame) -> Vec<bool> {
         }
     };
     let pairs = row_pairs(grid, pair);
-    (0..grid.points.len())
-        .map(|i| {
-            let (below, above) = row_steps(grid, &pairs, i);
-            below != Some(false)
-                && above != Some(false)
-                && (below == Some(true) || above == Some(true))
-        })
-        .collect()
+    // Flat to a neighbour, and steep to none.
+    let flat = |i| {
+        let steps = row_steps(grid, &pairs, i);
+        matches!(steps, (Some(true), None | Some(true)) | (None, Some(true)))
+    };
+    (0..grid.points.len()).map(flat).collect()
 }
