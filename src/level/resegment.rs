@@ -108,11 +108,8 @@ pub fn refine_estimate(
         Ok(sol) => vec![*sol],
         Err(_) => blind_starts(est, grid, levels, &steps, params),
     };
-    let walls: Vec<&Patch> = est
-        .patches
-        .iter()
-        .filter(|p| p.kind == SurfaceKind::Wall)
-        .collect();
+    let wall = |p: &Patch| (p.kind == SurfaceKind::Wall).then_some(p.fit);
+    let walls: Vec<PlaneFit> = est.patches.iter().filter_map(wall).collect();
     let mut refined: Vec<(UpSolution, refine::Refined)> = starts
         .into_iter()
         .filter(|start| start_tight_enough(start, params))

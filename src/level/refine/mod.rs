@@ -21,7 +21,6 @@
 
 use super::checks::{self, clear_of_scanner};
 use super::grid::{GridPoint, PlaneFit, PoseGrid};
-use super::patches::Patch;
 use super::up::{self, LevelLine, PlaneObs, UpSolution};
 use super::{LevelParams, SurfaceKind};
 use crate::geometry::Attitude;
@@ -126,12 +125,12 @@ fn line_of(fit: &PlaneFit, level_from_robot: &Rotation3<f64>) -> Option<Line> {
 }
 
 /// Refines up from a provisional solution by re-segmenting the grid in its level frame.
-/// `walls` are the wall patches of region growing (the first walls to assign points to); the
-/// floor and ceiling are found afresh. `None` when the refined model does not fix up.
+/// `walls` are the planes of region growing's wall patches (the first walls to assign points
+/// to); the floor and ceiling are found afresh. `None` when the refined model does not fix up.
 pub(crate) fn refine(
     grid: &PoseGrid,
     start: &UpSolution,
-    walls: &[&Patch],
+    walls: &[PlaneFit],
     steps: &LevelSteps,
     params: &LevelParams,
     sigma: f64,
@@ -140,7 +139,7 @@ pub(crate) fn refine(
     let mut up = start.up;
     let mut sigma_up = sigma_up_of(start, params);
     // Wall planes to assign from, robot frame.
-    let mut wall_fits: Vec<PlaneFit> = walls.iter().map(|p| p.fit).collect();
+    let mut wall_fits = walls.to_vec();
     let mut level_fits: Vec<PlaneFit> = Vec::new();
     let mut result: Option<Refined> = None;
     // Walls the region growing missed are looked for as lines in each leveled scan (a small
