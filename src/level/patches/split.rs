@@ -118,17 +118,23 @@ pub fn split_members(
     by_column.sort_by_key(|&i| i % grid.cols);
     let orders = [by_column, by_row];
     // The least two-plane RSS over both orderings, ties to the first ordering and boundary.
-    let Some((rss2, which, cut)) = (0..2)
+    let Some((_, which, cut)) = (0..2)
         .filter_map(|w| best_cut(grid, &orders[w], w == 1, params, sigma).map(|(r, b)| (r, w, b)))
         .min_by(|x, y| x.0.total_cmp(&y.0))
     else {
         return whole;
     };
-    // The cut's parts hold half a patch each over two rows ([`best_cut`]): the F test decides.
-    if !two_planes(fit_all.residual_ss, rss2, members.len(), params) {
+    // The cut's parts hold half a patch each over two rows ([`best_cut`]): the F test of
+    // their own fits decides (the search's sums, one part a difference of two, lose the
+    // digits of a noise-free plane's residuals).
+    let (a, b) = orders[which].split_at(cut);
+    let rss = |m: &[usize]| grid.accumulate(m).fit(sigma).map(|f| f.residual_ss);
+    let (Some(ra), Some(rb)) = (rss(a), rss(b)) else {
+        return whole;
+    };
+    if !two_planes(fit_all.residual_ss, ra + rb, members.len(), params) {
         return whole;
     }
-    let (a, b) = orders[which].split_at(cut);
     let mut out = split_members(grid, a, params, sigma, depth - 1);
     out.extend(split_members(grid, b, params, sigma, depth - 1));
     out
