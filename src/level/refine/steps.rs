@@ -45,15 +45,7 @@ pub fn level_steps(grid: &PoseGrid, params: &LevelParams, sigma: f64) -> LevelSt
         let de = grid.elevation[grid.row(j)] - grid.elevation[grid.row(i)];
         let change = (b.range - a.range) * de.signum() * a.dir.x.signum();
         let bound = 0.5 * (a.range + b.range) * de.abs() + margin;
-        let side = |bound: f64| {
-            if change < -bound {
-                1i8
-            } else if change > bound {
-                -1
-            } else {
-                0
-            }
-        };
+        let side = |bound: f64| (change < -bound) as i8 - (change > bound) as i8;
         Some((side(bound), side(bound.min(LINE_STEP_SIGMAS * two_ranges))))
     });
     // A wall point above or below a floor point steps far to it, but not to its other
