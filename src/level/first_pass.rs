@@ -88,6 +88,9 @@ pub(crate) fn robust_obs<'a>(
 /// floor and ceiling constraints must be real surfaces).
 pub fn level_fits(est: &LevelEstimate, params: &LevelParams) -> Vec<PlaneFit> {
     let used = params.level_surfaces && params.estimator == Estimator::Robust;
+    let level = |p: &&Patch| p.kind != SurfaceKind::Wall && p.fit.n >= params.min_level_points;
+    // Nothing to do (and no steps to take below) without a floor or ceiling patch.
+    let used = used && est.patches.iter().any(|p| level(&p));
     let Some(grid) = est.grid.as_ref().filter(|_| used) else {
         return Vec::new();
     };
@@ -96,13 +99,13 @@ pub fn level_fits(est: &LevelEstimate, params: &LevelParams) -> Vec<PlaneFit> {
     // joining point `i` to the one above it (`refine::row_pairs`).
     let steps = refine::row_pairs(grid, |i, j| {
         let (a, b) = (grid.points[i].as_ref()?, grid.points[j].as_ref()?);
-        let de = grid.elevation[grid.row(j)] - grid.elevation[grid.row(i)];
-        let scale = 0.5 * (a.range + b.range) * de;
+        let r = grid.row(i);
+        let scale = 0.5 * (a.range + b.range) * (grid.elevation[r + 1] - grid.elevation[r]);
         (scale.abs() > 1e-9).then(|| (b.range - a.range) / scale)
     });
     est.patches
         .iter()
-        .filter(|p| p.kind != SurfaceKind::Wall && p.fit.n >= params.min_level_points)
+        .filter(level)
         .filter_map(|p| {
             let kept = level_stepping_members(grid, p, &steps)?;
             let fit = fit_without_steep(grid, &kept, &steps, sigma, params)?;
