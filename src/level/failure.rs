@@ -111,10 +111,8 @@ pub(crate) fn acceptable_within(
     }
     let s = attitude_sigmas(sol, params);
     let max_sigma = max_sigma_deg.to_radians();
-    if !(s[0] <= max_sigma && s[1] <= max_sigma) {
-        return Err(FailCause::SigmaAboveGate);
-    }
-    Ok(())
+    let within = s[0] <= max_sigma && s[1] <= max_sigma;
+    within.then_some(()).ok_or(FailCause::SigmaAboveGate)
 }
 
 /// Whether up lies within `wall_min_angle_deg` of the robot's z axis. Walls, floors and

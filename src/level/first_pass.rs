@@ -44,8 +44,7 @@ pub(crate) fn solve(
             up::up_robust(&obs, sigma_eff, params.iterations).ok_or(FailCause::NoUp)?
         }
     };
-    acceptable(&sol, params, !levels.is_empty())?;
-    Ok(sol)
+    acceptable(&sol, params, !levels.is_empty()).map(|()| sol)
 }
 
 /// The robust estimator's observations: wall patches over three or more scans (a plane
@@ -89,16 +88,27 @@ pub(crate) fn robust_obs<'a>(
 /// floor and ceiling constraints must be real surfaces).
 pub fn level_fits(est: &LevelEstimate, params: &LevelParams) -> Vec<PlaneFit> {
     let used = params.level_surfaces && params.estimator == Estimator::Robust;
+    let level = |p: &&Patch| p.kind != SurfaceKind::Wall && p.fit.n >= params.min_level_points;
+    // Nothing to do (and no steps to take below) without a floor or ceiling patch.
+    let used = used && est.patches.iter().any(|p| level(&p));
     let Some(grid) = est.grid.as_ref().filter(|_| used) else {
         return Vec::new();
     };
     let sigma = est.range_sigma.max(params.min_sigma);
+    // Signed scan-to-scan range steps in units of `r de` (elevation step `de`), pair `i`
+    // joining point `i` to the one above it (`refine::row_pairs`).
+    let steps = refine::row_pairs(grid, |i, j| {
+        let (a, b) = (grid.points[i].as_ref()?, grid.points[j].as_ref()?);
+        let r = grid.row(i);
+        let scale = 0.5 * (a.range + b.range) * (grid.elevation[r + 1] - grid.elevation[r]);
+        (scale.abs() > 1e-9).then(|| (b.range - a.range) / scale)
+    });
     est.patches
         .iter()
-        .filter(|p| p.kind != SurfaceKind::Wall && p.fit.n >= params.min_level_points)
+        .filter(level)
         .filter_map(|p| {
-            let kept = level_stepping_members(grid, p)?;
-            let fit = fit_without_steep(grid, &kept, sigma, params)?;
+            let kept = level_stepping_members(grid, p, &steps)?;
+            let fit = fit_without_steep(grid, &kept, &steps, sigma, params)?;
             level_plane_stands(grid, &fit, sigma, params).then_some(fit)
         })
         .collect()
@@ -121,38 +131,29 @@ pub(crate) fn level_plane_stands(
 
 /// The members of `p` (in its order) whose range steps to the next scan in their column like a
 /// level surface's, in the patch's prevailing direction: by more than `r de` per elevation
-/// step `de` (signed, in units of `r de`), or whose member below does. `None` with fewer than
-/// `MIN_LEVEL_STEPS` steps to judge from.
-fn level_stepping_members(grid: &PoseGrid, p: &Patch) -> Option<Vec<usize>> {
+/// step `de` (`steps`, signed, in units of `r de`), or whose member below does. `None` with
+/// fewer than `MIN_LEVEL_STEPS` steps to judge from.
+fn level_stepping_members(grid: &PoseGrid, p: &Patch, steps: &[Option<f64>]) -> Option<Vec<usize>> {
     let cols = grid.cols;
     // A mask rather than a binary search: `step` asks several times per member.
     let mut in_patch = vec![false; grid.points.len()];
     for &i in &p.members {
         in_patch[i] = true;
     }
-    // Signed scan-to-scan range steps in units of `r de`, keyed by the lower point.
-    let step = |i: usize| -> Option<f64> {
-        let j = i + cols;
-        if j >= grid.points.len() || !in_patch[j] {
-            return None;
-        }
-        let (a, b) = (grid.points[i].as_ref()?, grid.points[j].as_ref()?);
-        let de = grid.elevation[grid.row(j)] - grid.elevation[grid.row(i)];
-        let scale = 0.5 * (a.range + b.range) * de;
-        (scale.abs() > 1e-9).then(|| (b.range - a.range) / scale)
+    // A member's step to the member above it.
+    let step = |i: usize| {
+        steps
+            .get(i)
+            .copied()
+            .flatten()
+            .filter(|_| in_patch[i + cols])
     };
-    // Each member's step once: `kept` below asks for it up to three times per member (and
-    // only for members).
-    let mut step_at = vec![None; grid.points.len()];
-    for &i in &p.members {
-        step_at[i] = step(i);
-    }
-    let mut steps: Vec<f64> = p.members.iter().filter_map(|&i| step_at[i]).collect();
-    if steps.len() < MIN_LEVEL_STEPS {
+    let mut values: Vec<f64> = p.members.iter().filter_map(|&i| step(i)).collect();
+    if values.len() < MIN_LEVEL_STEPS {
         return None;
     }
-    let sign = super::median_of(&mut steps).signum();
-    let levelish = |i: usize| step_at[i].is_some_and(|x| x * sign > 1.0);
+    let sign = super::median_of(&mut values).signum();
+    let levelish = |i: usize| step(i).is_some_and(|x| x * sign > 1.0);
     let kept = |i: usize| {
         let from_below = i >= cols && in_patch[i - cols] && levelish(i - cols);
         levelish(i) || from_below
@@ -160,38 +161,16 @@ fn level_stepping_members(grid: &PoseGrid, p: &Patch) -> Option<Vec<usize>> {
     Some(p.members.iter().copied().filter(|&i| kept(i)).collect())
 }
 
-/// Whether grid point `i`'s range hardly changes to a neighbouring scan's (member or not): it
-/// lies on a steep surface with it. A wall line at the foot of a wall joins a floor patch
-/// through the floor line below it (their step is a floor's), but the wall above it gives it
-/// away.
-fn on_steep(grid: &PoseGrid, i: usize) -> bool {
-    let Some(a) = grid.points[i].as_ref() else {
-        return false;
-    };
-    let (cols, r) = (grid.cols, grid.row(i));
-    [
-        (r > 0).then(|| i - cols),
-        (i + cols < grid.points.len()).then_some(i + cols),
-    ]
-    .into_iter()
-    .flatten()
-    .any(|j| {
-        grid.points[j].as_ref().is_some_and(|b| {
-            let de = grid.elevation[grid.row(j)] - grid.elevation[r];
-            (b.range - a.range).abs() <= 0.5 * (a.range + b.range) * de.abs()
-        })
-    })
-}
-
 /// The plane of the `kept` members, over at least `min_level_points` points and enough scan
 /// lines (`LEVEL_MIN_ROWS_NOISY` from `level_steep_min_sigma` of noise, else 2). From that
 /// noise up (or below it on two scan lines only, where a wall's
 /// line and a floor line still pass for one plane when parallel), a plane that only the
-/// points on a steep surface ([`on_steep`]) make, over a fifth of them, is no floor: a floor
+/// points on a steep surface make, over a fifth of them, is no floor: a floor
 /// line and a wall's line at its foot, coplanar within the noise.
 fn fit_without_steep(
     grid: &PoseGrid,
     kept: &[usize],
+    steps: &[Option<f64>],
     sigma: f64,
     params: &LevelParams,
 ) -> Option<PlaneFit> {
@@ -210,7 +189,15 @@ fn fit_without_steep(
     let mut rows_flat = vec![0usize; grid.rows()];
     for (i, g) in kept_points() {
         all.add(g);
-        if veto && !on_steep(grid, i) {
+        // On a steep surface: its range hardly changes to a neighbouring scan's (member or
+        // not; `steps` in units of `r de`). A wall line at the foot of a wall joins a floor
+        // patch through the floor line below it (their step is a floor's), but the wall above
+        // it gives it away.
+        let on_steep = || {
+            let (below, above) = refine::row_steps(grid, steps, i);
+            [below, above].into_iter().flatten().any(|x| x.abs() <= 1.0)
+        };
+        if veto && !on_steep() {
             flat.add(g);
             rows_flat[grid.row(i)] += 1;
         }

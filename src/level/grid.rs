@@ -6,6 +6,7 @@ use super::eigen3::{UPPER_I, UPPER_J};
 use crate::geometry::{beam_origin, rot_y};
 use crate::scan::Scan;
 use nalgebra::{Point3, Vector3};
+use std::borrow::Cow;
 use std::sync::Arc;
 
 /// One valid reading placed in the robot frame.
@@ -128,16 +129,12 @@ impl PoseGrid {
             return Err(FailCause::InconsistentScans);
         }
         let mut points = Vec::with_capacity(order.len() * cols);
-        // Scans of one pose nearly always share their bearings: one sincos per bearing.
-        let mut trig: Vec<(f64, f64)> = Vec::new();
-        let mut trig_of: Option<&[f64]> = None;
         for &(i, e) in &order {
-            let s = &scans[i];
-            if shared_trig.is_none() && trig_of != Some(&s.theta[..]) {
-                trig = s.theta.iter().map(|t| t.sin_cos()).collect();
-                trig_of = Some(&s.theta[..]);
-            }
-            push_row(&mut points, s, e, shared_trig.unwrap_or(&trig), cols);
+            // Scans of one pose nearly always share their bearings (`shared_trig`); else each
+            // scan's own.
+            let own = || Cow::Owned(scans[i].theta.iter().map(|t| t.sin_cos()).collect());
+            let trig = shared_trig.map_or_else(own, Cow::Borrowed);
+            push_row(&mut points, &scans[i], e, &trig, cols);
         }
         Ok(PoseGrid {
             scan_index: order.iter().map(|o| o.0).collect(),
@@ -154,9 +151,8 @@ impl PoseGrid {
     /// The plane sums of the valid points among `members` (grid indices), in their order.
     pub(crate) fn accumulate(&self, members: &[usize]) -> PlaneAccumulator {
         let mut acc = PlaneAccumulator::default();
-        for g in members.iter().filter_map(|&i| self.points[i].as_ref()) {
-            acc.add(g);
-        }
+        let points = members.iter().filter_map(|&i| self.points[i].as_ref());
+        points.for_each(|g| acc.add(g));
         acc
     }
 

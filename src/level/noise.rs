@@ -116,8 +116,12 @@ pub(crate) fn split_at_median_range<T: Copy>(
 /// The noise from squared standardised residuals (as bits): their trimmed RMS, started from
 /// their MAD's sigma; with that sigma. Reorders `z`.
 fn trimmed_sigma(z: &mut [u64]) -> (f64, f64) {
-    // The residuals are squared: the median's root is the median of their magnitudes.
-    let mad = f64::from_bits(median_bits(z)).sqrt() * MAD_TO_SIGMA;
+    // The residuals are squared: the median's root is the median of their magnitudes. The upper
+    // median (element `len / 2`) as bits: for non-negative, non-NaN numbers the order of the
+    // bit patterns as integers is their numeric order (and `total_cmp`'s), and integer
+    // comparisons are cheaper.
+    let mid = z.len() / 2;
+    let mad = f64::from_bits(*z.select_nth_unstable(mid).1).sqrt() * MAD_TO_SIGMA;
     (trimmed_rms(z.iter().map(|&b| f64::from_bits(b)), mad), mad)
 }
 
@@ -139,14 +143,6 @@ fn trimmed_rms(z2: impl Iterator<Item = f64>, start: f64) -> f64 {
         return start;
     }
     (sum / n as f64).sqrt() / TRUNCATED_RMS_3
-}
-
-/// The upper median (element `len / 2` in sorted order) of non-negative, non-NaN residuals, as
-/// bits. For such numbers the order of the bit patterns as integers is their numeric order (and
-/// `total_cmp`'s), and integer comparisons are cheaper.
-fn median_bits(z: &mut [u64]) -> u64 {
-    let mid = z.len() / 2;
-    *z.select_nth_unstable(mid).1
 }
 
 /// Sines of the bearing differences of a scan: `one[i] = sin(phi_i - phi_{i-1})` and
@@ -205,7 +201,7 @@ fn standardised_residuals(
         let e = sb * u0 + sa * u2 - sab * u1;
         let var = sb * sb * q0 + sa * sa * q2 + sab * sab * q1;
         // Squared, which spares a square root per triple: the median's element and the
-        // trimmed sum come out the same. Non-negative and not NaN (`median_bits`).
+        // trimmed sum come out the same. Non-negative and not NaN (as `trimmed_sigma`'s median needs).
         let z2 = e * e / var;
         if var > 0.0 && z2.is_finite() {
             out.push(z2.to_bits());

@@ -28,21 +28,16 @@ pub(crate) fn resegmented(
     {
         return (first, None);
     }
-    let Some(Resegmented {
-        start,
-        refined,
-        rivals,
-    }) = refine_estimate(est, levels, &first, params)
-    else {
+    let Some(re) = refine_estimate(est, levels, &first, params) else {
         return (first, None);
     };
     // The solution kept and the distance that widens it: the refined one's from the first,
     // or from where it started when it stands alone; else the first's from the refined one.
-    let accepted = refined_solution(est, &refined, &rivals, params);
+    let accepted = refined_solution(est, &re.refined, &re.rivals, params);
     let (kept, widened) = match (accepted, &first) {
         (Some(kept), Ok(first)) => (kept, widened_against_first(&kept, first)),
-        (Some(kept), Err(_)) => (kept, widened_from_start(&kept, &start)),
-        (None, Ok(first)) => (*first, widened_unconfirmed(first, &refined.solution)),
+        (Some(kept), Err(_)) => (kept, widened_from_start(&kept, &re.start)),
+        (None, Ok(first)) => (*first, widened_unconfirmed(first, &re.refined.solution)),
         (None, Err(_)) => return (first, None),
     };
     let result = match widened {
@@ -52,7 +47,7 @@ pub(crate) fn resegmented(
             .map_err(|_| FailCause::ResegmentationDisagrees),
         None => Ok(kept),
     };
-    (result, accepted.map(|_| refined.models))
+    (result, accepted.map(|_| re.refined.models))
 }
 
 /// [`Check::RefineAboveSigma`]: whether the first solution is re-segmented: when it failed,
@@ -113,11 +108,8 @@ pub fn refine_estimate(
         Ok(sol) => vec![*sol],
         Err(_) => blind_starts(est, grid, levels, &steps, params),
     };
-    let walls: Vec<&Patch> = est
-        .patches
-        .iter()
-        .filter(|p| p.kind == SurfaceKind::Wall)
-        .collect();
+    let wall = |p: &Patch| (p.kind == SurfaceKind::Wall).then_some(p.fit);
+    let walls: Vec<PlaneFit> = est.patches.iter().filter_map(wall).collect();
     let mut refined: Vec<(UpSolution, refine::Refined)> = starts
         .into_iter()
         .filter(|start| start_tight_enough(start, params))
@@ -125,11 +117,8 @@ pub fn refine_estimate(
             refine::refine(grid, &start, &walls, &steps, params, sigma).map(|r| (start, r))
         })
         .collect();
-    let (best, _) = refined
-        .iter()
-        .map(|(_, r)| r.solution.max_attitude_sigma())
-        .enumerate()
-        .min_by(|a, b| a.1.total_cmp(&b.1))?;
+    let sigma_of = |k: usize| refined[k].1.solution.max_attitude_sigma();
+    let best = (0..refined.len()).min_by(|&a, &b| sigma_of(a).total_cmp(&sigma_of(b)))?;
     let (start, kept) = refined.swap_remove(best);
     let rivals = refined
         .into_iter()

@@ -57,17 +57,13 @@ impl LevelLine {
         let corrected = scatter - dd * (sigma * sigma * (nf - 1.0) / nf);
         let eig = super::eigen3::sym_eigen3(&corrected);
         let dir = eig.vectors[2].try_normalize(1e-300)?;
-        // Each point's squared position along the line, `t_i^2`.
-        let t2: Vec<f64> = points
-            .iter()
-            .map(|(p, _)| dir.dot(&(p.coords - c)).powi(2))
-            .collect();
-        let spread: f64 = t2.iter().sum();
-        let spread_dd: Matrix3<f64> = points
-            .iter()
-            .zip(&t2)
-            .map(|((_, d), t2)| outer(*d) * *t2)
-            .sum();
+        // Each point's squared position along the line, `t_i^2`, alone and on its ray's `d d^T`.
+        let (mut spread, mut spread_dd) = (0.0, Matrix3::zeros());
+        for (p, d) in points {
+            let t2 = dir.dot(&(p.coords - c)).powi(2);
+            spread += t2;
+            spread_dd += outer(*d) * t2;
+        }
         (spread > 0.0).then_some(LevelLine {
             dir,
             centroid: nalgebra::Point3::from(c),
@@ -162,14 +158,6 @@ impl PlaneObs<'_> {
     fn z2(&self, up: &Vector3<f64>, sigma: f64) -> f64 {
         let (terms, k) = self.terms(up, sigma);
         z2_of(&terms[..k], up)
-    }
-
-    /// The direction this evidence proposes for up on its own, if any: a level plane's normal.
-    fn proposal(&self) -> Option<Vector3<f64>> {
-        match self.evidence {
-            Evidence::Level(f) => Some(f.normal),
-            _ => None,
-        }
     }
 
     /// Its share of the unweighted start matrix: the constrained directions' outer products,
@@ -288,19 +276,20 @@ pub(crate) fn up_robust(planes: &[PlaneObs], sigma: f64, iterations: usize) -> O
     if constraints < 2 {
         return None;
     }
-    let mut candidates: Vec<Vector3<f64>> = planes.iter().filter_map(|p| p.proposal()).collect();
+    // A level plane proposes its normal.
+    let level = |p: &PlaneObs| match p.evidence {
+        Evidence::Level(f) => Some(f.normal),
+        _ => None,
+    };
+    let mut candidates: Vec<Vector3<f64>> = planes.iter().filter_map(level).collect();
     let start: Matrix3<f64> = planes.iter().map(|p| p.start_matrix()).sum();
     candidates.extend(smallest_eigenvector(&start));
     // Walls and level lines: each pair proposes the direction normal to both.
     let singles: Vec<Vector3<f64>> = planes.iter().filter_map(|p| p.single()).collect();
     for (i, a) in singles.iter().enumerate() {
         for b in &singles[i + 1..] {
-            let c = a.cross(b);
             // Nearly parallel normals propose nothing reliable.
-            if c.norm() < PARALLEL_PROPOSAL_SIN {
-                continue;
-            }
-            candidates.push(c.normalize());
+            candidates.extend(a.cross(b).try_normalize(PARALLEL_PROPOSAL_SIN));
         }
     }
     let loss = |up: &Vector3<f64>| -> f64 {
@@ -333,10 +322,7 @@ pub(crate) fn up_robust(planes: &[PlaneObs], sigma: f64, iterations: usize) -> O
         }
     }
     // The result is held to the same limit.
-    if up.z < MAX_TILT.cos() {
-        return None;
-    }
-    Some(solution_at(up, planes, sigma, true))
+    within_max_tilt(&up).then(|| solution_at(up, planes, sigma, true))
 }
 
 /// [`Check::MaxTilt`](super::checks::Check::MaxTilt): whether a unit `up` (`z >= 0`) lies

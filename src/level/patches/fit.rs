@@ -77,17 +77,6 @@ pub(super) fn ray_weighted_fit<'a>(
     acc.fit(sigma)
 }
 
-/// Members in row-major order (`by_row`) or column-major order, ties by grid index, as a
-/// sort by `(row or column, index)` would give: ascending grid index is row-major, and a
-/// stable sort of that by column is column-major.
-pub(super) fn in_order(grid: &PoseGrid, members: &[usize], by_row: bool) -> Vec<usize> {
-    let mut v = ascending(members);
-    if !by_row {
-        v.sort_by_key(|&i| i % grid.cols);
-    }
-    v
-}
-
 /// Distinct grid indices in ascending order: marked in a bitset over their range and read
 /// back word by word, cheaper than a comparison sort for a patch's members (dense in their
 /// range).

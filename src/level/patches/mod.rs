@@ -88,7 +88,6 @@ pub(crate) fn grow_patches(
         grid,
         params,
         sigma,
-        tol: params.grow_k * sigma.max(params.min_sigma),
     };
     let width = seed_cols(grid, params, sigma);
     let wide: Vec<Polygon>;
@@ -156,13 +155,12 @@ fn ordered_seeds<'a>(
         .collect()
 }
 
-/// What growing patches over one grid needs: the grid, the parameters, the range noise as given
-/// and the growing tolerance `grow_k sigma` \[m\].
+/// What growing patches over one grid needs: the grid, the parameters and the range noise as
+/// given.
 struct Growth<'a> {
     grid: &'a PoseGrid,
     params: &'a LevelParams,
     sigma: f64,
-    tol: f64,
 }
 
 impl Growth<'_> {
@@ -177,7 +175,7 @@ impl Growth<'_> {
         labels: &mut [u32],
         members: &mut Vec<usize>,
     ) -> Option<Patch> {
-        let (grid, params, sigma) = (self.grid, self.params, self.sigma);
+        let (grid, sigma) = (self.grid, self.sigma);
         let cols = grid.cols;
         if q.span(cols).any(|i| labels[i] != UNLABELLED) {
             return None;
@@ -193,10 +191,25 @@ impl Growth<'_> {
         }
         let mut fit = acc.fit(sigma)?;
         self.flood(id, labels, members, &mut acc, &mut fit);
-        let s_eff = sigma.max(params.min_sigma);
-        let tol_at = |fit: &PlaneFit, g: &GridPoint| ray_tolerance(fit, g, s_eff, params);
-        // Release members that the final plane does not explain, then refit.
-        fit = acc.fit(sigma).unwrap_or(fit);
+        let made = self.release_and_make(members, &acc, |i| labels[i] = UNLABELLED);
+        if made.is_none() {
+            members.iter().for_each(|&i| labels[i] = UNLABELLED);
+        }
+        made
+    }
+
+    /// The patch of `members` (their sums `acc`) without the members their plane does not
+    /// explain (beyond [`ray_tolerance`]), each of which goes to `release`
+    /// ([`Growth::make_patch`]).
+    fn release_and_make(
+        &self,
+        members: &mut Vec<usize>,
+        acc: &PlaneAccumulator,
+        mut release: impl FnMut(usize),
+    ) -> Option<Patch> {
+        let (grid, params) = (self.grid, self.params);
+        let s_eff = self.sigma.max(params.min_sigma);
+        let fit = acc.fit(self.sigma)?;
         // Few are released: their sums come off the accumulator, rather than the kept ones'
         // being summed again.
         let mut released = PlaneAccumulator::default();
@@ -204,21 +217,14 @@ impl Growth<'_> {
             let Some(g) = grid.points[i].as_ref() else {
                 return false;
             };
-            if fit.distance(&g.p).abs() <= tol_at(&fit, g) {
-                true
-            } else {
+            let kept = fit.distance(&g.p).abs() <= ray_tolerance(&fit, g, s_eff, params);
+            if !kept {
                 released.add(g);
-                labels[i] = UNLABELLED;
-                false
+                release(i);
             }
+            kept
         });
-        let made = self.make_patch(members, acc.minus(&released));
-        if made.is_none() {
-            for &i in members.iter() {
-                labels[i] = UNLABELLED;
-            }
-        }
-        made
+        self.make_patch(members, acc.minus(&released))
     }
 
     /// Patches that are really two planes (grown across a corner or a wall's foot) split into
@@ -232,8 +238,9 @@ impl Growth<'_> {
                 split.push(p);
                 continue;
             }
-            for part in split_members(grid, &p.members, params, sigma, params.split_depth) {
-                split.extend(self.release_and_make(&part));
+            for mut part in split_members(grid, &p.members, params, sigma, params.split_depth) {
+                let acc = grid.accumulate(&part);
+                split.extend(self.release_and_make(&mut part, &acc, |_| {}));
             }
         }
         split

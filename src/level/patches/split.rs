@@ -90,29 +90,6 @@ pub(super) fn bent_across_rows(
     chi2 / dof > 1.0 + params.max_row_bend_sigmas * (2.0 / dof).sqrt()
 }
 
-/// Drops members farther than `tol` from the members' plane, then makes the patch.
-impl Growth<'_> {
-    pub(super) fn release_and_make(&self, members: &[usize]) -> Option<Patch> {
-        let (grid, sigma, tol) = (self.grid, self.sigma, self.tol);
-        let fit = grid.accumulate(members).fit(sigma)?;
-        let mut acc = PlaneAccumulator::default();
-        let kept: Vec<usize> = members
-            .iter()
-            .copied()
-            .filter(|&i| {
-                grid.points[i].as_ref().is_some_and(|g| {
-                    let near = fit.distance(&g.p).abs() <= tol;
-                    if near {
-                        acc.add(g);
-                    }
-                    near
-                })
-            })
-            .collect();
-        self.make_patch(&kept, acc)
-    }
-}
-
 /// Splits a patch's members into planes while two planes explain them significantly better
 /// than one: the best split by column (walls meet at corners, which are column ranges) or by
 /// row (contiguous splits only: freely reassigning points would split one noisy plane into two
@@ -133,7 +110,13 @@ pub fn split_members(
     let Some(fit_all) = grid.accumulate(members).fit(sigma) else {
         return whole;
     };
-    let orders = [false, true].map(|by_row| in_order(grid, members, by_row));
+    // Column-major and row-major, ties by grid index, as a sort by `(column or row, index)`
+    // would give: ascending grid index is row-major, and a stable sort of that by column is
+    // column-major.
+    let by_row = ascending(members);
+    let mut by_column = by_row.clone();
+    by_column.sort_by_key(|&i| i % grid.cols);
+    let orders = [by_column, by_row];
     // The least two-plane RSS over both orderings, ties to the first ordering and boundary.
     let Some((_, which, cut)) = (0..2)
         .filter_map(|w| best_cut(grid, &orders[w], w == 1, params, sigma).map(|(r, b)| (r, w, b)))
@@ -141,8 +124,15 @@ pub fn split_members(
     else {
         return whole;
     };
+    // The cut's parts hold half a patch each over two rows ([`best_cut`]): the F test of
+    // their own fits decides (the search's sums, one part a difference of two, lose the
+    // digits of a noise-free plane's residuals).
     let (a, b) = orders[which].split_at(cut);
-    if !split_significant(grid, fit_all.residual_ss, a, b, params, sigma) {
+    let rss = |m: &[usize]| grid.accumulate(m).fit(sigma).map(|f| f.residual_ss);
+    let (Some(ra), Some(rb)) = (rss(a), rss(b)) else {
+        return whole;
+    };
+    if !two_planes(fit_all.residual_ss, ra + rb, members.len(), params) {
         return whole;
     }
     let mut out = split_members(grid, a, params, sigma, depth - 1);
@@ -151,8 +141,8 @@ pub fn split_members(
 }
 
 /// The cut of one member ordering (`by_row`, else by column) that [`split_members`] takes:
-/// where the key changes and both parts span two rows, the one of least two-plane RSS (ties
-/// to the first), as (RSS, boundary index).
+/// where the key changes and both parts hold half a patch over two rows, the one of least
+/// two-plane RSS (ties to the first), as (RSS, boundary index).
 fn best_cut(
     grid: &PoseGrid,
     sorted: &[usize],
@@ -194,31 +184,6 @@ fn best_cut(
         }
     }
     best
-}
-
-/// Whether parts `a` and `b` of one patch's members (one plane's RSS `rss1`) are two planes:
-/// each at least half a patch over two rows, and the F test of [`split_members`] above
-/// `split_f`.
-fn split_significant(
-    grid: &PoseGrid,
-    rss1: f64,
-    a: &[usize],
-    b: &[usize],
-    params: &LevelParams,
-    sigma: f64,
-) -> bool {
-    let ok = |m: &[usize]| {
-        m.len() >= params.min_patch_points / 2 && m.iter().any(|&i| grid.row(i) != grid.row(m[0]))
-    };
-    if !ok(a) || !ok(b) {
-        return false;
-    }
-    let (Some(fa), Some(fb)) = (grid.accumulate(a).fit(sigma), grid.accumulate(b).fit(sigma))
-    else {
-        return false;
-    };
-    let rss2 = fa.residual_ss + fb.residual_ss;
-    two_planes(rss1, rss2, a.len() + b.len(), params)
 }
 
 /// [`Check::PatchSplitF`](crate::level::checks::Check::PatchSplitF): whether two planes of

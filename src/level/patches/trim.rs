@@ -21,19 +21,14 @@ pub(super) fn trim_edge_rows(
     sigma: f64,
     params: &LevelParams,
 ) -> Option<Vec<usize>> {
-    if params.trim_sigmas <= 0.0 {
-        return None;
-    }
     // Over four rows or more the rest is still a three-row wall. Over three, an edge row
     // standing off leaves no wall to keep: trimmed to two rows, such patches let other,
-    // wrong planes decide some poses at 10 cm; the patch goes (an empty list).
+    // wrong planes decide some poses at 10 cm; the patch goes (an empty list). Over two,
+    // nothing is tested. A plane the noise explains has no row standing off it worth the
+    // test either: a floor line taken in at a wall's foot leaves the whole patch's fit about
+    // half as scattered again.
     let (lo, hi) = rows_span_sorted(members, grid.cols);
-    if hi < lo + 2 {
-        return None;
-    }
-    // A plane the noise explains has no row standing off it worth the test: a floor line
-    // taken in at a wall's foot leaves the whole patch's fit about half as scattered again.
-    if plane_explained(all_fit, sigma, params) {
+    if params.trim_sigmas <= 0.0 || hi < lo + 2 || plane_explained(all_fit, sigma, params) {
         return None;
     }
     // Each row's own sums, so that the other rows' plane is a subtraction away.
@@ -92,10 +87,8 @@ impl EdgeRows<'_> {
         let others = (0..self.per_row.len())
             .filter(|&r| r == row || !(first..=last).contains(&r))
             .fold(*self.all, |acc, r| acc.minus(&self.per_row[r]));
-        if others.n < params.min_patch_points {
-            return false;
-        }
-        let Some(fit) = others.fit(self.sigma) else {
+        let enough = others.n >= params.min_patch_points;
+        let Some(fit) = others.fit(self.sigma).filter(|_| enough) else {
             return false;
         };
         let (mut sum, mut var, mut at, mut n) = (0.0, 0.0, Vector3::zeros(), 0.0);
@@ -202,16 +195,13 @@ pub(super) fn without_front_row_ends(
         dropped |= left + right > 0;
         start += len;
     }
-    if !dropped {
-        return None;
-    }
-    Some(
+    let kept = || {
         members
             .iter()
             .zip(&keep)
             .filter_map(|(&i, &k)| k.then_some(i))
-            .collect(),
-    )
+    };
+    dropped.then(|| kept().collect())
 }
 
 /// Length of the leading run of `residuals` whose sum (with their variances) stands out most in

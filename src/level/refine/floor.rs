@@ -13,11 +13,7 @@ use super::*;
 pub(crate) fn opaque(grid: &PoseGrid, fit: &PlaneFit, s: f64, params: &LevelParams) -> bool {
     let model = LevelModel::new(fit, s);
     // Away from the scanner, which sits at the robot frame's origin.
-    let normal = if fit.normal.dot(&fit.centroid.coords) < 0.0 {
-        -fit.normal
-    } else {
-        fit.normal
-    };
+    let normal = fit.normal * fit.normal.dot(&fit.centroid.coords).signum();
     let beyond = grid
         .points
         .iter()
@@ -74,35 +70,21 @@ impl<'a> LevelModel<'a> {
     }
 }
 
-/// The floor and ceiling planes to assign from in frame `f`: the ones `given` unless `fresh`,
-/// else the densest height among the usable (`ok`) points below (floor) and above (ceiling)
-/// the scanner in the level frame, where at least
+/// The floor and ceiling planes to assign from in frame `f`: the densest height among the
+/// usable (`ok`) points below (floor) and above (ceiling) the scanner in the level frame, where
+/// at least
 /// `min_level_points` points lie within the tolerance of one height ([`height_window`]),
 /// refitted in rounds ([`refit_rounds`]) and kept when level within `refine_max_tilt_deg` of
 /// up, explaining its points and clear of the scanner (sect. 5.3 takes floors and ceilings as
 /// the level constraints).
-pub(crate) fn find_levels(
-    f: &Frame,
-    ok: &[bool],
-    given: &[PlaneFit],
-    fresh: bool,
-) -> Vec<PlaneFit> {
+pub(crate) fn find_levels(f: &Frame, ok: &[bool]) -> Vec<PlaneFit> {
     let (grid, params, up, s) = (f.grid, f.params, &f.up, f.s);
-    let below = |l: &PlaneFit| l.centroid.coords.dot(up) < 0.0;
     let mut out: Vec<PlaneFit> = Vec::new();
     for floor in [true, false] {
-        if !fresh {
-            // Later passes carry what the first found, and look for nothing new.
-            out.extend(given.iter().find(|l| below(l) == floor).copied());
-            continue;
-        }
         let mut zs = height_candidates(&f.lv, floor, |i| ok[i]);
         if !floor {
             // By height, ascending, as for the floor.
             zs = zs.into_iter().rev().map(|(z, i)| (-z, i)).collect();
-        }
-        if zs.len() < params.min_level_points {
-            continue;
         }
         // The most populous window (the lowest such), when it holds `min_level_points`.
         let min_points = params.min_level_points;
@@ -133,14 +115,14 @@ pub(crate) fn height_candidates(
     keep: impl Fn(usize) -> bool,
 ) -> Vec<(f64, usize)> {
     let key = |z: f64| if floor { z } else { -z };
-    let mut zs: Vec<(f64, usize)> =
-        lv.q.iter()
-            .enumerate()
-            .filter_map(|(i, q)| {
-                let (q, _) = q.as_ref()?;
-                (keep(i) && key(q.z) < -MIN_LEVEL_DISTANCE).then_some((key(q.z), i))
-            })
-            .collect();
+    let mut zs: Vec<(f64, usize)> = lv
+        .iter()
+        .enumerate()
+        .filter_map(|(i, q)| {
+            let (q, _) = q.as_ref()?;
+            (keep(i) && key(q.z) < -MIN_LEVEL_DISTANCE).then_some((key(q.z), i))
+        })
+        .collect();
     zs.sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
     zs
 }
@@ -185,10 +167,7 @@ fn refit_rounds(
     s: f64,
 ) -> Option<PlaneFit> {
     for round in 0..LEVEL_ROUNDS {
-        if !level_support(grid, &members, params) {
-            return None;
-        }
-        let f = grid.accumulate(&members).fit(s)?;
+        let f = supported_level_fit(grid, &members, params, s)?;
         if round + 1 == LEVEL_ROUNDS {
             return Some(f);
         }
@@ -211,7 +190,7 @@ fn refit_rounds(
 /// above, when it lies beyond `MIN_LEVEL_DISTANCE` from the scanner on that side.
 pub(crate) fn extreme_height(lv: &Leveled, lowest: bool) -> Option<f64> {
     let sign = if lowest { 1.0 } else { -1.0 };
-    let mut z: Vec<f64> = lv.q.iter().flatten().map(|(q, _)| sign * q.z).collect();
+    let mut z: Vec<f64> = lv.iter().flatten().map(|(q, _)| sign * q.z).collect();
     if z.len() < 50 {
         return None;
     }
@@ -229,7 +208,7 @@ pub(crate) fn level_band<'a>(
     above: bool,
 ) -> impl Iterator<Item = usize> + Clone + 'a {
     let (s, k) = (f.s, f.k);
-    f.lv.q.iter().enumerate().filter_map(move |(i, q)| {
+    f.lv.iter().enumerate().filter_map(move |(i, q)| {
         let (q, d) = q.as_ref()?;
         let lever = q.xy().norm() * f.sigma_up;
         let band = k * (s * s * d.z * d.z + lever * lever).sqrt() + f.params.flat_margin;

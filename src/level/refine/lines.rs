@@ -38,9 +38,6 @@ pub(crate) fn level_lines(
     let (grid, params, s) = (f.grid, f.params, f.s);
     let zs = height_candidates(&f.lv, kind == SurfaceKind::Floor, candidate);
     let min_points = params.level_line_min_points.max(3);
-    if zs.len() < min_points {
-        return LevelEvidence::None;
-    }
     // The outermost window that holds `min_points` and a third as many as the densest (a box
     // top is not the floor); the surface's height key is its middle.
     let Some((lo, hi)) = height_window(f, &zs, |n, most| n >= min_points && 3 * n >= most) else {
@@ -62,7 +59,7 @@ fn rows_at_height(f: &Frame, zs: &[(f64, usize)], height: f64) -> Vec<Vec<usize>
     let (params, s, k) = (f.params, f.s, f.params.refine_k);
     let mut rows: Vec<Vec<usize>> = vec![Vec::new(); f.grid.rows()];
     for &(z, i) in zs {
-        let Some((q, d)) = f.lv.q[i].as_ref() else {
+        let Some((q, d)) = f.lv[i].as_ref() else {
             continue;
         };
         let lever = q.xy().norm() * f.sigma_up;
@@ -104,11 +101,10 @@ fn lines_evidence(
         // One floor's lines always fit one plane; a wall's line just above its foot and a
         // floor line at another bearing are skew (traced: a zigzag wall's foot 10 cm up,
         // taken with a floor line, pulled a pose 8 degrees off with a sigma of 0.4).
-        let Some(plane) = lines_plane(grid, &found, s) else {
-            return LevelEvidence::None;
-        };
-        let skew = skew_lines(&plane.0, s);
-        if let Some(plane) = level_plane(f, plane) {
+        // No plane at all is as bad.
+        let plane = lines_plane(grid, &found, s);
+        let skew = plane.as_ref().is_none_or(|p| skew_lines(&p.0, s));
+        if let Some(plane) = plane.and_then(|p| level_plane(f, p)) {
             return plane;
         }
         if skew {
@@ -154,20 +150,18 @@ pub(crate) fn one_plane(
     s: f64,
     params: &LevelParams,
 ) -> bool {
-    if lines.len() < 3 {
-        return true;
-    }
-    (0..lines.len()).all(|i| {
-        let others: Vec<usize> = lines
-            .iter()
-            .enumerate()
-            .filter(|&(j, _)| j != i)
-            .flat_map(|(_, (_, m))| m.iter().copied())
-            .collect();
-        grid.accumulate(&others).fit(s).is_some_and(|fit| {
-            line_offset_sigmas(grid, &lines[i].1, &fit, s, params.min_sigma) <= params.refine_k
+    lines.len() < 3
+        || (0..lines.len()).all(|i| {
+            let others: Vec<usize> = lines
+                .iter()
+                .enumerate()
+                .filter(|&(j, _)| j != i)
+                .flat_map(|(_, (_, m))| m.iter().copied())
+                .collect();
+            grid.accumulate(&others).fit(s).is_some_and(|fit| {
+                line_offset_sigmas(grid, &lines[i].1, &fit, s, params.min_sigma) <= params.refine_k
+            })
         })
-    })
 }
 
 /// How far, in standard deviations, a line's points lie from a plane on average: the mean
@@ -212,11 +206,13 @@ pub(crate) fn fit_line(
 ) -> Option<(LevelLine, Vec<usize>)> {
     let min_points = min_points.max(3);
     let ms2 = params.min_sigma * params.min_sigma;
+    // Valid points only (all are, as the callers pick them), so that `pts` below runs with `idx`.
+    idx.retain(|&i| grid.points[i].is_some());
     for round in 0..LINE_ROUNDS {
         if idx.len() < min_points {
             return None;
         }
-        let pts: Vec<(nalgebra::Point3<f64>, Vector3<f64>)> = idx
+        let pts: Vec<(Point3<f64>, Vector3<f64>)> = idx
             .iter()
             .filter_map(|&i| grid.points[i].as_ref().map(|g| (g.p, g.dir)))
             .collect();
@@ -224,7 +220,7 @@ pub(crate) fn fit_line(
         // Across the line: vertical-ish and horizontal-ish unit directions.
         let v1 = (up - line.dir * line.dir.dot(up)).try_normalize(1e-12)?;
         let v2 = line.dir.cross(&v1);
-        let z2 = |p: &nalgebra::Point3<f64>, d: &Vector3<f64>| {
+        let z2 = |p: &Point3<f64>, d: &Vector3<f64>| {
             let r = p - line.centroid;
             let r = r - line.dir * line.dir.dot(&r);
             let a = r.dot(&v1).powi(2) / (s * s * d.dot(&v1).powi(2) + ms2);
@@ -232,37 +228,25 @@ pub(crate) fn fit_line(
             (a, b)
         };
         let k2 = params.refine_k * params.refine_k;
-        let kept: Vec<usize> = idx
-            .iter()
-            .copied()
-            .filter(|&i| {
-                grid.points[i].as_ref().is_some_and(|g| {
-                    let (a, b) = z2(&g.p, &g.dir);
-                    a <= k2 && b <= k2
-                })
-            })
+        let z: Vec<(f64, f64)> = pts.iter().map(|(p, d)| z2(p, d)).collect();
+        let kept: Vec<usize> = (0..idx.len())
+            .filter(|&k| z[k].0 <= k2 && z[k].1 <= k2)
+            .map(|k| idx[k])
             .collect();
         if kept.len() == idx.len() || round + 1 == LINE_ROUNDS {
             // Points still going after the last round: no line. (All kept, they are the
             // `min_points` or more checked above.)
-            if kept.len() < idx.len() {
-                return None;
-            }
-            let chi2: f64 = pts.iter().map(|(p, d)| z2(p, d)).map(|(a, b)| a + b).sum();
-            if line_misfits(chi2, pts.len(), params) {
+            let chi2 = z.iter().map(|(a, b)| a + b).sum();
+            if kept.len() < idx.len() || line_misfits(chi2, pts.len(), params) {
                 return None;
             }
             // A floor line is level in the provisional frame, within that frame's
             // uncertainty and its own: a wall's line that passes near the floor's height
             // (a scan meeting a far wall near its foot) slopes, and taken as level it pulled
             // poses 6-7 degrees off with sigmas under one degree.
-            if let Some(sigma_up) = sigma_up {
-                let slope = line.dir.dot(up);
-                if slope * slope > k2 * (line.variance_along(&v1, s) + sigma_up * sigma_up) {
-                    return None;
-                }
-            }
-            return Some((line, idx));
+            let slope = line.dir.dot(up);
+            let sloping = |su: f64| slope * slope > k2 * (line.variance_along(&v1, s) + su * su);
+            return (!sigma_up.is_some_and(sloping)).then_some((line, idx));
         }
         idx = kept;
     }

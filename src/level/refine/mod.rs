@@ -21,7 +21,6 @@
 
 use super::checks::{self, clear_of_scanner};
 use super::grid::{GridPoint, PlaneFit, PoseGrid};
-use super::patches::Patch;
 use super::up::{self, LevelLine, PlaneObs, UpSolution};
 use super::{LevelParams, SurfaceKind};
 use crate::geometry::Attitude;
@@ -45,6 +44,7 @@ pub use ransac::level_start;
 use ransac::*;
 use steps::*;
 pub use steps::{LevelSteps, level_steps};
+pub(crate) use steps::{row_pairs, row_steps};
 pub(crate) use support::supported_rows;
 use support::*;
 use walls::*;
@@ -105,17 +105,11 @@ struct Line {
 }
 
 /// Every valid grid point in the provisional level frame: position and ray direction.
-pub(crate) struct Leveled {
-    q: Vec<Option<(Vector3<f64>, Vector3<f64>)>>,
-}
+pub(crate) type Leveled = Vec<Option<(Vector3<f64>, Vector3<f64>)>>;
 
-impl Leveled {
-    fn new(grid: &PoseGrid, level_from_robot: &Rotation3<f64>) -> Self {
-        let level = |g: &GridPoint| (level_from_robot * g.p.coords, level_from_robot * g.dir);
-        Leveled {
-            q: grid.points.iter().map(|g| g.as_ref().map(level)).collect(),
-        }
-    }
+fn leveled(grid: &PoseGrid, level_from_robot: &Rotation3<f64>) -> Leveled {
+    let level = |g: &GridPoint| (level_from_robot * g.p.coords, level_from_robot * g.dir);
+    grid.points.iter().map(|g| g.as_ref().map(level)).collect()
 }
 
 fn line_of(fit: &PlaneFit, level_from_robot: &Rotation3<f64>) -> Option<Line> {
@@ -131,12 +125,12 @@ fn line_of(fit: &PlaneFit, level_from_robot: &Rotation3<f64>) -> Option<Line> {
 }
 
 /// Refines up from a provisional solution by re-segmenting the grid in its level frame.
-/// `walls` are the wall patches of region growing (the first walls to assign points to); the
-/// floor and ceiling are found afresh. `None` when the refined model does not fix up.
+/// `walls` are the planes of region growing's wall patches (the first walls to assign points
+/// to); the floor and ceiling are found afresh. `None` when the refined model does not fix up.
 pub(crate) fn refine(
     grid: &PoseGrid,
     start: &UpSolution,
-    walls: &[&Patch],
+    walls: &[PlaneFit],
     steps: &LevelSteps,
     params: &LevelParams,
     sigma: f64,
@@ -145,7 +139,7 @@ pub(crate) fn refine(
     let mut up = start.up;
     let mut sigma_up = sigma_up_of(start, params);
     // Wall planes to assign from, robot frame.
-    let mut wall_fits: Vec<PlaneFit> = walls.iter().map(|p| p.fit).collect();
+    let mut wall_fits = walls.to_vec();
     let mut level_fits: Vec<PlaneFit> = Vec::new();
     let mut result: Option<Refined> = None;
     // Walls the region growing missed are looked for as lines in each leveled scan (a small
@@ -158,7 +152,7 @@ pub(crate) fn refine(
             grid,
             params,
             steps,
-            lv: Leveled::new(grid, &level_from_robot),
+            lv: leveled(grid, &level_from_robot),
             level_from_robot,
             up,
             s,
@@ -167,16 +161,17 @@ pub(crate) fn refine(
             sigma_up,
         };
         let level_ok = flat_points(&f);
-        if params.level_surfaces {
+        if params.level_surfaces && pass == 0 {
             // The first pass looks for the floor and ceiling afresh in its level frame (the
-            // region-grown ones can have run up a wall's foot); later passes carry them.
-            level_fits = find_levels(&f, &level_ok, &level_fits, pass == 0);
+            // region-grown ones can have run up a wall's foot); later passes carry them and
+            // look for nothing new.
+            level_fits = find_levels(&f, &level_ok);
         }
         // 2. Points assigned to the floor and ceiling, then to walls; 3. the models refitted.
         let (level_members, near_level) = assign_levels(&f, &level_fits, &level_ok);
         // New walls are looked for once; later passes carry them as models.
-        let mut walls = assign_walls(&f, &wall_fits, &near_level, pass == 0, seed_width);
-        let wall_members = std::mem::take(&mut walls.members);
+        let (walls, wall_members) =
+            assign_walls(&f, &wall_fits, &near_level, pass == 0, seed_width);
         let (mut models, walls_found) = models_of(&f, wall_members, &level_fits, level_members);
         let flat_lines = level_line_evidence(&f, &walls, &mut models);
         let (sol, flat_lines) = solve_models(&f, &models, flat_lines)?;
@@ -277,13 +272,10 @@ fn assign_levels(
     // degrees off vertical, leveled a pose 7 degrees off with a sigma of 1.4). Without such
     // steps the highest points are the tops of walls, which keep them.
     for (lowest, side) in [(true, -1.0), (false, 1.0)] {
-        if level_fits
+        let modelled = level_fits
             .iter()
-            .any(|l| l.centroid.coords.dot(&up) * side > 0.0)
-        {
-            continue;
-        }
-        let Some(height) = extreme_height(lv, lowest) else {
+            .any(|l| l.centroid.coords.dot(&up) * side > 0.0);
+        let Some(height) = (!modelled).then(|| extreme_height(lv, lowest)).flatten() else {
             continue;
         };
         let band = level_band(f, height, lowest);
@@ -303,11 +295,10 @@ pub(crate) fn steps_as_ceiling(band: impl Iterator<Item = usize>, ceiling: &[boo
 
 /// Points assigned to walls: the walls' lines (`wall_fits` in this frame, merged, and with
 /// `discover` the lines found in each leveled scan), the wall candidates (not near a level
-/// surface, not stepping like one), and each line's members.
+/// surface, not stepping like one); with each line's members.
 struct WallAssignment {
     lines: Vec<Line>,
     candidate: Vec<bool>,
-    members: Vec<Vec<usize>>,
     /// Candidates within reach of a line (the floor and ceiling lines keep off them).
     in_reach: Vec<bool>,
 }
@@ -318,7 +309,7 @@ fn assign_walls(
     near_level: &[bool],
     discover: bool,
     seed_width: usize,
-) -> WallAssignment {
+) -> (WallAssignment, Vec<Vec<usize>>) {
     let (grid, lv) = (f.grid, &f.lv);
     // Walls: merge those that are one wall, then assign by horizontal distance.
     let mut lines: Vec<Line> = wall_fits
@@ -326,7 +317,7 @@ fn assign_walls(
         .filter_map(|w| line_of(w, &f.level_from_robot))
         .collect();
     let candidate: Vec<bool> = (0..grid.points.len())
-        .map(|i| lv.q[i].is_some() && !near_level[i] && !f.steps.levelish[i])
+        .map(|i| lv[i].is_some() && !near_level[i] && !f.steps.levelish[i])
         .collect();
     if discover {
         lines.extend(discover_lines(f, &candidate, seed_width));
@@ -336,7 +327,7 @@ fn assign_walls(
     let mut wall_members: Vec<Vec<usize>> = vec![Vec::new(); lines.len()];
     // Candidates within reach of a line (the floor and ceiling lines below keep off them).
     let mut in_reach = vec![false; grid.points.len()];
-    for (i, q) in lv.q.iter().enumerate() {
+    for (i, q) in lv.iter().enumerate() {
         let Some((q, d)) = q else { continue };
         if !candidate[i] {
             continue;
@@ -364,12 +355,12 @@ fn assign_walls(
         }
         wall_members[m].push(i);
     }
-    WallAssignment {
+    let walls = WallAssignment {
         lines,
         candidate,
-        members: wall_members,
         in_reach,
-    }
+    };
+    (walls, wall_members)
 }
 
 /// The refitted models: walls that span `refine_min_rows` scans and stay walls, then the
@@ -382,48 +373,32 @@ fn models_of(
 ) -> (Vec<Model>, usize) {
     let (grid, params, up, s, sigma, k, sigma_up) =
         (f.grid, f.params, f.up, f.s, f.sigma, f.k, f.sigma_up);
-    let mut models: Vec<Model> = Vec::new();
-    for members in wall_members {
-        if !spans_wall_rows(grid, &members, params) {
-            continue;
-        }
-        let Some(fit) = grid.accumulate(&members).fit(sigma) else {
-            continue;
-        };
+    let wall = |members: Vec<usize>| {
+        let fit = spans_wall_rows(grid, &members, params)
+            .then(|| grid.accumulate(&members).fit(sigma))
+            .flatten()?;
         // A wall must stay a wall; what turned towards up was floor after all.
-        if fit.normal.dot(&up).abs() > params.wall_cos() {
-            continue;
-        }
-        models.push(Model {
-            kind: SurfaceKind::Wall,
-            fit,
-            members,
-        });
-    }
+        let kind = SurfaceKind::Wall;
+        (fit.normal.dot(&up).abs() <= params.wall_cos()).then_some(Model { kind, fit, members })
+    };
+    let mut models: Vec<Model> = wall_members.into_iter().filter_map(wall).collect();
     let walls_found = models.len();
-    for (f, members) in level_fits.iter().zip(level_members) {
+    let level = |(f, members): (&PlaneFit, Vec<usize>)| {
         let members = without_standing_rows(grid, members, s, params);
-        if !level_support(grid, &members, params) {
-            continue;
-        }
-        let Some(fit) = grid.accumulate(&members).fit(sigma) else {
-            continue;
-        };
+        let fit = supported_level_fit(grid, &members, params, sigma)?;
         let kind = if f.centroid.coords.dot(&up) < 0.0 {
             SurfaceKind::Floor
         } else {
             SurfaceKind::Ceiling
         };
-        if !checks::refined_level(&fit, &up, s, params)
+        let stands = checks::refined_level(&fit, &up, s, params)
             // Over two scans it must agree with up (one leveled a pose 7 degrees off
             // with a sigma of 0.1); over three, it may overrule a wrong start.
-            || (!three_rows_support(grid, &members) && level_z2(&fit, &up, s, sigma_up) > k * k)
-            || !opaque(grid, &fit, s, params)
-        {
-            continue;
-        }
-        models.push(Model { kind, fit, members });
-    }
+            && (three_rows_support(grid, &members) || level_z2(&fit, &up, s, sigma_up) <= k * k)
+            && opaque(grid, &fit, s, params);
+        stands.then_some(Model { kind, fit, members })
+    };
+    models.extend(level_fits.iter().zip(level_members).filter_map(level));
     (models, walls_found)
 }
 
@@ -452,7 +427,7 @@ fn level_line_evidence(
         for &i in models.iter().flat_map(|m| &m.members) {
             taken[i] = true;
         }
-        for (i, q) in lv.q.iter().enumerate() {
+        for (i, q) in lv.iter().enumerate() {
             let Some((q, d)) = q else { continue };
             if taken[i] {
                 continue;

@@ -18,9 +18,8 @@ pub fn level_start(
     sigma: f64,
 ) -> Option<UpSolution> {
     let s = sigma.max(params.min_sigma);
-    let levelish = &steps.levelish;
     let idx: Vec<usize> = (0..grid.points.len())
-        .filter(|&i| levelish[i] && grid.points[i].is_some())
+        .filter(|&i| steps.levelish[i] && grid.points[i].is_some())
         .collect();
     if idx.len() < params.min_level_points {
         return None;
@@ -28,13 +27,8 @@ pub fn level_start(
     let min_z = MAX_TILT_DEG.to_radians().cos();
     let members = sampled_plane(grid, &idx, &idx, |n| n.z.abs() >= min_z, s, params)?;
     let members = without_standing_rows(grid, members, s, params);
-    if !level_support(grid, &members, params) {
-        return None;
-    }
-    let fit = grid.accumulate(&members).fit(sigma)?;
-    if fit.normal.z.abs() < min_z {
-        return None;
-    }
+    let fit =
+        supported_level_fit(grid, &members, params, sigma).filter(|f| f.normal.z.abs() >= min_z)?;
     let sol = up::up_robust(&[PlaneObs::level(&fit, 1.0)], s, params.iterations)?;
     if !three_rows_support(grid, &members) {
         let loose = Matrix2::identity() * (MAX_SIGMA_UP * MAX_SIGMA_UP);
@@ -84,15 +78,13 @@ pub(crate) fn sampled_plane(
             continue;
         };
         let (u, v) = (pb.p - pa.p, pc.p - pa.p);
-        let cross = u.cross(&v);
         // Nearly collinear triples (one scan line) leave the plane free to turn.
-        if cross.norm() < COLLINEAR_SIN * u.norm() * v.norm() {
+        let normal = u
+            .cross(&v)
+            .try_normalize(COLLINEAR_SIN * u.norm() * v.norm());
+        let Some(normal) = normal.filter(|n| accept(n) && clear_of_scanner(n, &pa.p)) else {
             continue;
-        }
-        let normal = cross.normalize();
-        if !accept(&normal) || !clear_of_scanner(&normal, &pa.p) {
-            continue;
-        }
+        };
         if let Some(count) = count_beating(idx, |i| on(i, &pa.p, &normal), best.map(|b| b.0)) {
             best = Some((count, pa.p, normal));
         }

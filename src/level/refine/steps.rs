@@ -40,20 +40,13 @@ pub fn level_steps(grid: &PoseGrid, params: &LevelParams, sigma: f64) -> LevelSt
     let two_ranges = std::f64::consts::SQRT_2 * sigma.max(params.min_sigma);
     let margin = params.refine_step_k * two_ranges;
     // +1 a floor's step, -1 a ceiling's, 0 neither; beside it the same by sign alone.
-    let pairs = row_pairs(grid, |a, b, i, j| {
+    let pairs = row_pairs(grid, |i, j| {
+        let (a, b) = (grid.points[i].as_ref()?, grid.points[j].as_ref()?);
         let de = grid.elevation[grid.row(j)] - grid.elevation[grid.row(i)];
         let change = (b.range - a.range) * de.signum() * a.dir.x.signum();
         let bound = 0.5 * (a.range + b.range) * de.abs() + margin;
-        let side = |bound: f64| {
-            if change < -bound {
-                1i8
-            } else if change > bound {
-                -1
-            } else {
-                0
-            }
-        };
-        (side(bound), side(bound.min(LINE_STEP_SIGMAS * two_ranges)))
+        let side = |bound: f64| (change < -bound) as i8 - (change > bound) as i8;
+        Some((side(bound), side(bound.min(LINE_STEP_SIGMAS * two_ranges))))
     });
     // A wall point above or below a floor point steps far to it, but not to its other
     // neighbour on the wall: every neighbour must agree. (Each test is its own closure, so
@@ -66,20 +59,16 @@ pub fn level_steps(grid: &PoseGrid, params: &LevelParams, sigma: f64) -> LevelSt
     }
 }
 
-/// `step(a, b, i, j)` for each point `a` (index `i`) and the point `b` (index `j`) above it in
-/// the next row, `None` where either is missing: each column pair of adjacent rows once,
-/// pair `i` joining point `i` to the one above.
+/// `step(i, j)` for each grid index `i` and the index `j` above it in the next row (`None`
+/// where there is no step, as where either point is missing): each column pair of adjacent
+/// rows once, pair `i` joining point `i` to the one above.
 pub(crate) fn row_pairs<T>(
     grid: &PoseGrid,
-    step: impl Fn(&GridPoint, &GridPoint, usize, usize) -> T,
+    step: impl Fn(usize, usize) -> Option<T>,
 ) -> Vec<Option<T>> {
     let cols = grid.cols;
     (0..cols * grid.rows().saturating_sub(1))
-        .map(|i| {
-            let j = i + cols;
-            let (a, b) = (grid.points[i].as_ref()?, grid.points[j].as_ref()?);
-            Some(step(a, b, i, j))
-        })
+        .map(|i| step(i, i + cols))
         .collect()
 }
 
@@ -99,7 +88,11 @@ pub(crate) fn every_row_neighbour<T: Copy>(
 }
 
 /// Point `i`'s steps ([`row_pairs`]) to the rows below and above it, `None` past the grid.
-fn row_steps<T: Copy>(grid: &PoseGrid, pairs: &[Option<T>], i: usize) -> (Option<T>, Option<T>) {
+pub(crate) fn row_steps<T: Copy>(
+    grid: &PoseGrid,
+    pairs: &[Option<T>],
+    i: usize,
+) -> (Option<T>, Option<T>) {
     let r = grid.row(i);
     let below = if r > 0 { pairs[i - grid.cols] } else { None };
     let above = if r + 1 < grid.rows() { pairs[i] } else { None };
@@ -117,11 +110,9 @@ fn row_steps<T: Copy>(grid: &PoseGrid, pairs: &[Option<T>], i: usize) -> (Option
 pub(crate) fn flat_points(f: &Frame) -> Vec<bool> {
     let (grid, lv, s, min_sigma, sigma_up, k) =
         (f.grid, &f.lv, f.s, f.params.min_sigma, f.sigma_up, f.k);
-    let cols = grid.cols;
-    let rows = grid.rows();
     // Some(true) flat, Some(false) steep, None neither or no neighbour.
     let pair = |i: usize, j: usize| -> Option<bool> {
-        let ((a, da), (b, db)) = (lv.q[i].as_ref()?, lv.q[j].as_ref()?);
+        let ((a, da), (b, db)) = (lv[i].as_ref()?, lv[j].as_ref()?);
         let dz2 = (a.z - b.z).powi(2);
         let dxy2 = (a.xy() - b.xy()).norm_squared();
         let var = s * s * (da.z * da.z + db.z * db.z)
@@ -135,15 +126,11 @@ pub(crate) fn flat_points(f: &Frame) -> Vec<bool> {
             None
         }
     };
-    let pairs: Vec<Option<bool>> = (0..cols * rows.saturating_sub(1))
-        .map(|i| pair(i, i + cols))
-        .collect();
-    (0..grid.points.len())
-        .map(|i| {
-            let (below, above) = row_steps(grid, &pairs, i);
-            below != Some(false)
-                && above != Some(false)
-                && (below == Some(true) || above == Some(true))
-        })
-        .collect()
+    let pairs = row_pairs(grid, pair);
+    // Flat to a neighbour, and steep to none.
+    let flat = |i| {
+        let steps = row_steps(grid, &pairs, i);
+        matches!(steps, (Some(true), None | Some(true)) | (None, Some(true)))
+    };
+    (0..grid.points.len()).map(flat).collect()
 }

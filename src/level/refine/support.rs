@@ -34,10 +34,10 @@ pub(crate) fn without_standing_rows(
             .copied()
             .filter(|&i| !drop.contains(&grid.row(i)))
             .partition(|&i| grid.row(i) == edge);
-        let Some(fit) = grid.accumulate(&others).fit(s) else {
-            continue;
+        let off = |fit: PlaneFit| {
+            line_offset_sigmas(grid, &line, &fit, s, params.min_sigma) > params.refine_k
         };
-        if line_offset_sigmas(grid, &line, &fit, s, params.min_sigma) > params.refine_k {
+        if grid.accumulate(&others).fit(s).is_some_and(off) {
             drop.push(edge);
         }
     }
@@ -73,6 +73,20 @@ pub(crate) fn supported_rows(per_row: &[usize], share: f64) -> usize {
 /// the line).
 pub(crate) fn level_support(grid: &PoseGrid, members: &[usize], params: &LevelParams) -> bool {
     members.len() >= params.min_level_points && rows_supported(grid, members, LEVEL_ROW_SHARE) >= 2
+}
+
+/// The plane (at range noise `sigma`) of a floor's or ceiling's `members` that can make one
+/// ([`level_support`]).
+pub(crate) fn supported_level_fit(
+    grid: &PoseGrid,
+    members: &[usize],
+    params: &LevelParams,
+    sigma: f64,
+) -> Option<PlaneFit> {
+    let supported = level_support(grid, members, params);
+    supported
+        .then(|| grid.accumulate(members).fit(sigma))
+        .flatten()
 }
 
 /// Whether a level plane spans three scans. Two scan lines that meet are coplanar whatever

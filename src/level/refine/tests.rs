@@ -54,7 +54,7 @@ fn floor_evidence_within(grid: &PoseGrid, sigma_up: f64) -> LevelEvidence {
         grid,
         params: &params,
         steps: &steps,
-        lv: Leveled::new(grid, &Rotation3::identity()),
+        lv: leveled(grid, &Rotation3::identity()),
         level_from_robot: Rotation3::identity(),
         up: Vector3::z(),
         s: 0.01,

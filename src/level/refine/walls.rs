@@ -15,7 +15,7 @@ pub(crate) fn discover_lines(f: &Frame, candidate: &[bool], width: usize) -> Vec
     let min_points = params.min_patch_points.max(width);
     let k = params.refine_k;
     let point = |i: usize| -> Option<(Vector2<f64>, Vector2<f64>, f64)> {
-        let (q, d) = lv.q[i].as_ref().filter(|_| candidate[i])?;
+        let (q, d) = lv[i].as_ref().filter(|_| candidate[i])?;
         Some((q.xy(), d.xy(), q.z))
     };
     let mut out = Vec::new();
@@ -23,22 +23,15 @@ pub(crate) fn discover_lines(f: &Frame, candidate: &[bool], width: usize) -> Vec
         let row = r * cols;
         let mut c = 0;
         while c + width <= cols {
-            let mut acc = Line2::default();
-            let mut unusable = None;
-            for j in c..c + width {
-                match point(row + j) {
-                    Some((p, d, z)) => acc.add(&p, &d, z),
-                    None => {
-                        unusable = Some(j);
-                        break;
-                    }
-                }
-            }
-            // Every seed over an unusable ray fails: the next one starts past it.
-            if let Some(j) = unusable {
+            let seed = c..c + width;
+            // Every seed over an unusable ray fails: the next one starts past the last one.
+            if let Some(j) = seed.clone().rev().find(|&j| point(row + j).is_none()) {
                 c = j + 1;
                 continue;
             }
+            let mut acc = Line2::default();
+            let seed_points = seed.filter_map(|j| point(row + j));
+            seed_points.for_each(|(p, d, z)| acc.add(&p, &d, z));
             let Some(mut line) = acc
                 .line()
                 .filter(|l| acc.misfit(l, s, params.min_sigma) <= SEED_MISFIT)
@@ -82,27 +75,20 @@ pub(crate) fn discover_lines(f: &Frame, candidate: &[bool], width: usize) -> Vec
 pub(crate) struct Line2 {
     n: usize,
     sum: Vector2<f64>,
-    sxx: f64,
-    sxy: f64,
-    syy: f64,
+    /// Sum of `p p^T` over the points.
+    pp: Matrix2<f64>,
     z: f64,
-    /// Sum of the squared ray directions (for the noise along the normal).
-    dxx: f64,
-    dxy: f64,
-    dyy: f64,
+    /// Sum of `d d^T` over the ray directions (for the noise along the normal).
+    dd: Matrix2<f64>,
 }
 
 impl Line2 {
     pub(crate) fn add(&mut self, p: &Vector2<f64>, d: &Vector2<f64>, z: f64) {
         self.n += 1;
         self.sum += p;
-        self.sxx += p.x * p.x;
-        self.sxy += p.x * p.y;
-        self.syy += p.y * p.y;
+        self.pp += p * p.transpose();
         self.z += z;
-        self.dxx += d.x * d.x;
-        self.dxy += d.x * d.y;
-        self.dyy += d.y * d.y;
+        self.dd += d * d.transpose();
     }
 
     pub(crate) fn line(&self) -> Option<Line> {
@@ -110,7 +96,8 @@ impl Line2 {
             return None;
         }
         let n = self.n as f64;
-        let (c, [a, b, d]) = self.scatter();
+        let (c, m) = self.scatter();
+        let (a, b, d) = (m[(0, 0)], m[(0, 1)], m[(1, 1)]);
         // Minor axis of the 2x2 scatter [[a, b], [b, d]].
         let half = 0.5 * (a - d);
         let root = (half * half + b * b).sqrt();
@@ -131,21 +118,18 @@ impl Line2 {
         })
     }
 
-    /// The centroid, and the scatter about it per point (xx, xy, yy).
-    fn scatter(&self) -> (Vector2<f64>, [f64; 3]) {
-        let n = self.n as f64;
-        let c = self.sum / n;
-        let (xx, xy, yy) = (self.sxx / n, self.sxy / n, self.syy / n);
-        (c, [xx - c.x * c.x, xy - c.x * c.y, yy - c.y * c.y])
+    /// The centroid, and the scatter about it per point.
+    fn scatter(&self) -> (Vector2<f64>, Matrix2<f64>) {
+        let c = self.sum / self.n as f64;
+        (c, self.pp / self.n as f64 - c * c.transpose())
     }
 
     /// Residual variance about `l` over what the noise explains.
     pub(crate) fn misfit(&self, l: &Line, s: f64, min_sigma: f64) -> f64 {
         let n = self.n as f64;
-        let (_, [a, b, d]) = self.scatter();
-        let (u, v) = (l.normal.x, l.normal.y);
-        let scatter = a * u * u + 2.0 * b * u * v + d * v * v;
-        let dn2 = (self.dxx * u * u + 2.0 * self.dxy * u * v + self.dyy * v * v) / n;
+        let (_, m) = self.scatter();
+        let scatter = l.normal.dot(&(m * l.normal));
+        let dn2 = l.normal.dot(&(self.dd * l.normal)) / n;
         let expected = s * s * dn2 + min_sigma * min_sigma;
         scatter * n / (n - 2.0).max(1.0) / expected
     }
