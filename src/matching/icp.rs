@@ -217,18 +217,7 @@ fn icp_solving(
             .count();
         let kept = trimming.trim(&mut pairs, params);
         let kept_pairs = &pairs[..kept];
-        let mut solver = RigidSolver::new();
-        let rotation = pose.theta.sin_cos();
-        for pair in kept_pairs {
-            let w = weight(pair.residual, params) * incidence_weight(pair, rotation, params);
-            match (params.metric, pair.line) {
-                (Metric::PointToLine, Some((n, anchor))) => solver.add_line(n, &pair.p, &anchor, w),
-                _ => solver.add_point(&pair.p, &pair.q, w),
-            }
-        }
-        if let Some(prior) = prior {
-            solver.add_prior(&prior.pose, prior.weight_xy, prior.weight_theta);
-        }
+        let solver = weighted_solver(kept_pairs, &pose, prior, params);
         result.iterations = iteration;
         result.correspondences = kept;
         result.residual =
@@ -266,6 +255,29 @@ fn icp_solving(
         observed,
     );
     Some(result)
+}
+
+/// The solver over the kept pairs associated at `pose`, each with its robust and incidence
+/// weight, and the prior if any.
+fn weighted_solver(
+    kept: &[Pair],
+    pose: &Pose2,
+    prior: Option<PosePrior>,
+    params: &IcpParams,
+) -> RigidSolver {
+    let mut solver = RigidSolver::new();
+    let rotation = pose.theta.sin_cos();
+    for pair in kept {
+        let w = weight(pair.residual, params) * incidence_weight(pair, rotation, params);
+        match (params.metric, pair.line) {
+            (Metric::PointToLine, Some((n, anchor))) => solver.add_line(n, &pair.p, &anchor, w),
+            _ => solver.add_point(&pair.p, &pair.q, w),
+        }
+    }
+    if let Some(prior) = prior {
+        solver.add_prior(&prior.pose, prior.weight_xy, prior.weight_theta);
+    }
+    solver
 }
 
 /// One solve: exact, or remapped (with the pairs' normal scatter's minor axis as the sliding
