@@ -6,7 +6,7 @@
 
 use super::checks::Check;
 use super::up::UpSolution;
-use super::{FailReason, LevelEstimate, LevelParams};
+use super::{FailReason, LevelEstimate, LevelParams, attitude::attitude_sigmas};
 use nalgebra::Vector3;
 
 /// Why a pose could not be leveled, each cause on its own. The output speaks only the
@@ -74,12 +74,6 @@ impl FailCause {
             FailCause::ResegmentationDisagrees => "resegmentation_disagrees",
         }
     }
-}
-
-/// The reported 1-sigma of theta_x and theta_y \[rad\]: the propagated covariance, scaled by
-/// `sigma_inflation`.
-pub(crate) fn attitude_sigmas(sol: &UpSolution, params: &LevelParams) -> [f64; 2] {
-    sol.attitude_sigmas().map(|s| s * params.sigma_inflation)
 }
 
 /// The parallel-walls test: up must be pinned down in both tangent directions.

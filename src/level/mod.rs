@@ -6,8 +6,8 @@
 //! - [`noise`]: the range noise, estimated from the data when not given;
 //! - [`polygons`]: the paper's quads (5.2);
 //! - [`patches`]: quads merged into whole-wall patches by region growing (after sect. 9);
-//! - [`up`]: the up vector (5.3), the paper's estimator and a robust least-squares one, and the
-//!   attitude with its uncertainty (5.4);
+//! - [`up`]: the up vector (5.3), the paper's estimator and a robust least-squares one;
+//! - [`attitude`]: roll and pitch from up, with their uncertainty (5.4);
 //! - [`first_pass`]: up from the first segmentation, with failure detection (5.5) in
 //!   [`failure`];
 //! - [`refine`] and [`resegment`]: re-segmentation in the provisional level frame (after
@@ -17,6 +17,7 @@
 //! and every accept/reject rule in one table, [`checks`].
 
 mod adopt;
+mod attitude;
 #[cfg(test)]
 mod check_tests;
 pub mod checks;

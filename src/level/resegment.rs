@@ -2,8 +2,9 @@
 //! solution is kept and gated, and how the kept solution's covariance is widened when two
 //! readings of the same ranges disagree. The engine is [`refine`](super::refine).
 
+use super::attitude::attitude_sigmas;
 use super::checks::Check;
-use super::failure::{FailCause, acceptable, acceptable_within, attitude_sigmas};
+use super::failure::{FailCause, acceptable, acceptable_within};
 use super::first_pass::robust_obs;
 use super::grid::{PlaneFit, PoseGrid};
 use super::patches::Patch;

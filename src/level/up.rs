@@ -9,7 +9,6 @@
 //!   and Cauchy reweighting of `z_i = (n_i . up) / sd_i` against wrongly extracted planes.
 
 use super::grid::PlaneFit;
-use crate::geometry::Attitude;
 use crate::level::params::up::*;
 use nalgebra::{Matrix2, Matrix3, Vector2, Vector3};
 
@@ -208,43 +207,11 @@ pub struct UpSolution {
 }
 
 impl UpSolution {
-    pub fn attitude(&self) -> Attitude {
-        Attitude::from_up(&self.up)
-    }
-
     /// Its covariance expressed in another tangent `basis` (of a nearby up): `J cov J^T` with
     /// `J[i][j] = basis[i] . self.basis[j]`.
     pub(crate) fn cov_in(&self, basis: &[Vector3<f64>; 2]) -> Matrix2<f64> {
         let j = Matrix2::from_fn(|i, k| basis[i].dot(&self.basis[k]));
         j * self.cov * j.transpose()
-    }
-
-    /// The larger of [`Self::attitude_sigmas`] \[rad\].
-    pub(crate) fn max_attitude_sigma(&self) -> f64 {
-        self.attitude_sigmas().iter().fold(0f64, |a, &b| a.max(b))
-    }
-
-    /// 1-sigma of theta_x and theta_y \[rad\], propagating `cov` through `Attitude::from_up`.
-    pub fn attitude_sigmas(&self) -> [f64; 2] {
-        let h = 1e-6;
-        let mut j = nalgebra::Matrix2::zeros();
-        for k in 0..2 {
-            let a = Attitude::from_up(&(self.up + self.basis[k] * h));
-            let b = Attitude::from_up(&(self.up - self.basis[k] * h));
-            j[(0, k)] = (a.theta_x - b.theta_x) / (2.0 * h);
-            j[(1, k)] = (a.theta_y - b.theta_y) / (2.0 * h);
-        }
-        let c = j * self.cov * j.transpose();
-        // An undetermined direction's infinite variance comes out as NaN through the
-        // Jacobian (0 times infinity); `max` would turn that into a sigma of zero.
-        let sd = |v: f64| {
-            if v.is_nan() {
-                f64::INFINITY
-            } else {
-                v.max(0.0).sqrt()
-            }
-        };
-        [sd(c[(0, 0)]), sd(c[(1, 1)])]
     }
 }
 
@@ -400,6 +367,7 @@ pub(crate) fn solution_at(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::geometry::Attitude;
 
     /// A covariance carried into its own basis is unchanged; into the basis turned a quarter
     /// turn about up, its variances swap.

@@ -14,7 +14,8 @@
 use super::relabel::{Neighbours, relabel};
 use super::{LabelledPoint, MlParams, MlSolution, Surface, refine};
 use crate::geometry::Attitude;
-use crate::level::failure::{attitude_sigmas, within_wall_angle};
+use crate::level::attitude::attitude_sigmas;
+use crate::level::failure::within_wall_angle;
 use crate::level::grid::PoseGrid;
 use crate::level::patches::Patch;
 use crate::level::up::UpSolution;
