@@ -296,7 +296,7 @@ fn write_trajectories(
     let stem = log.name.trim_end_matches(".gz").trim_end_matches(".log");
     for (kind, poses) in [
         ("reference", &log.reference),
-        ("matched", &result.estimate),
+        ("matched", &result.matched_poses),
         ("odometry", &result.odometry_poses),
     ] {
         let mut text = Vec::new();

@@ -52,10 +52,11 @@ pub struct RealResult {
     pub fallbacks: usize,
     /// Scans where the coarse search ran.
     pub coarse: usize,
-    /// The matched and the perturbed-odometry trajectories, one pose per scan (written as TUM
-    /// files beside the tables, for `evo`; not in the JSON).
+    /// The matched trajectory, one pose per scan (written as a TUM file beside the tables, for
+    /// `evo`; not in the JSON).
     #[serde(skip)]
-    pub estimate: Vec<Pose2>,
+    pub matched_poses: Vec<Pose2>,
+    /// The perturbed odometry, likewise.
     #[serde(skip)]
     pub odometry_poses: Vec<Pose2>,
 }
@@ -98,7 +99,7 @@ pub fn evaluate_real(
             .filter(|r| matches!(r.status, MatchStatus::Fallback(_)))
             .count(),
         coarse: reports.iter().filter(|r| r.coarse).count(),
-        estimate,
+        matched_poses: estimate,
         odometry_poses: odo,
     })
 }

@@ -47,8 +47,8 @@ pub struct MatcherParams {
     /// Metascan: the first stage (the scan against the last one that went into the map) only
     /// finds the basin that the map stage then refines, so its ICP stops at this many times
     /// the ICP's convergence thresholds [-]. Default 100 (1 mm and 0.06 degrees at the ICP's
-    /// defaults): on the CARMEN logs 9% (Intel), 15% (ACES), 21% (CSAIL) and 20% (Freiburg 079) fewer
-    /// instructions than 1, drift at 10 m over seeds 1-10 within the seeds' spread
+    /// defaults): on the CARMEN logs 9% (Intel), 15% (ACES), 21% (CSAIL) and 20% (Freiburg
+    /// 079) fewer instructions than 1, drift at 10 m over seeds 1-10 within the seeds' spread
     /// (docs/RESULTS.md). 1 converges both stages alike.
     pub local_tolerance_factor: f64,
     /// Weigh the odometry as a prior in every ICP solve; `None` (the default) trusts the scans
