@@ -139,32 +139,19 @@ fn fit(
     refine(&points, up, &ml).ok()
 }
 
-/// Per valid point (grid indices `index`, ascending), the valid points of its own and the
-/// adjacent scans within `window` bearings of it, itself excluded: where a vertical surface
-/// standing over it shows.
+/// The valid points' neighbourhoods in `grid` (grid indices `index`, ascending), within
+/// `window` bearings: where a vertical surface standing over a point shows.
 fn neighbourhoods(grid: &PoseGrid, index: &[usize], window: usize) -> Neighbours {
     let mut at = vec![None; grid.points.len()];
     for (k, &i) in index.iter().enumerate() {
         at[i] = Some(k);
     }
-    let rows = grid.points.len() / grid.cols.max(1);
-    let mut out = Neighbours {
-        start: Vec::with_capacity(index.len() + 1),
-        near: Vec::with_capacity(index.len() * (3 * (2 * window + 1) - 1)),
-    };
-    out.start.push(0);
-    for &i in index {
-        let (row, col) = (i / grid.cols, i % grid.cols);
-        for r in row.saturating_sub(1)..(row + 2).min(rows) {
-            for c in col.saturating_sub(window)..(col + window + 1).min(grid.cols) {
-                if (r, c) != (row, col) {
-                    out.near.extend(at[r * grid.cols + c]);
-                }
-            }
-        }
-        out.start.push(out.near.len());
+    Neighbours {
+        at,
+        index: index.to_vec(),
+        cols: grid.cols,
+        window,
     }
-    out
 }
 
 /// Per valid point of `all` (grid indices ascending), the surface of the group holding it.

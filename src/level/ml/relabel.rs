@@ -18,16 +18,29 @@ use super::model::{Placement, Plane, Rotations, predict_level};
 use super::{LabelledPoint, MlSolution, Surface};
 use nalgebra::{Vector2, Vector3};
 
-/// Per point, the valid points near it in the grid (its own and the adjacent scans), stored
-/// flat: point `i`'s are `near[start[i]..start[i + 1]]`.
+/// Per point, the valid points near it in the grid: its own and the adjacent scans, within
+/// `window` bearings, itself excluded. Found when asked (only the floor's and ceiling's
+/// points are), in row-major order.
 pub(crate) struct Neighbours {
-    pub start: Vec<usize>,
-    pub near: Vec<usize>,
+    /// Per grid index, the point's index, `None` for an invalid reading.
+    pub at: Vec<Option<usize>>,
+    /// Per point, its grid index.
+    pub index: Vec<usize>,
+    pub cols: usize,
+    pub window: usize,
 }
 
 impl Neighbours {
-    fn of(&self, i: usize) -> &[usize] {
-        &self.near[self.start[i]..self.start[i + 1]]
+    fn of(&self, i: usize) -> impl Iterator<Item = usize> + '_ {
+        let cols = self.cols.max(1);
+        let (rows, w) = (self.at.len() / cols, self.window);
+        let (row, col) = (self.index[i] / cols, self.index[i] % cols);
+        let cells = (row.saturating_sub(1)..(row + 2).min(rows)).flat_map(move |r| {
+            (col.saturating_sub(w)..(col + w + 1).min(cols)).map(move |c| (r, c))
+        });
+        cells
+            .filter(move |&cell| cell != (row, col))
+            .filter_map(move |(r, c)| self.at[r * cols + c])
     }
 }
 
@@ -83,8 +96,7 @@ pub(crate) fn relabel(
         let on = (&points[i], &level[i]);
         if neighbours
             .of(i)
-            .iter()
-            .any(|&j| stands_over(on, (&points[j], &level[j]), k, level_plane))
+            .any(|j| stands_over(on, (&points[j], &level[j]), k, level_plane))
         {
             *l = None;
         }
@@ -179,15 +191,15 @@ fn fitted_surfaces(
             sin_cos: w.azimuth.sin_cos(),
         })
         .collect();
+    // One pass over the points (a wall's stretch is its labelled points' extremes).
+    for (l, label) in level.iter().zip(labels) {
+        let Some(f) = fitted.iter_mut().find(|f| Some(f.surface) == *label) else {
+            continue;
+        };
+        let t = tangent(f.sin_cos, &l.q);
+        f.stretch = (f.stretch.0.min(t), f.stretch.1.max(t));
+    }
     for f in &mut fitted {
-        for (l, _) in level
-            .iter()
-            .zip(labels)
-            .filter(|(_, l)| **l == Some(f.surface))
-        {
-            let t = tangent(f.sin_cos, &l.q);
-            f.stretch = (f.stretch.0.min(t), f.stretch.1.max(t));
-        }
         f.stretch = (f.stretch.0 - margin, f.stretch.1 + margin);
     }
     for (surface, height) in [(Surface::Floor, sol.floor), (Surface::Ceiling, sol.ceiling)] {
