@@ -12,7 +12,8 @@
 //! leveler's answer stands, or the pose fails as before.
 
 use super::relabel::{Neighbours, relabel};
-use super::{LabelledPoint, MlParams, MlSolution, Surface, refine};
+use super::solve::refine_labelled;
+use super::{LabelledPoint, MlParams, MlSolution, Surface};
 use crate::geometry::Attitude;
 use crate::level::attitude::attitude_sigmas;
 use crate::level::failure::within_wall_angle;
@@ -126,17 +127,11 @@ fn fit(
     up: &nalgebra::Vector3<f64>,
     params: &LevelParams,
 ) -> Option<MlSolution> {
-    let points: Vec<LabelledPoint> = all
-        .1
-        .iter()
-        .zip(labels)
-        .filter_map(|(p, l)| l.map(|surface| LabelledPoint { surface, ..*p }))
-        .collect();
     let ml = MlParams {
         approach: false,
         ..params.ml.clone()
     };
-    refine(&points, up, &ml).ok()
+    refine_labelled(&all.1, labels, up, &ml).ok()
 }
 
 /// The valid points' neighbourhoods in `grid` (grid indices `index`, ascending), within

@@ -43,6 +43,19 @@ pub(crate) fn refine(
     up0: &nalgebra::Vector3<f64>,
     params: &MlParams,
 ) -> Result<MlSolution, MlError> {
+    let labels: Vec<Option<Surface>> = points.iter().map(|p| Some(p.surface)).collect();
+    refine_labelled(points, &labels, up0, params)
+}
+
+/// [`refine`] on the points that `labels` gives a surface (their own `surface` ignored), so
+/// that a caller trying several segmentations of the same points need not copy them; the
+/// solution's residuals are indexed by `points`.
+pub(crate) fn refine_labelled(
+    points: &[LabelledPoint],
+    labels: &[Option<Surface>],
+    up0: &nalgebra::Vector3<f64>,
+    params: &MlParams,
+) -> Result<MlSolution, MlError> {
     let good = |p: &LabelledPoint| {
         let finite = p
             .origin
@@ -52,11 +65,13 @@ pub(crate) fn refine(
             .all(|v| v.is_finite());
         finite && p.range.is_finite() && p.range > 0.0 && p.sigma.is_finite() && p.sigma > 0.0
     };
-    if !points.iter().all(good) {
+    let labelled = || points.iter().zip(labels).filter(|(_, l)| l.is_some());
+    if !labelled().all(|(p, _)| good(p)) {
         return Err(MlError::BadPoint);
     }
     let start = Attitude::from_up(up0);
-    let mut state = State::new(points, Vector2::new(start.theta_x, start.theta_y), params);
+    let theta = Vector2::new(start.theta_x, start.theta_y);
+    let mut state = State::new(points, labels, theta, params);
     let parameters = 2 + 2 * state.surfaces.len();
     if state.slot.iter().filter(|s| s.is_some()).count() <= parameters {
         return Err(MlError::TooFewPoints);
@@ -107,17 +122,21 @@ pub(crate) fn refine(
 /// inside the likelihood's basin.
 const APPROACH_TOLERANCE: f64 = 1e-6;
 
-/// The points' indices grouped by surface, the surfaces in their order (a few surfaces, so a
-/// short list searched from the last one found: the points of a surface come in runs).
-fn group_by_surface(points: &[LabelledPoint]) -> Vec<(Surface, Vec<usize>)> {
+/// The labelled points' indices grouped by surface, the surfaces in their order (a few
+/// surfaces, so a short list searched from the last one found: the points of a surface come
+/// in runs).
+fn group_by_surface(labels: &[Option<Surface>]) -> Vec<(Surface, Vec<usize>)> {
     let mut groups: Vec<(Surface, Vec<usize>)> = Vec::new();
     let mut last = 0;
-    for (i, p) in points.iter().enumerate() {
-        if groups.get(last).is_none_or(|g| g.0 != p.surface) {
-            last = match groups.iter().position(|g| g.0 == p.surface) {
+    for (i, surface) in labels.iter().enumerate() {
+        let Some(surface) = *surface else {
+            continue;
+        };
+        if groups.get(last).is_none_or(|g| g.0 != surface) {
+            last = match groups.iter().position(|g| g.0 == surface) {
                 Some(j) => j,
                 None => {
-                    groups.push((p.surface, Vec::new()));
+                    groups.push((surface, Vec::new()));
                     groups.len() - 1
                 }
             };
@@ -131,9 +150,14 @@ fn group_by_surface(points: &[LabelledPoint]) -> Vec<(Surface, Vec<usize>)> {
 impl<'a> State<'a> {
     /// Groups the points by surface (keeping surfaces with enough points whose placement can
     /// be fitted at the starting attitude) and places each surface.
-    fn new(points: &'a [LabelledPoint], theta: Vector2<f64>, params: &MlParams) -> Self {
+    fn new(
+        points: &'a [LabelledPoint],
+        labels: &[Option<Surface>],
+        theta: Vector2<f64>,
+        params: &MlParams,
+    ) -> Self {
         let rot = Rotations::at(&theta);
-        let groups = group_by_surface(points);
+        let groups = group_by_surface(labels);
         let mut slot = vec![None; points.len()];
         let mut surfaces = Vec::new();
         let mut placements = Vec::new();
