@@ -21,8 +21,8 @@ use nalgebra::{Matrix2, Vector2};
 /// The points' grouping by surface and the state being refined.
 struct State<'a> {
     points: &'a [LabelledPoint],
-    /// Per point: its surface's index in `surfaces`, `None` when left out.
-    slot: Vec<Option<usize>>,
+    /// Per kept surface (as `surfaces`), its points' indices, ascending.
+    members: Vec<Vec<usize>>,
     surfaces: Vec<Surface>,
     theta: Vector2<f64>,
     placements: Vec<Placement>,
@@ -73,7 +73,7 @@ pub(crate) fn refine_labelled(
     let theta = Vector2::new(start.theta_x, start.theta_y);
     let mut state = State::new(points, labels, theta, params);
     let parameters = 2 + 2 * state.surfaces.len();
-    if state.slot.iter().filter(|s| s.is_some()).count() <= parameters {
+    if state.members.iter().map(Vec::len).sum::<usize>() <= parameters {
         return Err(MlError::TooFewPoints);
     }
     // From far: least squares on the plane residuals, into the basin; then the likelihood
@@ -158,7 +158,7 @@ impl<'a> State<'a> {
     ) -> Self {
         let rot = Rotations::at(&theta);
         let groups = group_by_surface(labels);
-        let mut slot = vec![None; points.len()];
+        let mut kept = Vec::new();
         let mut surfaces = Vec::new();
         let mut placements = Vec::new();
         for (surface, members) in groups {
@@ -169,9 +169,7 @@ impl<'a> State<'a> {
             let Some(placement) = initial_placement(&pts, surface, &rot) else {
                 continue;
             };
-            for &i in &members {
-                slot[i] = Some(surfaces.len());
-            }
+            kept.push(members);
             surfaces.push(surface);
             placements.push(placement);
         }
@@ -183,7 +181,7 @@ impl<'a> State<'a> {
             residual: Residual::Range,
             rays: Vec::new(),
             last: None,
-            slot,
+            members: kept,
         }
     }
 
@@ -203,29 +201,16 @@ impl<'a> State<'a> {
     fn take_rays(&mut self, min_incidence: f64) {
         self.last = None;
         let frames = self.frames(&self.theta, &self.placements);
-        // Each surface's rays from where its run starts (a counting sort, input order kept).
-        let mut start = vec![0; self.surfaces.len() + 1];
-        for s in self.slot.iter().flatten() {
-            start[s + 1] += 1;
-        }
-        for s in 1..start.len() {
-            start[s] += start[s - 1];
-        }
-        let mut sorted = vec![None; start[self.surfaces.len()]];
-        for (index, (p, s)) in self.points.iter().zip(&self.slot).enumerate() {
-            let Some(slot) = *s else {
-                continue;
-            };
-            let incidence = frames[slot].incidence(&p.dir);
-            let at = start[slot];
-            start[slot] += 1;
-            if incidence < min_incidence {
-                continue;
-            }
-            sorted[at] = Some(Ray::new(index, slot, p, incidence));
-        }
         self.rays.clear();
-        self.rays.extend(sorted.into_iter().flatten());
+        for (slot, members) in self.members.iter().enumerate() {
+            for &index in members {
+                let p = &self.points[index];
+                let incidence = frames[slot].incidence(&p.dir);
+                if incidence >= min_incidence {
+                    self.rays.push(Ray::new(index, slot, p, incidence));
+                }
+            }
+        }
     }
 
     /// The pass at a trial state with threshold `k` into `out`.
@@ -359,12 +344,12 @@ impl<'a> State<'a> {
                 },
             })
             .collect();
-        for (r, s) in residuals.iter().zip(&self.slot) {
-            if let (Some(r), Some(s)) = (r, s) {
-                surfaces[*s].points += 1;
-                surfaces[*s].chi2 += clipped(*r);
-                surfaces[*s].dof += 1.0;
-            }
+        // Over the rays, whose residuals these are (each surface's in ascending order).
+        for ray in &self.rays {
+            let (r, fit) = (residuals[ray.index], &mut surfaces[ray.slot]);
+            fit.points += 1;
+            fit.chi2 += r.map_or(0.0, clipped);
+            fit.dof += 1.0;
         }
         let chi2: f64 = surfaces.iter().map(|s| s.chi2).sum();
         let dof = surfaces.iter().map(|s| s.dof).sum::<f64>() - 2.0;
