@@ -9,7 +9,8 @@
 //! contract and are checked against the rotation matrices in the tests.
 
 use nalgebra::{
-    Isometry3, Matrix3, Point2, Point3, Rotation3, Translation3, UnitQuaternion, Vector2, Vector3,
+    Isometry3, Matrix2, Matrix3, Point2, Point3, Rotation3, Translation3, UnitQuaternion, Vector2,
+    Vector3,
 };
 use serde::{Deserialize, Serialize};
 use std::f64::consts::PI;
@@ -231,6 +232,17 @@ pub fn reading_in_robot(
 /// Smallest angle between two unit vectors' lines, ignoring sign, in radians.
 pub fn angle_between_lines(a: &Vector3<f64>, b: &Vector3<f64>) -> f64 {
     a.dot(b).abs().min(1.0).acos()
+}
+
+/// The unit eigenvector of the smaller eigenvalue of a symmetric 2x2 matrix (a scatter's: the
+/// normal of the total-least-squares line through its points). Shared by the leveler's wall
+/// lines and the scan matcher's local lines.
+pub fn minor_axis_2x2(m: &Matrix2<f64>) -> Vector2<f64> {
+    let (a, b, c) = (m[(0, 0)], 0.5 * (m[(0, 1)] + m[(1, 0)]), m[(1, 1)]);
+    // The major axis is at angle phi = atan2(2b, a - c) / 2; the minor one is perpendicular.
+    let phi = 0.5 * (2.0 * b).atan2(a - c);
+    let (s, co) = phi.sin_cos();
+    Vector2::new(-s, co)
 }
 
 /// Builds `Ry(ry) · Rx(rx)` as a plain matrix, for hot loops.

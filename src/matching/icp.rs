@@ -8,7 +8,8 @@
 
 use super::covariance::Sandwich;
 use super::reference::Target;
-use super::solve::{Remap, Remapped, RigidSolver, minor_axis_2x2, symmetric_eigenvalues_2x2};
+use super::solve::{Remap, Remapped, RigidSolver, symmetric_eigenvalues_2x2};
+use crate::geometry::minor_axis_2x2;
 use crate::geometry::{Pose2, wrap_angle};
 use nalgebra::{Matrix2, Matrix3, Point2, Vector2, Vector3};
 

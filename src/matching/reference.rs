@@ -6,7 +6,8 @@
 //! and the flattest fit wins.
 
 use super::grid::{PointGrid, scan_cell};
-use super::solve::{minor_axis_2x2, symmetric_eigenvalues_2x2};
+use super::solve::symmetric_eigenvalues_2x2;
+use crate::geometry::minor_axis_2x2;
 use nalgebra::{Matrix2, Point2, Vector2};
 
 /// The nearest reference point to a query.

@@ -18,7 +18,7 @@
 //! scan knows along them than the odometry does).
 
 use super::icp::PosePrior;
-use crate::geometry::{Pose2, wrap_angle};
+use crate::geometry::{Pose2, minor_axis_2x2, wrap_angle};
 use nalgebra::{Matrix2, Matrix3, Matrix4, Point2, Vector2, Vector3, Vector4};
 
 /// Accumulates weighted residual rows `n · (R p + t - q)` and solves for `(R, t)`.
@@ -355,15 +355,6 @@ pub(crate) fn symmetric_eigenvalues_2x2(m: &Matrix2<f64>) -> (f64, f64) {
     let mean = 0.5 * (a + c);
     let radius = (0.5 * (a - c)).hypot(b);
     (mean - radius, mean + radius)
-}
-
-/// The unit eigenvector of λ_min of [`symmetric_eigen_2x2`].
-pub(crate) fn minor_axis_2x2(m: &Matrix2<f64>) -> Vector2<f64> {
-    let (a, b, c) = (m[(0, 0)], 0.5 * (m[(0, 1)] + m[(1, 0)]), m[(1, 1)]);
-    // The major axis is at angle phi = atan2(2b, a - c) / 2; the minor one is perpendicular.
-    let phi = 0.5 * (2.0 * b).atan2(a - c);
-    let (s, co) = phi.sin_cos();
-    Vector2::new(-s, co)
 }
 
 #[cfg(test)]
