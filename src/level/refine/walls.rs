@@ -2,6 +2,7 @@
 //! extraction of a planar scan) and lines that are one wall merged.
 
 use super::*;
+use crate::geometry::minor_axis_2x2;
 
 /// New walls in the level frame, found scan by scan: a run of consecutive rays whose points
 /// lie on one 2D line within their noise (along-beam noise projected on the line's normal)
@@ -97,19 +98,7 @@ impl Line2 {
         }
         let n = self.n as f64;
         let (c, m) = self.scatter();
-        let (a, b, d) = (m[(0, 0)], m[(0, 1)], m[(1, 1)]);
-        // Minor axis of the 2x2 scatter [[a, b], [b, d]].
-        let half = 0.5 * (a - d);
-        let root = (half * half + b * b).sqrt();
-        let minor = 0.5 * (a + d) - root;
-        let normal = if b.abs() > 1e-15 {
-            Vector2::new(b, minor - a)
-        } else if a < d {
-            Vector2::new(1.0, 0.0)
-        } else {
-            Vector2::new(0.0, 1.0)
-        }
-        .try_normalize(1e-300)?;
+        let normal = minor_axis_2x2(&m);
         Some(Line {
             normal,
             offset: normal.dot(&c),
