@@ -56,6 +56,7 @@ pub(crate) fn refine_labelled(
     up0: &nalgebra::Vector3<f64>,
     params: &MlParams,
 ) -> Result<MlSolution, MlError> {
+    assert_eq!(points.len(), labels.len(), "one label per point");
     let good = |p: &LabelledPoint| {
         let finite = p
             .origin

@@ -134,6 +134,53 @@ fn covariance_at_the_truth_is_the_bound() {
     }
 }
 
+/// Labels beside the points are the same fit as the labelled points alone: leaving every
+/// third point unlabelled gives bit for bit the answer of refining the others, and the left-out
+/// points get no residual.
+#[test]
+fn labels_beside_the_points_fit_as_the_labelled_points_alone() {
+    let plan = box_plan(7.0, 5.0, 2.6, true);
+    let pts = points(
+        &plan,
+        &pose(2.0, 1.5, 0.4, 9.0 * DEG, -6.0 * DEG),
+        4,
+        0.02,
+        5,
+    );
+    let labels: Vec<Option<Surface>> = pts
+        .iter()
+        .enumerate()
+        .map(|(i, p)| (i % 3 != 0).then_some(p.surface))
+        .collect();
+    let kept: Vec<LabelledPoint> = pts
+        .iter()
+        .zip(&labels)
+        .filter(|(_, l)| l.is_some())
+        .map(|(p, _)| *p)
+        .collect();
+    let params = MlParams::default();
+    let beside = solve::refine_labelled(&pts, &labels, &Vector3::z(), &params).unwrap();
+    let alone = refine(&kept, &Vector3::z(), &params).unwrap();
+    assert_eq!(beside.attitude, alone.attitude);
+    assert_eq!(beside.covariance, alone.covariance);
+    assert_eq!((beside.chi2, beside.dof), (alone.chi2, alone.dof));
+    let beside_kept: Vec<Option<f64>> = beside
+        .residuals
+        .iter()
+        .zip(&labels)
+        .filter(|(_, l)| l.is_some())
+        .map(|(r, _)| *r)
+        .collect();
+    assert_eq!(beside_kept, alone.residuals);
+    let left_out = beside
+        .residuals
+        .iter()
+        .zip(&labels)
+        .filter(|(_, l)| l.is_none());
+    assert!(left_out.clone().count() > 0);
+    assert!(left_out.into_iter().all(|(r, _)| r.is_none()));
+}
+
 /// The residual's derivatives agree with central differences of the residual itself.
 #[test]
 fn jacobians_match_numeric_differences() {
