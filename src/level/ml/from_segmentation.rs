@@ -11,7 +11,7 @@
 //! the leveler's up and sigmas when it passes the same gate. Where the core refuses, the
 //! leveler's answer stands, or the pose fails as before.
 
-use super::relabel::{Neighbours, relabel};
+use super::relabel::{Neighbours, relabel, without_level_edges};
 use super::solve::refine_labelled;
 use super::{LabelledPoint, MlParams, MlSolution, Surface};
 use crate::geometry::Attitude;
@@ -46,23 +46,14 @@ pub(crate) fn finish(
         .enabled
         .then(|| final_estimate(est, scans, &leveler, params))
         .flatten();
-    let leveler_sigmas = attitude_sigmas(&leveler, params);
     let Some(sol) = ml else {
         est.attitude = Some(leveler.attitude());
-        est.sigmas = Some(leveler_sigmas);
+        est.sigmas = Some(attitude_sigmas(&leveler, params));
         est.up = Some(leveler.up);
         return;
     };
-    // Above `max_range_sigma` the core's own sigmas are not honest (docs/ESTIMATOR.md,
-    // section 6): each axis reports the larger of its and the leveler's.
-    let own = sol.sigmas();
-    let sigmas = if est.range_sigma > params.ml.max_range_sigma {
-        [own[0].max(leveler_sigmas[0]), own[1].max(leveler_sigmas[1])]
-    } else {
-        own
-    };
     est.attitude = Some(Attitude::new(sol.attitude[0], sol.attitude[1]));
-    est.sigmas = Some(sigmas);
+    est.sigmas = Some(sol.sigmas());
     est.up = Some(sol.up);
     est.failure = None;
     est.cause = None;
@@ -102,6 +93,14 @@ fn final_estimate(
         (sol, labels) = (refitted, next);
     }
     widen_by(&mut sol, first);
+    if est.range_sigma > params.ml.level_edges_above {
+        let rival = without_level_edges(&labels, &neighbours, params.ml.level_edge_window);
+        if rival != labels {
+            if let Some(without) = fit(&all, &rival, &sol.up, params) {
+                widen_by(&mut sol, without.attitude);
+            }
+        }
+    }
     gate(&sol, start, params).then_some(sol)
 }
 

@@ -81,15 +81,20 @@ pub struct MlParams {
     /// A wall takes points this far beyond the stretch its points cover \[m\]. Default 0.3
     /// (section 5).
     pub relabel_margin: f64,
-    /// The stage's own sigmas are reported only on poses whose range sigma (given or
-    /// estimated) is at most this \[m\]; above it the stage still refines the attitude, but
-    /// each axis reports the larger of its sigma and the leveler's. Default 0.08. With the
-    /// covariance widened to the cluster-robust one (`cluster_rays`), at 5 cm noise 99.1-99.5%
-    /// of errors lie within three sigmas per axis over 33,600 protocol poses, sigma / bound
-    /// 1.21-1.27; at 10 cm its own sigmas held only 98.2-99.4%, from floor points at the foot
-    /// of a wall that no scan sees standing over them, while its errors are a third below the
-    /// leveler's (docs/ESTIMATOR.md, sections 5 and 6).
-    pub max_range_sigma: f64,
+    /// On poses whose range sigma (given or estimated) exceeds this, the covariance also
+    /// takes in the fit without the floor's and ceiling's edges ([`relabel::without_level_edges`])
+    /// as a rival segmentation, by `d d^T / 2` as the relabelled fit's \[m\]. Default 0.08.
+    /// Below it the edges' pull lies within the sigmas (at 5 cm 99.2-100% of errors within three
+    /// sigmas per axis without it; with it sigma / bound rises by 0.06-0.1 for nothing); at
+    /// 10 cm the model's own sigmas held only 97.7-99.85%, from the feet of walls that no scan
+    /// sees standing over the floor, and with the rival 99.1-99.8% at sigma / bound 1.39-1.65,
+    /// where the leveler's padded sigmas reported before were 3.0-3.35 (docs/ESTIMATOR.md,
+    /// section 7).
+    pub level_edges_above: f64,
+    /// A floor or ceiling point with a point of another label (or none) in its own scan
+    /// within this many bearings is an edge ([`relabel::without_level_edges`]) \[rays\]. Default
+    /// 2: 1, 2 and 3 measured alike (section 7), 4 and more drop good floor for little.
+    pub level_edge_window: usize,
     /// A floor (ceiling) point is left out when a point of its own or an adjacent scan within
     /// this many bearings stands over (under) it as on a wall ([`relabel`]) \[rays\]. Default
     /// 1: at 10 cm noise (stage forced on) the floor's and ceiling's points that were wall
@@ -155,7 +160,8 @@ impl Default for MlParams {
             max_shift_sigmas: 2.0,
             relabel_passes: 1,
             relabel_margin: 0.3,
-            max_range_sigma: 0.08,
+            level_edges_above: 0.08,
+            level_edge_window: 2,
             relabel_window: 1,
             approach: true,
             max_iterations: 50,

@@ -171,3 +171,60 @@ fn a_failed_pose_stays_failed_when_the_core_refuses() {
     assert_eq!(refused.failure, off.failure);
     assert_eq!(refused.attitude.is_none(), off.attitude.is_none());
 }
+
+/// At 10 cm of range noise the covariance also takes in the fit without the floor's edges
+/// (`level_edges_above`): the stage's answer stays where it was, its sigmas only widen (by
+/// `d d^T / 2`, positive semi-definite), and on some poses they do. Where the widened answer
+/// fails the gate the leveler's own answer stands.
+#[test]
+fn above_level_edges_above_the_fit_without_the_floors_edges_widens_the_sigmas() {
+    let plan = box_plan(6.0, 4.0, 2.4, false);
+    let noisy = |ml: MlParams| LevelParams {
+        sigma: Some(0.1),
+        ml,
+        ..LevelParams::default()
+    };
+    let without_rival = MlParams {
+        level_edges_above: f64::INFINITY,
+        ..on()
+    };
+    let leveler_alone = MlParams {
+        enabled: false,
+        ..on()
+    };
+    let mut widened = 0;
+    for (i, (x, y, ry, rx)) in [
+        (2.0, 1.5, 8.0, -5.0),
+        (4.0, 2.5, -12.0, 10.0),
+        (3.0, 2.0, 3.0, 6.0),
+        (1.5, 3.0, -6.0, -4.0),
+        (4.5, 1.0, 10.0, 2.0),
+    ]
+    .into_iter()
+    .enumerate()
+    {
+        let truth = Pose {
+            x,
+            y,
+            z: 0.45,
+            rz: 0.3 * i as f64,
+            ry: ry * DEG,
+            rx: rx * DEG,
+        };
+        let seen = scans(&plan, &truth, 4, 0.1);
+        let with = level_pose(&seen, &noisy(on()));
+        let without = level_pose(&seen, &noisy(without_rival.clone()));
+        let (Some(sw), Some(so)) = (with.sigmas, without.sigmas) else {
+            continue;
+        };
+        if with.attitude == without.attitude {
+            assert!(sw[0] >= so[0] && sw[1] >= so[1], "{sw:?} < {so:?}");
+            widened += usize::from(sw != so);
+        } else {
+            let alone = level_pose(&seen, &noisy(leveler_alone.clone()));
+            assert_eq!(with.attitude, alone.attitude);
+            assert_eq!(with.sigmas, alone.sigmas);
+        }
+    }
+    assert!(widened > 0, "no pose widened");
+}

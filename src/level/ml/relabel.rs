@@ -31,6 +31,15 @@ pub(crate) struct Neighbours {
 }
 
 impl Neighbours {
+    /// The valid points of `i`'s own scan within `window` bearings of it, itself excluded.
+    fn along_scan(&self, i: usize, window: usize) -> impl Iterator<Item = usize> + '_ {
+        let cols = self.cols.max(1);
+        let (row, col) = (self.index[i] / cols, self.index[i] % cols);
+        (col.saturating_sub(window)..(col + window + 1).min(cols))
+            .filter(move |&c| c != col)
+            .filter_map(move |c| self.at[row * cols + c])
+    }
+
     fn of(&self, i: usize) -> impl Iterator<Item = usize> + '_ {
         let cols = self.cols.max(1);
         let (rows, w) = (self.at.len() / cols, self.window);
@@ -221,4 +230,84 @@ fn fitted_surfaces(
 /// The coordinate along a wall's line, of azimuth's `(sin a, cos a)`, of a level-frame point.
 fn tangent((s, c): (f64, f64), q: &Vector3<f64>) -> f64 {
     -s * q.x + c * q.y
+}
+
+/// `labels` without the floor's and ceiling's edges: a floor (ceiling) point whose own scan
+/// holds, within `window` bearings, a valid point of another label or of none. That is where
+/// the floor meets another surface along the scan, and at high noise often a wall the model
+/// lacks: the scan that meets a wall only at its foot (no scan sees the wall standing over
+/// the floor there) gives hits a few centimetres up that lie within the floor's noise and
+/// pull it (docs/ESTIMATOR.md, section 7). The fit without them is the rival segmentation
+/// whose distance widens the covariance ([`super::from_segmentation`]).
+pub(crate) fn without_level_edges(
+    labels: &[Option<Surface>],
+    neighbours: &Neighbours,
+    window: usize,
+) -> Vec<Option<Surface>> {
+    let level = |l: &Option<Surface>| matches!(l, Some(Surface::Floor | Surface::Ceiling));
+    labels
+        .iter()
+        .enumerate()
+        .map(|(i, &l)| {
+            let edge = level(&l) && neighbours.along_scan(i, window).any(|j| labels[j] != l);
+            if edge { None } else { l }
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Two scans of 8 bearings (one invalid reading): a floor point loses its label where a
+    /// point of its own scan within the window holds another label or none, and only then;
+    /// walls and unlabelled points keep theirs, and the other scan's points are not looked at.
+    #[test]
+    fn level_edges_are_the_floor_points_next_to_another_label_along_their_scan() {
+        use Surface::{Ceiling, Floor, Wall};
+        let (f, w, c) = (Some(Floor), Some(Wall(0)), Some(Ceiling));
+        // Grid rows: scan 0 = F F F F F W W -, scan 1 = C C C C - F F F (`-` no reading).
+        let grid: [Option<Option<Surface>>; 16] = [
+            Some(f),
+            Some(f),
+            Some(f),
+            Some(f),
+            Some(f),
+            Some(w),
+            Some(w),
+            Some(None),
+            Some(c),
+            Some(c),
+            Some(c),
+            Some(c),
+            None,
+            Some(f),
+            Some(f),
+            Some(f),
+        ];
+        let mut at = vec![None; grid.len()];
+        let (mut index, mut labels) = (Vec::new(), Vec::new());
+        for (g, cell) in grid.iter().enumerate() {
+            if let Some(l) = cell {
+                at[g] = Some(index.len());
+                index.push(g);
+                labels.push(*l);
+            }
+        }
+        let neighbours = Neighbours {
+            at,
+            index,
+            cols: 8,
+            window: 1,
+        };
+        let got = without_level_edges(&labels, &neighbours, 2);
+        // Scan 0: the two floor points within 2 bearings of the wall go; scan 1: the ceiling
+        // and floor meet across an invalid reading, 2 bearings apart.
+        let want = [f, f, f, None, None, w, w, None, c, c, c, None, None, f, f];
+        assert_eq!(got, want);
+        assert_eq!(without_level_edges(&labels, &neighbours, 0), labels);
+        let wide = without_level_edges(&labels, &neighbours, 8);
+        assert!(wide.iter().zip(&labels).all(|(g, l)| g == l || g.is_none()));
+        assert_eq!(wide[5..8], labels[5..8]);
+    }
 }
