@@ -93,7 +93,8 @@ pub struct MlParams {
     pub level_edges_above: f64,
     /// A floor or ceiling point with a point of another label (or none) in its own scan
     /// within this many bearings is an edge ([`relabel::without_level_edges`]) \[rays\]. Default
-    /// 2: 1, 2 and 3 measured alike (section 7), 4 and more drop good floor for little.
+    /// 2: windows 1 and 3 held 98.45% and 98.71% within three sigmas in the worst cell at
+    /// 10 cm, 2 held 99.08% (a few poses apart; section 7).
     pub level_edge_window: usize,
     /// A floor (ceiling) point is left out when a point of its own or an adjacent scan within
     /// this many bearings stands over (under) it as on a wall ([`relabel`]) \[rays\]. Default
