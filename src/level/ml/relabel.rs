@@ -266,7 +266,8 @@ mod tests {
     fn level_edges_are_the_floor_points_next_to_another_label_along_their_scan() {
         use Surface::{Ceiling, Floor, Wall};
         let (f, w, c) = (Some(Floor), Some(Wall(0)), Some(Ceiling));
-        // Grid rows: scan 0 = F F F F F W W -, scan 1 = C C C C - F F F (`-` no reading).
+        // Grid rows: scan 0 = F F F F F W W ., scan 1 = C C C C - F F F (`.` a reading with
+        // no label, `-` no reading).
         let grid: [Option<Option<Surface>>; 16] = [
             Some(f),
             Some(f),
