@@ -11,7 +11,7 @@
 
 mod table;
 
-use crate::geometry::Pose2;
+use crate::geometry::{Pose2, wrap_angle};
 use nalgebra::Point2;
 use std::cmp::Reverse;
 use table::{Offsets, Table};
@@ -147,8 +147,7 @@ fn search(
     factor: i64,
 ) -> (f32, Pose2) {
     let res = params.resolution;
-    let w = (params.window_xy / res).ceil() as i64;
-    let kt = (params.window_theta / params.step_theta).round() as i64;
+    let (w, kt) = window_steps(params);
     let n = s.used.len();
     s.cells.clear();
     s.headings.clear();
@@ -216,6 +215,31 @@ fn search(
     }
     s.ranked = heap.into_vec();
     best
+}
+
+/// The search window's half-widths in steps: translation offsets `-w..=w` cells of
+/// `resolution` per axis, headings `-k..=k` steps of `step_theta`.
+fn window_steps(params: &CorrelativeParams) -> (i64, i64) {
+    (
+        (params.window_xy / params.resolution).ceil() as i64,
+        (params.window_theta / params.step_theta).round() as i64,
+    )
+}
+
+/// Whether `found`, a search's answer around `guess`, lies on its window's edge: at the
+/// outermost translation offset on either axis or the outermost heading. Such a best is not
+/// bracketed (the score may still rise outside the window), so it is no maximum the search
+/// found; an answer inside the window is one. On the CSAIL log a best on the heading edge,
+/// 20 degrees from an odometry that was right, turned the run by 20 degrees for good
+/// (docs/RESULTS.md, 2026-12-06). An axis the window does not search (half-width 0) has no edge.
+pub(crate) fn on_window_edge(found: &Pose2, guess: &Pose2, params: &CorrelativeParams) -> bool {
+    let (w, kt) = window_steps(params);
+    let steps = |d: f64, step: f64| (d / step).round().abs() as i64;
+    let res = params.resolution;
+    let translation =
+        w > 0 && (steps(found.x - guess.x, res) >= w || steps(found.y - guess.y, res) >= w);
+    let heading = kt > 0 && steps(wrap_angle(found.theta - guess.theta), params.step_theta) >= kt;
+    translation || heading
 }
 
 /// `pose.transform_point(p)` with the heading's `sin_cos` taken once for all the points (the
@@ -362,5 +386,58 @@ mod tests {
         assert!((found.y - truth.y).abs() <= 0.05, "{found:?}");
         assert!((found.theta - truth.theta).abs() <= 1.01f64.to_radians());
         assert!(score > 0.5);
+        assert!(!on_window_edge(
+            &found,
+            &Pose2::identity(),
+            &CorrelativeParams::default()
+        ));
+    }
+
+    /// Inside the window the search's best is bracketed; where the truth lies beyond it, the
+    /// best is found on the edge (the score still rising outward) and said to be there, on
+    /// each axis, at any guess heading (the heading's edge across +-180 degrees too).
+    #[test]
+    fn a_best_beyond_the_window_lies_on_its_edge() {
+        let reference: Vec<Point2<f64>> = (0..360)
+            .map(|i| {
+                let a = (i as f64).to_radians();
+                let r = 3.0 + 0.8 * (3.0 * a).sin() + 0.3 * (7.0 * a).cos();
+                Point2::new(r * a.cos(), r * a.sin())
+            })
+            .collect();
+        let params = CorrelativeParams::default();
+        let search = |truth: Pose2, guess: Pose2| {
+            let source: Vec<Point2<f64>> = reference
+                .iter()
+                .map(|p| truth.inverse().transform_point(p))
+                .collect();
+            let (found, _) =
+                correlative_search(&source, &reference, &Point2::origin(), guess, &params).unwrap();
+            on_window_edge(&found, &guess, &params)
+        };
+        for guess_theta in [0.0, 179.5f64.to_radians(), -179.5f64.to_radians()] {
+            let guess = Pose2::new(0.0, 0.0, guess_theta);
+            let at = |dx: f64, dy: f64, dtheta_deg: f64| {
+                Pose2::new(dx, dy, guess_theta + dtheta_deg.to_radians())
+            };
+            assert!(!search(at(0.1, -0.2, 8.0), guess));
+            assert!(search(at(0.0, 0.0, 26.0), guess));
+            assert!(search(at(0.0, 0.0, -26.0), guess));
+            assert!(search(at(0.6, 0.0, 0.0), guess));
+            assert!(search(at(0.0, -0.6, 3.0), guess));
+        }
+        // Exact edges: offsets of whole steps.
+        let g = Pose2::new(1.0, 2.0, 0.5);
+        let edge = |dx: f64, dy: f64, dt: f64| {
+            on_window_edge(&Pose2::new(1.0 + dx, 2.0 + dy, 0.5 + dt), &g, &params)
+        };
+        assert!(edge(0.4, 0.0, 0.0) && edge(0.0, -0.4, 0.0) && edge(0.0, 0.0, params.window_theta));
+        assert!(!edge(0.35, -0.35, params.window_theta - params.step_theta));
+        // A window of no width on an axis has no edge there.
+        let fixed = CorrelativeParams {
+            window_theta: 0.0,
+            ..params
+        };
+        assert!(!on_window_edge(&g, &g, &fixed));
     }
 }

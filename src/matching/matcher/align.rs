@@ -4,7 +4,7 @@
 
 use super::{Coarse, FallbackReason, Matcher};
 use crate::geometry::Pose2;
-use crate::matching::correlative::correlative_search_with;
+use crate::matching::correlative::{correlative_search_with, on_window_edge};
 use crate::matching::degeneracy::{remap_around, slides_as_the_scan_does};
 use crate::matching::icp::{IcpParams, IcpResult, icp_remapped, icp_with_prior};
 use crate::matching::reference::{ScanReference, Target};
@@ -30,6 +30,8 @@ impl Matcher {
                 &self.params.correlative,
             )
             .map(|c| c.0)
+            // A best on the window's edge is no found maximum: no start.
+            .filter(|start| !on_window_edge(start, &g, &self.params.correlative))
         };
         let (result, coarse) = self.align_unchecked(points, reference, guess, icp, coarse_search);
         (result.and_then(|r| self.gate(r, &guess)), coarse)
