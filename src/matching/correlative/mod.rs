@@ -359,16 +359,21 @@ mod tests {
         assert!(s.fine.iter().chain(&s.coarse).all(|&v| v == 0.0));
     }
 
-    #[test]
-    fn finds_a_far_offset_that_icp_would_miss() {
-        // An irregular outline, displaced by 30 cm and 12 degrees.
-        let reference: Vec<Point2<f64>> = (0..360)
+    /// An irregular closed outline around the origin, a point per degree.
+    fn outline() -> Vec<Point2<f64>> {
+        (0..360)
             .map(|i| {
                 let a = (i as f64).to_radians();
                 let r = 3.0 + 0.8 * (3.0 * a).sin() + 0.3 * (7.0 * a).cos();
                 Point2::new(r * a.cos(), r * a.sin())
             })
-            .collect();
+            .collect()
+    }
+
+    #[test]
+    fn finds_a_far_offset_that_icp_would_miss() {
+        // An irregular outline, displaced by 30 cm and 12 degrees.
+        let reference = outline();
         let truth = Pose2::new(0.3, -0.25, 12f64.to_radians());
         let source: Vec<Point2<f64>> = reference
             .iter()
@@ -398,13 +403,7 @@ mod tests {
     /// each axis, at any guess heading (the heading's edge across +-180 degrees too).
     #[test]
     fn a_best_beyond_the_window_lies_on_its_edge() {
-        let reference: Vec<Point2<f64>> = (0..360)
-            .map(|i| {
-                let a = (i as f64).to_radians();
-                let r = 3.0 + 0.8 * (3.0 * a).sin() + 0.3 * (7.0 * a).cos();
-                Point2::new(r * a.cos(), r * a.sin())
-            })
-            .collect();
+        let reference = outline();
         let params = CorrelativeParams::default();
         let search = |truth: Pose2, guess: Pose2| {
             let source: Vec<Point2<f64>> = reference
