@@ -87,10 +87,12 @@ pub struct MatchOptions {
     /// Metascan voxel size (m).
     #[arg(long, default_value_t = MapParams::default().voxel_size)]
     pub voxel_size: f64,
-    /// Coarse search: half-width of the translation window (m).
+    /// Coarse search: half-width of the translation window (m); a best on the window's edge
+    /// is not used, so make it wider than the odometry's error between scans.
     #[arg(long, default_value_t = CorrelativeParams::default().window_xy)]
     pub window_xy: f64,
-    /// Coarse search: half-width of the heading window (deg).
+    /// Coarse search: half-width of the heading window (deg); a best on the window's edge is
+    /// not used, so make it wider than the odometry's error between scans.
     #[arg(long, default_value_t = CorrelativeParams::default().window_theta.to_degrees())]
     pub window_theta: f64,
     /// Fall back to odometry with fewer kept pairs than this.
