@@ -6,10 +6,12 @@
 //! patches whose lines coincide in the level frame are merged as one wall (`refine_merge_deg`, as re-segmentation merges its lines), every floor
 //! patch one `Floor` and every ceiling patch one `Ceiling` (the world has one floor height).
 //! Each grid point becomes a [`LabelledPoint`] with the leveler's range sigma (the ray's own
-//! `readings_sigma` when given). The core starts from the leveler's up; its answer, with the
-//! covariance of its information matrix (inflated only by its own chi-square test), replaces
-//! the leveler's up and sigmas when it passes the same gate. Where the core refuses, the
-//! leveler's answer stands, or the pose fails as before.
+//! `readings_sigma` when given). The core starts from the leveler's up; its answer replaces the
+//! leveler's up and sigmas when it passes the same gate. Its covariance is the information
+//! matrix's (inflated by its own chi-square test, covering the cluster-robust one), widened by
+//! the distance to rival segmentations of the same ranges: the fit before relabelling and,
+//! above `level_edges_above`, the fit without the floor's and ceiling's edges. Where the core
+//! refuses, the leveler's answer stands, or the pose fails as before.
 
 use super::relabel::{Neighbours, relabel, without_level_edges};
 use super::solve::refine_labelled;

@@ -31,25 +31,28 @@ pub(crate) struct Neighbours {
 }
 
 impl Neighbours {
-    /// The valid points of `i`'s own scan within `window` bearings of it, itself excluded.
-    fn along_scan(&self, i: usize, window: usize) -> impl Iterator<Item = usize> + '_ {
+    /// The valid points within `scans` scans and `window` bearings of point `i`, itself
+    /// excluded, in row-major order.
+    fn around(&self, i: usize, scans: usize, window: usize) -> impl Iterator<Item = usize> + '_ {
         let cols = self.cols.max(1);
+        let rows = self.at.len() / cols;
         let (row, col) = (self.index[i] / cols, self.index[i] % cols);
-        (col.saturating_sub(window)..(col + window + 1).min(cols))
-            .filter(move |&c| c != col)
-            .filter_map(move |c| self.at[row * cols + c])
-    }
-
-    fn of(&self, i: usize) -> impl Iterator<Item = usize> + '_ {
-        let cols = self.cols.max(1);
-        let (rows, w) = (self.at.len() / cols, self.window);
-        let (row, col) = (self.index[i] / cols, self.index[i] % cols);
-        let cells = (row.saturating_sub(1)..(row + 2).min(rows)).flat_map(move |r| {
-            (col.saturating_sub(w)..(col + w + 1).min(cols)).map(move |c| (r, c))
+        let cells = (row.saturating_sub(scans)..(row + scans + 1).min(rows)).flat_map(move |r| {
+            (col.saturating_sub(window)..(col + window + 1).min(cols)).map(move |c| (r, c))
         });
         cells
             .filter(move |&cell| cell != (row, col))
             .filter_map(move |(r, c)| self.at[r * cols + c])
+    }
+
+    /// The valid points of `i`'s own scan within `window` bearings of it.
+    fn along_scan(&self, i: usize, window: usize) -> impl Iterator<Item = usize> + '_ {
+        self.around(i, 0, window)
+    }
+
+    /// The valid points of `i`'s own and the adjacent scans within `self.window` bearings.
+    fn of(&self, i: usize) -> impl Iterator<Item = usize> + '_ {
+        self.around(i, 1, self.window)
     }
 }
 
