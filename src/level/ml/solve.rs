@@ -203,6 +203,9 @@ impl<'a> State<'a> {
         self.last = None;
         let frames = self.frames(&self.theta, &self.placements);
         self.rays.clear();
+        // Every member at most: one allocation, where growing by doubling copied the rays
+        // (128 bytes each) about once more.
+        self.rays.reserve(self.members.iter().map(Vec::len).sum());
         for (slot, members) in self.members.iter().enumerate() {
             for &index in members {
                 let p = &self.points[index];
