@@ -439,7 +439,8 @@ proptest! {
     #![proptest_config(ProptestConfig::with_cases(24))]
 
     /// From a level start, noise-free scans of any pose in a room give its attitude back;
-    /// scaling every sigma scales the covariance by its square and moves nothing else.
+    /// scaling every sigma scales the covariance by its square and moves the answer by no
+    /// more than the stopping rule allows.
     #[test]
     fn exact_and_scale_covariant_on_any_pose(
         x in 1.0f64..5.0, y in 1.0f64..3.0, rz in -3.0f64..3.0,
@@ -458,7 +459,13 @@ proptest! {
             let want = 4.0 * sol.covariance[i][j];
             prop_assert!((sol2.covariance[i][j] - want).abs() < 1e-6 * sol.covariance[i][i] * 4.0);
         }
-        prop_assert!((sol2.attitude[0] - sol.attitude[0]).abs() < 1e-10);
+        // Each stops within `step_sigmas` of its own sigma of the optimum (the Newton
+        // decrement's rule, in sigmas): doubled sigmas may stop a step earlier.
+        let step = MlParams::default().step_sigmas;
+        for i in 0..2 {
+            let within = 2.0 * step * sol2.covariance[i][i].sqrt();
+            prop_assert!((sol2.attitude[i] - sol.attitude[i]).abs() <= within);
+        }
     }
 }
 
