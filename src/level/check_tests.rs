@@ -47,6 +47,7 @@ const TESTED: &[Check] = &[
     Check::RefinedClearOfScanner,
     Check::LineMinPoints,
     Check::LineMisfit,
+    Check::LinesAtOneHeight,
     Check::LinesPlaneMisfit,
     Check::CeilingBandSteps,
     Check::MaxTilt,
@@ -559,6 +560,31 @@ fn line_misfit() {
     let (lo, hi) = around(Check::LineMisfit.threshold(&p) * 16.0);
     assert!(!refine::lines::line_misfits(lo, 10, &p));
     assert!(refine::lines::line_misfits(hi, 10, &p));
+}
+
+/// Two floor lines straight above each other (no tilt lever between them): one floor while
+/// their heights differ by less than `refine_k` of their joint noise.
+#[test]
+fn lines_at_one_height() {
+    let p = LevelParams::default();
+    let (s, n) = (0.01, 30);
+    let line = |z: f64| {
+        let pts: Vec<_> = (0..n)
+            .map(|k| Point3::new(2.0, -1.0 + 2.0 * k as f64 / (n - 1) as f64, z))
+            .map(|q| (q, q.coords.normalize()))
+            .collect();
+        refine::FlatLine {
+            line: super::up::LevelLine::fit(&pts, s, p.min_sigma).unwrap(),
+            kind: SurfaceKind::Floor,
+        }
+    };
+    let sd = (2.0 * (s * s / n as f64 + p.min_sigma * p.min_sigma)).sqrt();
+    let (lo, hi) = around(Check::LinesAtOneHeight.threshold(&p) * sd);
+    let level = solution(0.0, 0.001, (1.0, 1.0));
+    let one =
+        |dz: f64| refine::lines::lines_at_one_height(&[line(-0.4), line(-0.4 + dz)], &level, s, &p);
+    assert!(one(lo));
+    assert!(!one(hi));
 }
 
 #[test]

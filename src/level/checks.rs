@@ -153,6 +153,8 @@ checks! {
         "a scan's floor line alone; PLANE_LINE_MIN_POINTS beside a full one (refine::lines::fit_line)";
     LineMisfit: Refine, "1", |p| p.level_line_misfit, Drops("floor or ceiling line"),
         "a line's points' chi2 / dof about it (refine::lines::line_misfits)";
+    LinesAtOneHeight: Refine, "sigma", |p| p.refine_k, Drops("floor or ceiling lines"),
+        "floor lines below the scanner, ceiling lines above, each surface's at one height under the up they give (refine::lines::lines_at_one_height)";
     LinesPlaneMisfit: Refine, "1", |_| refine::LINES_PLANE_MISFIT, Drops("floor or ceiling lines"),
         "several scans' lines, skew when their plane misfits beyond this (refine::lines::skew_lines)";
     CeilingBandSteps: Refine, "points", |_| refine::CEILING_BAND_MIN_STEPS as f64, Drops("ceiling"),

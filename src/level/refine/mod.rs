@@ -80,7 +80,15 @@ pub struct Refined {
     pub models: Vec<Model>,
     /// Lines on the floor or ceiling used where no level plane was found
     /// (`level_lines`).
-    pub lines: Vec<LevelLine>,
+    pub lines: Vec<FlatLine>,
+}
+
+/// A scan's run of floor or ceiling points used as a level line.
+#[derive(Clone, Copy, Debug)]
+pub struct FlatLine {
+    pub line: LevelLine,
+    /// The surface it lies on: the floor or the ceiling.
+    pub kind: SurfaceKind,
 }
 
 impl Refined {
@@ -416,10 +424,10 @@ fn level_line_evidence(
     f: &Frame,
     walls: &WallAssignment,
     models: &mut Vec<Model>,
-) -> Vec<LevelLine> {
+) -> Vec<FlatLine> {
     let (grid, params, steps, lv) = (f.grid, f.params, f.steps, &f.lv);
     let (lines, candidate, in_reach) = (&walls.lines, &walls.candidate, &walls.in_reach);
-    let mut flat_lines: Vec<LevelLine> = Vec::new();
+    let mut flat_lines: Vec<FlatLine> = Vec::new();
     if params.level_surfaces && params.level_lines {
         // Points of a model, or within reach of a wall's vertical plane (a wall line near
         // its foot lies at the floor's height within the provisional frame's tolerance).
@@ -446,7 +454,9 @@ fn level_line_evidence(
             }
             match level_lines(f, kind, |i| levelish[i] && !taken[i]) {
                 LevelEvidence::None => {}
-                LevelEvidence::Lines(found) => flat_lines.extend(found),
+                LevelEvidence::Lines(found) => {
+                    flat_lines.extend(found.into_iter().map(|line| FlatLine { line, kind }))
+                }
                 LevelEvidence::Plane(fit, members) => models.push(Model { kind, fit, members }),
             }
         }
@@ -458,15 +468,23 @@ fn level_line_evidence(
 fn solve_models(
     f: &Frame,
     models: &[Model],
-    mut flat_lines: Vec<LevelLine>,
-) -> Option<(UpSolution, Vec<LevelLine>)> {
+    mut flat_lines: Vec<FlatLine>,
+) -> Option<(UpSolution, Vec<FlatLine>)> {
     let (s, params, inflate) = (f.s, f.params, f.params.level_line_inflation);
     let obs: Vec<PlaneObs> = models
         .iter()
         .map(|m| m.obs(s, params))
-        .chain(flat_lines.iter().map(|l| PlaneObs::level_line(l, inflate)))
+        .chain(
+            flat_lines
+                .iter()
+                .map(|l| PlaneObs::level_line(&l.line, inflate)),
+        )
         .collect();
-    let sol = match up::up_robust(&obs, s, params.iterations) {
+    // Lines that are no one floor and one ceiling under the up they give were wrong too
+    // (`Check::LinesAtOneHeight`).
+    let joint = up::up_robust(&obs, s, params.iterations)
+        .filter(|sol| lines_at_one_height(&flat_lines, sol, s, params));
+    let sol = match joint {
         Some(sol) => sol,
         // Lines that leave no up within reach were wrong: the models stand alone.
         None if !flat_lines.is_empty() => {

@@ -482,3 +482,43 @@ fn merge_lines_joins_pieces_of_one_wall_but_not_a_corner() {
     assert_eq!(x_wall.weight, 150.0);
     assert!((x_wall.offset.abs() - 3.0).abs() < 0.02);
 }
+
+/// A level robot's floor line across its path `x` ahead at height `z`, of 30 points.
+fn flat_line(x: f64, z: f64, kind: SurfaceKind) -> FlatLine {
+    let pts: Vec<_> = across(x, z, 30)
+        .into_iter()
+        .map(|p| (nalgebra::Point3::from(p), p.normalize()))
+        .collect();
+    FlatLine {
+        line: LevelLine::fit(&pts, 0.01, 0.001).unwrap(),
+        kind,
+    }
+}
+
+/// Floor lines of two scans at one height are one floor; a line 0.4 m higher is not, nor
+/// is a "floor" above the scanner or a "ceiling" below it (the traced pose: a wall's run in a
+/// tilted-up scan taken as a second floor line 0.33 m above the scanner).
+#[test]
+fn floor_and_ceiling_lines_lie_at_one_height_on_their_side() {
+    let params = LevelParams::default();
+    let level = crate::level::failure::tests::solution(0.0, 0.2f64.to_radians(), (1.0, 1.0));
+    let floor = |x, z| flat_line(x, z, SurfaceKind::Floor);
+    let agree = |lines: &[FlatLine]| lines_at_one_height(lines, &level, 0.01, &params);
+    assert!(agree(&[floor(1.5, -0.4), floor(2.5, -0.4)]));
+    // Within the noise and the solution's tilt over the 1 m between them: 3 mm.
+    assert!(agree(&[floor(1.5, -0.4), floor(2.5, -0.397)]));
+    assert!(!agree(&[floor(1.5, -0.4), floor(2.5, 0.0)]));
+    assert!(!agree(&[floor(2.2, -0.19), floor(3.8, 0.33)]));
+    assert!(!agree(&[floor(3.8, 0.33)]));
+    assert!(!agree(&[flat_line(2.0, -0.4, SurfaceKind::Ceiling)]));
+    // A floor and a ceiling are two surfaces: each at its own height.
+    assert!(agree(&[
+        floor(1.5, -0.4),
+        flat_line(2.0, 2.1, SurfaceKind::Ceiling)
+    ]));
+    // A wider solution takes in more: 1.5 degrees over the 1.6 m between the traced pair's
+    // ends is 4 cm, not 0.4 m.
+    let loose = crate::level::failure::tests::solution(0.0, 1.5f64.to_radians(), (1.0, 1.0));
+    let pair = [floor(2.2, -0.19), floor(3.8, 0.33)];
+    assert!(!lines_at_one_height(&pair, &loose, 0.01, &params));
+}
