@@ -4,11 +4,11 @@
 
 use super::icp::IcpResult;
 use super::params::MatcherParams;
-use super::reference::estimate_lines;
+use super::reference::Line;
 use super::report::FallbackReason;
 use super::solve::{Remap, symmetric_eigenvalues_2x2};
 use crate::geometry::Pose2;
-use nalgebra::{Matrix2, Point2, Vector2};
+use nalgebra::{Matrix2, Vector2};
 
 /// The anchor of a degeneracy-aware solve: the odometry's answer `at` for the odometry step
 /// `step`, with the odometry model's information. `None` when switched off
@@ -36,20 +36,18 @@ pub(crate) fn remap_around(
 /// pairs' sliding axis must be the scan's own weak axis: its lines' normal scatter along it
 /// at most `CheckParams::max_free_scatter` of the largest (in the scan's frame;
 /// `r.pose = target_from_scan` turns it). Otherwise the step is `degenerate`. (Directions
-/// freed by the information test alone are ones the odometry knows better.)
+/// freed by the information test alone are ones the odometry knows better.) `lines`: the
+/// scan's local lines (`estimate_lines` of its points, seen from the origin).
 pub(crate) fn slides_as_the_scan_does(
     params: &MatcherParams,
-    points: &[Point2<f64>],
+    lines: &[Option<Line>],
     r: IcpResult,
 ) -> Result<IcpResult, FallbackReason> {
     let Some(m) = r.remapped.filter(|m| m.sliding) else {
         return Ok(r);
     };
     let mut scatter = Matrix2::zeros();
-    for line in estimate_lines(points, &Point2::origin(), &params.normals)
-        .iter()
-        .flatten()
-    {
+    for line in lines.iter().flatten() {
         scatter += line.normal * line.normal.transpose();
     }
     let (_, largest) = symmetric_eigenvalues_2x2(&scatter);

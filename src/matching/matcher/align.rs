@@ -156,7 +156,7 @@ impl Matcher {
         };
         result
             .ok_or(FallbackReason::TooFewCorrespondences)
-            .and_then(|r| slides_as_the_scan_does(&self.params, points, r))
+            .and_then(|r| slides_as_the_scan_does(&self.params, &self.lines, r))
     }
 
     pub(super) fn check(&self, r: IcpResult) -> Result<IcpResult, FallbackReason> {

@@ -73,6 +73,9 @@ pub struct Matcher {
     /// Pairwise: the current scan as a reference, when the match the other way built it; it
     /// becomes the next keyframe instead of being built again.
     built: Option<ScanReference>,
+    /// The current scan's local lines (`estimate_lines` from its own frame's origin), fitted
+    /// once per scan for every use: the sliding test, the map, the keyframe, the way back.
+    lines: Vec<Option<Line>>,
 }
 
 impl Matcher {
@@ -88,6 +91,7 @@ impl Matcher {
             correlative: RefCell::new(CorrelativeScratch::default()),
             trigger: RefCell::default(),
             built: None,
+            lines: Vec::new(),
         }
     }
 
@@ -103,6 +107,7 @@ impl Matcher {
             odometry.is_some() && self.previous.is_some_and(|(_, prev)| prev.is_some());
         self.rays_per_degree = rays_per_degree(points);
         self.built = None;
+        self.lines = estimate_lines(points, &Point2::origin(), &self.params.normals);
         let report = match self.previous {
             None => self.first(points, odometry),
             Some((prev_estimate, prev_odometry)) => match self.params.mode {
@@ -137,9 +142,10 @@ impl Matcher {
 
     /// Makes `points` (at `estimate`) the scan the next one is first matched against.
     fn set_keyframe(&mut self, points: &[Point2<f64>], estimate: Pose2, odometry: Option<Pose2>) {
-        let reference = self.built.take().unwrap_or_else(|| {
-            ScanReference::new(points.to_vec(), &Point2::origin(), &self.params.normals)
-        });
+        let reference = self
+            .built
+            .take()
+            .unwrap_or_else(|| ScanReference::with_lines(points.to_vec(), self.lines.clone()));
         self.keyframe = Some(Keyframe {
             reference,
             estimate,
@@ -152,7 +158,7 @@ impl Matcher {
         match self.params.mode {
             Mode::Pairwise => self.set_keyframe(points, estimate, odometry),
             Mode::Metascan => {
-                let lines = estimate_lines(points, &Point2::origin(), &self.params.normals);
+                let lines = &self.lines;
                 let world: Vec<Point2<f64>> =
                     points.iter().map(|p| estimate.transform_point(p)).collect();
                 let (s, c) = estimate.theta.sin_cos();
@@ -171,7 +177,7 @@ impl Matcher {
                 self.map.insert(&world, &world_lines);
                 // The last scan, in its own frame, seeds the coarse search.
                 self.keyframe = Some(Keyframe {
-                    reference: ScanReference::with_lines(points.to_vec(), lines),
+                    reference: ScanReference::with_lines(points.to_vec(), self.lines.clone()),
                     estimate,
                     odometry,
                 });
@@ -242,7 +248,7 @@ impl Matcher {
         if !self.params.symmetric || r.remapped.is_some_and(|m| m.free > 0) {
             return (r, None);
         }
-        let current = ScanReference::new(points.to_vec(), &Point2::origin(), &self.params.normals);
+        let current = ScanReference::with_lines(points.to_vec(), self.lines.clone());
         let back = icp(
             reference.points(),
             &current,
