@@ -145,6 +145,14 @@ pub(crate) struct Hit {
     pub dist2: f64,
 }
 
+/// A point with its item, chained to the next point of its cell (`END` at the chain's end).
+#[derive(Clone, Copy, Debug)]
+struct Entry {
+    point: Point2<f64>,
+    item: u32,
+    next: u32,
+}
+
 /// Points with an item each (an index into the owner's arrays), chained per cell.
 #[derive(Clone, Debug)]
 pub(crate) struct PointGrid {
@@ -154,9 +162,7 @@ pub(crate) struct PointGrid {
     index: TileMap,
     /// Each cell's most recently added point (an index into `points`), or `END`.
     tiles: Vec<[u32; (TILE * TILE) as usize]>,
-    points: Vec<(Point2<f64>, u32)>,
-    /// The next point of the same cell, or `END`.
-    next: Vec<u32>,
+    points: Vec<Entry>,
     /// Smallest and largest occupied cell per axis: a search that has covered them is done.
     lo: (i32, i32),
     hi: (i32, i32),
@@ -191,7 +197,6 @@ impl PointGrid {
             index: TileMap::default(),
             tiles: Vec::new(),
             points: Vec::new(),
-            next: Vec::new(),
             lo: (i32::MAX, i32::MAX),
             hi: (i32::MIN, i32::MIN),
             directory: Vec::new(),
@@ -280,15 +285,18 @@ impl PointGrid {
             }
         };
         let head = &mut self.tiles[tile as usize][Self::slot(key)];
-        self.next.push(*head);
-        *head = self.points.len() as u32;
-        self.points.push((p, item));
+        self.points.push(Entry {
+            point: p,
+            item,
+            next: *head,
+        });
+        *head = (self.points.len() - 1) as u32;
         self.lo = (self.lo.0.min(key.0), self.lo.1.min(key.1));
         self.hi = (self.hi.0.max(key.0), self.hi.1.max(key.1));
     }
 
     /// The first point of cell `key`'s chain, or `END`.
-    #[inline]
+    #[inline(always)]
     fn head(&self, key: (i32, i32), cursor: &mut TileCursor) -> u32 {
         let tile_key = (key.0 >> TILE_BITS, key.1 >> TILE_BITS);
         if cursor.key != tile_key {
@@ -315,40 +323,44 @@ impl PointGrid {
         // Offsets of q inside its cell, from its low and its high edge.
         let (fx, fy) = (q.x - kx as f64 * c, q.y - ky as f64 * c);
         let (gx, gy) = (c - fx, c - fy);
+        let edges = (fx, fy, gx, gy);
         // A point qualifies when its squared distance is below `limit`: at first just above
-        // `max_d2` (so a point at exactly the bound counts), then the best so far (so the first
-        // of equally near points stays).
-        let mut limit = just_above(max_d2);
-        let mut best = END;
+        // `max_d2` (so a point at exactly the bound counts), then the best so far.
+        let mut found = Found {
+            best: END,
+            limit: just_above(max_d2),
+        };
         let mut cursor = TileCursor {
             key: (i32::MIN, i32::MIN),
             tile: END,
         };
+        // Ring 0, the query's own cell, settles most queries alone.
+        if 0.0 < found.limit && self.holds((kx, ky)) {
+            self.walk(self.head((kx, ky), &mut cursor), q, &mut found);
+        }
+        let edge = fx.min(gx).min(fy).min(gy);
         for ring in 0..MAX_RINGS {
-            let edges = (fx, fy, gx, gy);
-            self.search_ring(
-                q,
-                (kx, ky),
-                ring,
-                edges,
-                (&mut best, &mut limit),
-                &mut cursor,
-            );
+            match ring {
+                0 => {}
+                1 => self.search_ring1(q, (kx, ky), edges, &mut found, &mut cursor),
+                _ => self.search_ring(q, (kx, ky), ring, edges, &mut found, &mut cursor),
+            }
             // Every point outside the block of rings 0..=ring lies at least this far from q
-            // (less a margin for the rounding of the cell keys: below 1e-10 m within `FAR`).
+            // (less a margin for the rounding of the cell keys: below 1e-10 m within `FAR`),
+            // so the next ring is searched only while it may hold a point below the limit.
             let r = ring as f64 * c;
-            let reach = fx.min(gx).min(fy).min(gy) + r - 1e-9;
+            let reach = edge + r - 1e-9;
             let covered = kx - ring <= self.lo.0
                 && kx + ring >= self.hi.0
                 && ky - ring <= self.lo.1
                 && ky + ring >= self.hi.1;
-            if covered || (reach > 0.0 && reach * reach >= limit) {
-                return (best != END).then(|| {
-                    let (point, item) = self.points[best as usize];
+            if covered || (reach > 0.0 && reach * reach >= found.limit) {
+                return (found.best != END).then(|| {
+                    let entry = &self.points[found.best as usize];
                     Hit {
-                        item,
-                        point,
-                        dist2: limit,
+                        item: entry.item,
+                        point: entry.point,
+                        dist2: found.limit,
                     }
                 });
             }
@@ -359,12 +371,13 @@ impl PointGrid {
     /// Every point tried: the answer where the rings would take too long.
     fn scan_all(&self, q: &Point2<f64>, max_d2: f64) -> Option<Hit> {
         let mut best: Option<Hit> = None;
-        for &(p, item) in &self.points {
+        for entry in &self.points {
+            let p = entry.point;
             let (dx, dy) = (p.x - q.x, p.y - q.y);
             let dist2 = dx * dx + dy * dy;
             if dist2 <= max_d2 && best.is_none_or(|b| dist2 < b.dist2) {
                 best = Some(Hit {
-                    item,
+                    item: entry.item,
                     point: p,
                     dist2,
                 });
@@ -373,21 +386,25 @@ impl PointGrid {
         best
     }
 
-    /// Visits the cells at Chebyshev distance `ring` from `(kx, ky)` that could hold a point
-    /// below `limit`, keeping the nearest (`best`, an index into `points`, with `limit` its
-    /// squared distance once found).
+    /// Whether cell `(x, y)` lies in the box of occupied cells.
+    #[inline]
+    fn holds(&self, (x, y): (i32, i32)) -> bool {
+        x >= self.lo.0 && x <= self.hi.0 && y >= self.lo.1 && y <= self.hi.1
+    }
+
+    /// Visits the cells at Chebyshev distance `ring` (2 or more) from `(kx, ky)` that could
+    /// hold a point below the limit, keeping the nearest. Rows and, in the end rows, columns
+    /// too far from q are not stepped through.
+    #[inline(never)]
     fn search_ring(
         &self,
         q: &Point2<f64>,
         (kx, ky): (i32, i32),
         ring: i32,
         (fx, fy, gx, gy): (f64, f64, f64, f64),
-        (best, limit): (&mut u32, &mut f64),
+        found: &mut Found,
         cursor: &mut TileCursor,
     ) {
-        if ring == 1 {
-            return self.search_ring1(q, (kx, ky), (fx, fy, gx, gy), (best, limit), cursor);
-        }
         let c = self.cell;
         // Distance along one axis from q to the cell `d` cells away (0 for its own).
         let gap = |d: i32, low: f64, high: f64| match d {
@@ -399,71 +416,91 @@ impl PointGrid {
             let ey = gap(dy, fy, gy);
             let ey2 = ey * ey;
             let y = ky + dy;
-            if ey2 >= *limit || y < self.lo.1 || y > self.hi.1 {
+            if ey2 >= found.limit || y < self.lo.1 || y > self.hi.1 {
                 continue;
             }
             // Inner rows of a ring have only its two end cells.
-            let inner = dy != -ring && dy != ring;
+            let step = if dy != -ring && dy != ring {
+                2 * ring
+            } else {
+                1
+            };
             let mut dx = -ring;
             while dx <= ring {
                 let ex = gap(dx, fx, gx);
                 let x = kx + dx;
-                dx += if inner { 2 * ring.max(1) } else { 1 };
-                if ex * ex + ey2 >= *limit || x < self.lo.0 || x > self.hi.0 {
+                dx += step;
+                if ex * ex + ey2 >= found.limit || x < self.lo.0 || x > self.hi.0 {
                     continue;
                 }
-                let at = self.head((x, y), cursor);
-                self.walk(at, q, (&mut *best, &mut *limit));
+                self.walk(self.head((x, y), cursor), q, found);
             }
         }
     }
 
-    /// `search_ring` for ring 1 (the one most queries end with), its eight cells listed: the
-    /// same cells and tests in the same order (a gap of one cell less is the edge distance
-    /// itself; `x + 0.0` differs from `x` only for -0, whose square is the same).
+    /// Ring 1 (the one most queries that leave their own cell end with) as a short list of
+    /// its eight cells, nearest first: the two sides q is nearest to, the corner between
+    /// them, then the rest. A near point found early rules out the farther cells by their
+    /// edge distance alone, before their chains are walked.
     #[inline]
     fn search_ring1(
         &self,
         q: &Point2<f64>,
         (kx, ky): (i32, i32),
         (fx, fy, gx, gy): (f64, f64, f64, f64),
-        (best, limit): (&mut u32, &mut f64),
+        found: &mut Found,
         cursor: &mut TileCursor,
     ) {
-        let ends = [(-1, fx), (0, 0.0), (1, gx)];
-        let sides = [(-1, fx), (1, gx)];
-        for (dy, ey) in [(-1, fy), (0, 0.0), (1, gy)] {
-            let ey2 = ey * ey;
-            let y = ky + dy;
-            if ey2 >= *limit || y < self.lo.1 || y > self.hi.1 {
+        // (cell offset, squared gap) along each axis: near side, far side, own column/row.
+        let axis = |low: f64, high: f64| {
+            if low <= high {
+                ((-1, low * low), (1, high * high))
+            } else {
+                ((1, high * high), (-1, low * low))
+            }
+        };
+        let (xn, xf) = axis(fx, gx);
+        let (yn, yf) = axis(fy, gy);
+        let same = (0, 0.0);
+        for ((dx, ex2), (dy, ey2)) in [
+            (xn, same),
+            (same, yn),
+            (xn, yn),
+            (xf, same),
+            (same, yf),
+            (xf, yn),
+            (xn, yf),
+            (xf, yf),
+        ] {
+            let cell = (kx + dx, ky + dy);
+            if ex2 + ey2 >= found.limit || !self.holds(cell) {
                 continue;
             }
-            let cells: &[(i32, f64)] = if dy == 0 { &sides } else { &ends };
-            for &(dx, ex) in cells {
-                let x = kx + dx;
-                if ex * ex + ey2 >= *limit || x < self.lo.0 || x > self.hi.0 {
-                    continue;
-                }
-                let at = self.head((x, y), cursor);
-                self.walk(at, q, (&mut *best, &mut *limit));
-            }
+            self.walk(self.head(cell, cursor), q, found);
         }
     }
 
-    /// Tries the points of the chain from `at`, keeping the nearest below `limit`.
-    #[inline]
-    fn walk(&self, mut at: u32, q: &Point2<f64>, (best, limit): (&mut u32, &mut f64)) {
+    /// Tries the points of the chain from `at`, keeping the nearest below the limit.
+    #[inline(always)]
+    fn walk(&self, mut at: u32, q: &Point2<f64>, found: &mut Found) {
         while at != END {
-            let p = self.points[at as usize].0;
-            let (ddx, ddy) = (p.x - q.x, p.y - q.y);
-            let d2 = ddx * ddx + ddy * ddy;
-            if d2 < *limit {
-                *best = at;
-                *limit = d2;
+            let entry = &self.points[at as usize];
+            let (dx, dy) = (entry.point.x - q.x, entry.point.y - q.y);
+            let d2 = dx * dx + dy * dy;
+            if d2 < found.limit {
+                found.best = at;
+                found.limit = d2;
             }
-            at = self.next[at as usize];
+            at = entry.next;
         }
     }
+}
+
+/// A query's best so far: an index into `points` (`END` for none) and the squared distance
+/// a point must be below to replace it.
+struct Found {
+    best: u32,
+    limit: f64,
 }
 
 #[cfg(test)]
