@@ -206,6 +206,35 @@ impl PointGrid {
         }
     }
 
+    /// A grid of `cell`-metre cells over `points`, each with its index as item, sized for them
+    /// once: the tile directory spans their box and their room is reserved before the first
+    /// insert, where inserting into an empty grid regrows both as the box and the count grow.
+    pub(crate) fn from_points(cell: f64, points: &[Point2<f64>]) -> Self {
+        let mut grid = Self::new(cell);
+        // Keys grow with the coordinates, so the corners of the points' box give the tiles'.
+        let (mut lo, mut hi) = (
+            Point2::new(f64::INFINITY, f64::INFINITY),
+            Point2::new(f64::NEG_INFINITY, f64::NEG_INFINITY),
+        );
+        for p in points.iter().filter(|p| p.x.is_finite() && p.y.is_finite()) {
+            lo = Point2::new(lo.x.min(p.x), lo.y.min(p.y));
+            hi = Point2::new(hi.x.max(p.x), hi.y.max(p.y));
+        }
+        if lo.x <= hi.x {
+            let tile = |p: &Point2<f64>| {
+                let key = grid.key(p);
+                (key.0 >> TILE_BITS, key.1 >> TILE_BITS)
+            };
+            let (lo, hi) = (tile(&lo), tile(&hi));
+            grid.span_directory(lo, hi);
+        }
+        grid.points.reserve_exact(points.len());
+        for (i, p) in points.iter().enumerate() {
+            grid.insert(*p, i as u32);
+        }
+        grid
+    }
+
     /// The index of tile `t` in the directory, if the directory's box holds it.
     #[inline]
     fn directory_slot(&self, t: (i32, i32)) -> Option<usize> {
@@ -233,15 +262,22 @@ impl PointGrid {
             lo = (lo.0.min(k.0), lo.1.min(k.1));
             hi = (hi.0.max(k.0), hi.1.max(k.1));
         }
+        if !self.span_directory(lo, hi) {
+            // Too spread out: keep the old box, which no longer holds every tile.
+            self.directory_all = false;
+        }
+    }
+
+    /// Rebuilds the directory over the tiles from `lo` to `hi` (with a margin) and fills it
+    /// from the hash; false, changing nothing, when that box would be too big.
+    fn span_directory(&mut self, lo: (i32, i32), hi: (i32, i32)) -> bool {
         let lo = (lo.0 - DIRECTORY_MARGIN, lo.1 - DIRECTORY_MARGIN);
         let size = (
             i64::from(hi.0) - i64::from(lo.0) + 1 + i64::from(DIRECTORY_MARGIN),
             i64::from(hi.1) - i64::from(lo.1) + 1 + i64::from(DIRECTORY_MARGIN),
         );
         if size.0 * size.1 > MAX_DIRECTORY {
-            // Too spread out: keep the old box, which no longer holds every tile.
-            self.directory_all = false;
-            return;
+            return false;
         }
         self.directory_lo = lo;
         self.directory_size = (size.0 as i32, size.1 as i32);
@@ -254,6 +290,18 @@ impl PointGrid {
             }
         }
         self.index = index;
+        true
+    }
+
+    /// The index into `tiles` of tile `t`, if it has one: from the directory inside its box,
+    /// from the hash outside it when the directory does not hold every tile.
+    #[inline(always)]
+    fn tile(&self, t: (i32, i32)) -> u32 {
+        match self.directory_slot(t) {
+            Some(slot) => self.directory[slot],
+            None if self.directory_all => END,
+            None => self.index.get(&t).copied().unwrap_or(END),
+        }
     }
 
     fn key(&self, p: &Point2<f64>) -> (i32, i32) {
@@ -274,15 +322,15 @@ impl PointGrid {
         }
         let key = self.key(&p);
         let tile_key = (key.0 >> TILE_BITS, key.1 >> TILE_BITS);
-        let tile = match self.index.get(&tile_key) {
-            Some(&tile) => tile,
-            None => {
+        let tile = match self.tile(tile_key) {
+            END => {
                 let tile = self.tiles.len() as u32;
                 self.tiles.push([END; (TILE * TILE) as usize]);
                 self.index.insert(tile_key, tile);
                 self.add_to_directory(tile_key, tile);
                 tile
             }
+            tile => tile,
         };
         let head = &mut self.tiles[tile as usize][Self::slot(key)];
         self.points.push(Entry {
@@ -301,11 +349,7 @@ impl PointGrid {
         let tile_key = (key.0 >> TILE_BITS, key.1 >> TILE_BITS);
         if cursor.key != tile_key {
             cursor.key = tile_key;
-            cursor.tile = match self.directory_slot(tile_key) {
-                Some(slot) => self.directory[slot],
-                None if self.directory_all => END,
-                None => self.index.get(&tile_key).copied().unwrap_or(END),
-            };
+            cursor.tile = self.tile(tile_key);
         }
         if cursor.tile == END {
             return END;
@@ -564,6 +608,33 @@ mod tests {
                     let got = grid.nearest_within(&q, max_d2).map(|h| (h.item, h.dist2));
                     assert_eq!(got, brute(&points, &q, max_d2), "query {q:?}");
                 }
+            }
+        }
+    }
+
+    #[test]
+    fn a_grid_built_at_once_answers_as_one_built_point_by_point() {
+        let mut points: Vec<Point2<f64>> = (0..300)
+            .map(|i| {
+                let a = i as f64 * 0.021;
+                Point2::new(12.0 * a.cos(), 9.0 * a.sin())
+            })
+            .collect();
+        points.push(Point2::new(f64::NAN, 1.0));
+        points.push(Point2::new(40.0, -35.0));
+        let at_once = PointGrid::from_points(SCAN_CELL, &points);
+        let mut one_by_one = PointGrid::new(SCAN_CELL);
+        for (i, p) in points.iter().enumerate() {
+            one_by_one.insert(*p, i as u32);
+        }
+        for k in 0..300 {
+            let t = k as f64 * 0.173;
+            let q = Point2::new(14.0 * t.sin(), 11.0 * (0.7 * t).cos());
+            for max_d2 in [0.01, 0.25, f64::INFINITY] {
+                assert_eq!(
+                    at_once.nearest_within(&q, max_d2),
+                    one_by_one.nearest_within(&q, max_d2)
+                );
             }
         }
     }

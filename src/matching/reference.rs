@@ -143,10 +143,7 @@ impl ScanReference {
     }
 
     pub fn with_lines(points: Vec<Point2<f64>>, lines: Vec<Option<Line>>) -> Self {
-        let mut grid = PointGrid::new(scan_cell(&points));
-        for (i, p) in points.iter().enumerate() {
-            grid.insert(*p, i as u32);
-        }
+        let grid = PointGrid::from_points(scan_cell(&points), &points);
         Self {
             points,
             lines,
