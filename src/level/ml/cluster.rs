@@ -14,35 +14,35 @@
 //! complement's effective Jacobian, [`super::solve`]); on a right model the sandwich equals the
 //! information's inverse on average, so it widens nothing then but its own sampling spread.
 
-use super::evaluate::{Arrow, Frame, Ray, Residual, huber_weight};
+use super::evaluate::{Arrow, Ray, Score};
 use super::solve::pseudo_inverse;
 use nalgebra::{Matrix2, Vector2};
 
 /// `B`: over clusters of at most `cluster_rays` consecutive rays of one surface (`rays` in
 /// surface order, each surface's in input order, hence scan order), the outer product of the
-/// cluster's summed scores, at the state whose surfaces are `frames` and whose normal equations
-/// are `arrow`, with Huber threshold `k`. `None` when a surface's block cannot be inverted.
+/// cluster's summed scores, from the range residual's pass at one state: its normal equations
+/// `arrow` and its rays' `scores` (one per ray). `None` when a surface's block cannot be
+/// inverted.
 pub(crate) fn clustered_meat(
     rays: &[Ray],
-    frames: &[Frame],
+    scores: &[Score],
     arrow: &Arrow,
-    k: f64,
     cluster_rays: usize,
 ) -> Option<Matrix2<f64>> {
+    assert_eq!(rays.len(), scores.len(), "one score per ray");
     let mut meat = Matrix2::zeros();
+    let mut start = 0;
     for run in rays.chunk_by(|a, b| a.slot == b.slot) {
-        let slot = run[0].slot;
-        let (h_as, h_ss, _) = &arrow.blocks[slot];
+        let (h_as, h_ss, _) = &arrow.blocks[run[0].slot];
         // The placement's share of each point's attitude Jacobian: ja - T js.
         let t = h_as * pseudo_inverse(h_ss)?;
-        let frame = &frames[slot];
-        for cluster in run.chunks(cluster_rays.max(1)) {
+        let run_scores = &scores[start..start + run.len()];
+        start += run.len();
+        for cluster in run_scores.chunks(cluster_rays.max(1)) {
             let mut score = Vector2::zeros();
-            for ray in cluster {
-                let (rho, q, scale, _) = frame.residual(ray, Residual::Range);
-                let (ja, js) = frame.jacobians(&q, scale);
-                let effective = Vector2::from(ja) - t * Vector2::from(js);
-                score += effective * (huber_weight(rho, k) * rho);
+            for s in cluster {
+                let effective = Vector2::from(s.by_attitude) - t * Vector2::from(s.by_placement);
+                score += effective * s.weighted;
             }
             meat += score * score.transpose();
         }

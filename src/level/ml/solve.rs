@@ -402,14 +402,7 @@ impl<'a> State<'a> {
         if params.cluster_rays == 0 {
             return None;
         }
-        let frames = self.frames(&self.theta, &self.placements);
-        let meat = clustered_meat(
-            &self.rays,
-            &frames,
-            &eval.arrow,
-            params.huber_k,
-            params.cluster_rays,
-        )?;
+        let meat = clustered_meat(&self.rays, &eval.scores, &eval.arrow, params.cluster_rays)?;
         Some(cov * meat * cov)
     }
 
