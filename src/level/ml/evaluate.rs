@@ -189,17 +189,6 @@ pub(crate) fn evaluate(
     with_arrow: bool,
     out: &mut Evaluation,
 ) {
-    out.cost = 0.0;
-    out.predicted.clear();
-    out.scores.clear();
-    let keep_scores = with_arrow && residual == Residual::Range;
-    // Room for every ray at once: growing by doubling copied them.
-    if residual == Residual::Range {
-        out.predicted.reserve(rays.len());
-    }
-    if keep_scores {
-        out.scores.reserve(rays.len());
-    }
     let arrow = &mut out.arrow;
     arrow.h_aa = Matrix2::zeros();
     arrow.g_a = Vector2::zeros();
@@ -208,37 +197,91 @@ pub(crate) fn evaluate(
         frames.len(),
         (Matrix2::zeros(), Matrix2::zeros(), Vector2::zeros()),
     );
-    for run in rays.chunk_by(|a, b| a.slot == b.slot) {
-        let frame = &frames[run[0].slot];
-        let mut sums = Sums::default();
-        for ray in run {
-            let (rho, q, scale, predicted) = frame.residual(ray, residual);
-            if let Some(predicted) = predicted {
-                out.predicted.push(predicted);
-            }
-            out.cost += huber_cost(rho, k);
-            if with_arrow {
-                let (ja, js) = frame.jacobians(&q, scale);
-                let w = huber_weight(rho, k);
-                if keep_scores {
-                    out.scores.push(Score {
-                        by_attitude: ja,
-                        by_placement: js,
-                        weighted: w * rho,
-                    });
-                }
-                sums.add(rho, ja, js, w);
-            }
-        }
-        if with_arrow {
-            sums.into_arrow(arrow, run[0].slot);
-        }
-    }
-    for (block, frame) in arrow.blocks.iter_mut().zip(frames) {
+    // The residual and whether the normal equations are wanted are fixed for the pass: one
+    // loop for each, without their tests per ray (the passes are a sixth of leveling).
+    out.cost = match (residual, with_arrow) {
+        (Residual::Range, true) => pass::<true, true>(rays, frames, k, out),
+        (Residual::Range, false) => pass::<true, false>(rays, frames, k, out),
+        (Residual::Plane, true) => pass::<false, true>(rays, frames, k, out),
+        (Residual::Plane, false) => pass::<false, false>(rays, frames, k, out),
+    };
+    for (block, frame) in out.arrow.blocks.iter_mut().zip(frames) {
         if frame.level {
             block.1[(1, 1)] = 1.0;
         }
     }
+}
+
+/// [`evaluate`]'s loop for the range residual (`RANGE`) or the plane residual, with the
+/// normal equations (`ARROW`) or without: fills `out`'s predicted ranges and scores (for the
+/// range residual) and normal equations, and returns the cost.
+fn pass<const RANGE: bool, const ARROW: bool>(
+    rays: &[Ray],
+    frames: &[Frame],
+    k: f64,
+    out: &mut Evaluation,
+) -> f64 {
+    let residual = if RANGE {
+        Residual::Range
+    } else {
+        Residual::Plane
+    };
+    // Every ray's slot written in place, sized at once (and not cleared first: every slot is
+    // written, and an evaluation reused for the next trial keeps its size): pushing tested the
+    // room per ray and growing by doubling copied them.
+    let (n_predicted, n_scores) = match (RANGE, ARROW) {
+        (true, true) => (rays.len(), rays.len()),
+        (true, false) => (rays.len(), 0),
+        _ => (0, 0),
+    };
+    let blank = Score {
+        by_attitude: [0.0; 2],
+        by_placement: [0.0; 2],
+        weighted: 0.0,
+    };
+    out.predicted.resize(n_predicted, 0.0);
+    out.scores.resize(n_scores, blank);
+    let (predicted_out, scores_out) = (&mut out.predicted[..], &mut out.scores[..]);
+    let arrow = &mut out.arrow;
+    let mut cost = 0.0;
+    // The rays come in runs of one surface (surface order): each run's sums are kept apart
+    // and added to the normal equations when the run ends.
+    let Some(first) = rays.first() else {
+        return cost;
+    };
+    let mut slot = first.slot;
+    let mut frame = &frames[slot];
+    let mut sums = Sums::default();
+    for (i, ray) in rays.iter().enumerate() {
+        if ray.slot != slot {
+            if ARROW {
+                std::mem::take(&mut sums).into_arrow(arrow, slot);
+            }
+            slot = ray.slot;
+            frame = &frames[slot];
+        }
+        let (rho, q, scale, predicted) = frame.residual(ray, residual);
+        if RANGE {
+            predicted_out[i] = predicted.unwrap_or_default();
+        }
+        cost += huber_cost(rho, k);
+        if ARROW {
+            let (ja, js) = frame.jacobians(&q, scale);
+            let w = huber_weight(rho, k);
+            if RANGE {
+                scores_out[i] = Score {
+                    by_attitude: ja,
+                    by_placement: js,
+                    weighted: w * rho,
+                };
+            }
+            sums.add(rho, ja, js, w);
+        }
+    }
+    if ARROW {
+        sums.into_arrow(arrow, slot);
+    }
+    cost
 }
 
 /// One surface's sums of the normal equations over its run of rays, kept in scalars.
