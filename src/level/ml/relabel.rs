@@ -31,28 +31,43 @@ pub(crate) struct Neighbours {
 }
 
 impl Neighbours {
-    /// The valid points within `scans` scans and `window` bearings of point `i`, itself
-    /// excluded, in row-major order.
-    fn around(&self, i: usize, scans: usize, window: usize) -> impl Iterator<Item = usize> + '_ {
+    /// Whether `f` holds for any valid point within `scans` scans and `window` bearings of
+    /// point `i`, itself excluded, tried in row-major order. Plain loops over each row's
+    /// stretch of the grid: the chain of iterator adapters it replaces cost more than the
+    /// tests it fed.
+    fn any_around(
+        &self,
+        i: usize,
+        scans: usize,
+        window: usize,
+        mut f: impl FnMut(usize) -> bool,
+    ) -> bool {
         let cols = self.cols.max(1);
         let rows = self.at.len() / cols;
         let (row, col) = (self.index[i] / cols, self.index[i] % cols);
-        let cells = (row.saturating_sub(scans)..(row + scans + 1).min(rows)).flat_map(move |r| {
-            (col.saturating_sub(window)..(col + window + 1).min(cols)).map(move |c| (r, c))
-        });
-        cells
-            .filter(move |&cell| cell != (row, col))
-            .filter_map(move |(r, c)| self.at[r * cols + c])
+        let (first, end) = (col.saturating_sub(window), (col + window + 1).min(cols));
+        for r in row.saturating_sub(scans)..(row + scans + 1).min(rows) {
+            let stretch = &self.at[r * cols + first..r * cols + end];
+            for (c, cell) in (first..end).zip(stretch) {
+                if let Some(j) = *cell {
+                    if (r, c) != (row, col) && f(j) {
+                        return true;
+                    }
+                }
+            }
+        }
+        false
     }
 
-    /// The valid points of `i`'s own scan within `window` bearings of it.
-    fn along_scan(&self, i: usize, window: usize) -> impl Iterator<Item = usize> + '_ {
-        self.around(i, 0, window)
+    /// Whether `f` holds for any valid point of `i`'s own scan within `window` bearings of it.
+    fn any_along_scan(&self, i: usize, window: usize, f: impl FnMut(usize) -> bool) -> bool {
+        self.any_around(i, 0, window, f)
     }
 
-    /// The valid points of `i`'s own and the adjacent scans within `self.window` bearings.
-    fn of(&self, i: usize) -> impl Iterator<Item = usize> + '_ {
-        self.around(i, 1, self.window)
+    /// Whether `f` holds for any valid point of `i`'s own and the adjacent scans within
+    /// `self.window` bearings.
+    fn any_of(&self, i: usize, f: impl FnMut(usize) -> bool) -> bool {
+        self.any_around(i, 1, self.window, f)
     }
 }
 
@@ -106,10 +121,9 @@ pub(crate) fn relabel(
             _ => continue,
         };
         let on = (&points[i], &level[i]);
-        if neighbours
-            .of(i)
-            .any(|j| stands_over(on, (&points[j], &level[j]), k, level_plane))
-        {
+        if neighbours.any_of(i, |j| {
+            stands_over(on, (&points[j], &level[j]), k, level_plane)
+        }) {
             *l = None;
         }
     }
@@ -252,7 +266,7 @@ pub(crate) fn without_level_edges(
         .iter()
         .enumerate()
         .map(|(i, &l)| {
-            let edge = level(&l) && neighbours.along_scan(i, window).any(|j| labels[j] != l);
+            let edge = level(&l) && neighbours.any_along_scan(i, window, |j| labels[j] != l);
             if edge { None } else { l }
         })
         .collect()
