@@ -241,7 +241,12 @@ fn pass<const RANGE: bool, const ARROW: bool>(
     };
     out.predicted.resize(n_predicted, 0.0);
     out.scores.resize(n_scores, blank);
-    let (predicted_out, scores_out) = (&mut out.predicted[..], &mut out.scores[..]);
+    // Sliced to their sizes, so that the compiler sees every ray's index in range and drops
+    // the bounds checks.
+    let (predicted_out, scores_out) = (
+        &mut out.predicted[..n_predicted],
+        &mut out.scores[..n_scores],
+    );
     let arrow = &mut out.arrow;
     let mut cost = 0.0;
     // The rays come in runs of one surface (surface order): each run's sums are kept apart
