@@ -105,10 +105,17 @@ impl Hasher for CellHasher {
 type TileMap = HashMap<(i32, i32), u32, BuildHasherDefault<CellHasher>>;
 
 /// [`floor_i64`] saturated to `i32` (far outside any map; the same function places points and
-/// queries, so the grid stays consistent there too).
+/// queries, so the grid stays consistent there too). Every key of a map or a query within
+/// `FAR` fits an `i32` with room to spare: those take a 32-bit truncation and one down-step,
+/// the rest the general path (NaN too, failing the bound).
 #[inline]
 fn floor_i32(v: f64) -> i32 {
-    floor_i64(v).clamp(i64::from(i32::MIN), i64::from(i32::MAX)) as i32
+    if v.abs() < 2_147_483_647.0 {
+        let t = v as i32;
+        if f64::from(t) > v { t - 1 } else { t }
+    } else {
+        floor_i64(v).clamp(i64::from(i32::MIN), i64::from(i32::MAX)) as i32
+    }
 }
 
 /// `v.floor() as i64` without the libm call: exact below 2^52 (the cast truncates, and one
@@ -382,7 +389,9 @@ impl PointGrid {
         if 0.0 < found.limit && self.holds((kx, ky)) {
             self.walk(self.head((kx, ky), &mut cursor), q, &mut found);
         }
-        let edge = fx.min(gx).min(fy).min(gy);
+        // Plain comparisons: the offsets are finite, so `f64::min`'s NaN handling is not needed.
+        let min = |a: f64, b: f64| if a < b { a } else { b };
+        let edge = min(min(fx, gx), min(fy, gy));
         for ring in 0..MAX_RINGS {
             match ring {
                 0 => {}
@@ -650,6 +659,33 @@ mod tests {
         }
         for x in [f64::NAN, f64::INFINITY, f64::NEG_INFINITY, 1e300, -1e300] {
             assert_eq!(floor_i64(x), x.floor() as i64);
+        }
+    }
+
+    #[test]
+    fn floor_i32_equals_saturated_floor() {
+        let edge = 2_147_483_647.0f64;
+        let mut v = -3.0f64;
+        while v <= 3.0 {
+            for x in [v, v + 1e-12, v - 1e-12, v * 1e5, v * 7e8, v * 1e17] {
+                assert_eq!(floor_i32(x), x.floor() as i32, "{x}");
+            }
+            v += 0.125;
+        }
+        for x in [
+            f64::NAN,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            edge,
+            edge - 0.5,
+            -edge,
+            -edge - 0.5,
+            -edge - 1.0,
+            -edge + 0.5,
+            1e300,
+            -1e300,
+        ] {
+            assert_eq!(floor_i32(x), x.floor() as i32, "{x}");
         }
     }
 
