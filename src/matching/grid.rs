@@ -389,36 +389,74 @@ impl PointGrid {
         if 0.0 < found.limit && self.holds((kx, ky)) {
             self.walk(self.head((kx, ky), &mut cursor), q, &mut found);
         }
-        // Plain comparisons: the offsets are finite, so `f64::min`'s NaN handling is not needed.
-        let min = |a: f64, b: f64| if a < b { a } else { b };
-        let edge = min(min(fx, gx), min(fy, gy));
-        for ring in 0..MAX_RINGS {
+        // Most queries end here; the rings beyond are out of line, so these do not pay for
+        // setting them up.
+        if self.searched_enough((kx, ky), 0, edges, &found) {
+            return self.hit(&found);
+        }
+        self.search_rings(q, max_d2, (kx, ky), edges, found, cursor)
+    }
+
+    /// Rings 1 and up, after ring 0 left the answer open.
+    #[inline(never)]
+    fn search_rings(
+        &self,
+        q: &Point2<f64>,
+        max_d2: f64,
+        (kx, ky): (i32, i32),
+        edges: (f64, f64, f64, f64),
+        mut found: Found,
+        mut cursor: TileCursor,
+    ) -> Option<Hit> {
+        for ring in 1..MAX_RINGS {
             match ring {
-                0 => {}
                 1 => self.search_ring1(q, (kx, ky), edges, &mut found, &mut cursor),
                 _ => self.search_ring(q, (kx, ky), ring, edges, &mut found, &mut cursor),
             }
-            // Every point outside the block of rings 0..=ring lies at least this far from q
-            // (less a margin for the rounding of the cell keys: below 1e-10 m within `FAR`),
-            // so the next ring is searched only while it may hold a point below the limit.
-            let r = ring as f64 * c;
-            let reach = edge + r - 1e-9;
-            let covered = kx - ring <= self.lo.0
-                && kx + ring >= self.hi.0
-                && ky - ring <= self.lo.1
-                && ky + ring >= self.hi.1;
-            if covered || (reach > 0.0 && reach * reach >= found.limit) {
-                return (found.best != END).then(|| {
-                    let entry = &self.points[found.best as usize];
-                    Hit {
-                        item: entry.item,
-                        point: entry.point,
-                        dist2: found.limit,
-                    }
-                });
+            if self.searched_enough((kx, ky), ring, edges, &found) {
+                return self.hit(&found);
             }
         }
         self.scan_all(q, max_d2)
+    }
+
+    /// Whether rings 0..=`ring` around cell `(kx, ky)` (q at `edges` from its cell's sides)
+    /// hold the answer. Every point outside them lies at least `ring` cells beyond the
+    /// nearest side from q (less a margin for the rounding of the cell keys: below 1e-10 m
+    /// within `FAR`), so the next ring is searched only while it may hold a point below the
+    /// limit.
+    #[inline(always)]
+    fn searched_enough(
+        &self,
+        (kx, ky): (i32, i32),
+        ring: i32,
+        (fx, fy, gx, gy): (f64, f64, f64, f64),
+        found: &Found,
+    ) -> bool {
+        // Plain comparisons: the offsets are finite, so `f64::min`'s NaN handling is not
+        // needed.
+        let min = |a: f64, b: f64| if a < b { a } else { b };
+        let edge = min(min(fx, gx), min(fy, gy));
+        let r = ring as f64 * self.cell;
+        let reach = edge + r - 1e-9;
+        let covered = kx - ring <= self.lo.0
+            && kx + ring >= self.hi.0
+            && ky - ring <= self.lo.1
+            && ky + ring >= self.hi.1;
+        covered || (reach > 0.0 && reach * reach >= found.limit)
+    }
+
+    /// The answer once the search is done.
+    #[inline(always)]
+    fn hit(&self, found: &Found) -> Option<Hit> {
+        (found.best != END).then(|| {
+            let entry = &self.points[found.best as usize];
+            Hit {
+                item: entry.item,
+                point: entry.point,
+                dist2: found.limit,
+            }
+        })
     }
 
     /// Every point tried: the answer where the rings would take too long.
