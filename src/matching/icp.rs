@@ -419,9 +419,10 @@ impl CycleWatch {
 /// Buffers of `trim`, kept over one ICP run's iterations.
 #[derive(Default)]
 struct Trimming {
-    /// (residual, index) of each pair: unique keys (the index breaks ties), so the order
-    /// they are put in is the same whichever way it is found.
-    order: Vec<(u64, u32)>,
+    /// Each pair's residual as bits (residuals are never negative: their bits order as
+    /// `total_cmp` orders them). Equal residuals add the same square whichever comes first,
+    /// so only the cut needs their indices: the kept ones are the first in association order.
+    order: Vec<u64>,
     /// `ξ^λ` for every overlap `count / n` from the first kept, for the last `n` seen (pair
     /// counts repeat from iteration to iteration near convergence; the same `powf`, so the
     /// same values).
@@ -441,13 +442,8 @@ impl Trimming {
             return n;
         }
         self.order.clear();
-        // Residuals are never negative: their bits order as `total_cmp` orders them.
-        self.order.extend(
-            pairs
-                .iter()
-                .enumerate()
-                .map(|(i, p)| (p.residual.to_bits(), i as u32)),
-        );
+        self.order
+            .extend(pairs.iter().map(|p| p.residual.to_bits()));
         let first = ((params.min_overlap * n as f64).ceil() as usize).clamp(1, n);
         self.order.select_nth_unstable(first - 1);
         self.order[first..].sort_unstable();
@@ -461,7 +457,7 @@ impl Trimming {
             }));
             self.powers_of = key;
         }
-        let squared = |&(bits, _): &(u64, u32)| f64::from_bits(bits).powi(2);
+        let squared = |&bits: &u64| f64::from_bits(bits).powi(2);
         let mut sum: f64 = self.order[..first - 1].iter().map(squared).sum();
         let mut best = (f64::INFINITY, n);
         for (k, entry) in self.order.iter().enumerate().skip(first - 1) {
@@ -475,11 +471,20 @@ impl Trimming {
             }
         }
         let last_kept = self.order[best.1 - 1];
-        let mut index = 0u32;
+        // Of the pairs tied with the last kept, as many as the sorted prefix holds.
+        let mut ties = self.order[..best.1]
+            .iter()
+            .filter(|&&bits| bits == last_kept)
+            .count();
         pairs.retain(|p| {
-            let kept = (p.residual.to_bits(), index) <= last_kept;
-            index += 1;
-            kept
+            let bits = p.residual.to_bits();
+            if bits == last_kept {
+                let kept = ties > 0;
+                ties = ties.saturating_sub(1);
+                kept
+            } else {
+                bits < last_kept
+            }
         });
         best.1
     }
