@@ -153,9 +153,9 @@ pub struct PosePrior {
 /// Aligns `source` (points in the source scanner's frame, the scanner at the origin) to
 /// `target`, starting from `guess` (`target_from_source`). Returns `None` when the target is
 /// empty or no point associates.
-pub fn icp(
+pub fn icp<T: Target + ?Sized>(
     source: &[Point2<f64>],
-    target: &dyn Target,
+    target: &T,
     guess: Pose2,
     params: &IcpParams,
 ) -> Option<IcpResult> {
@@ -165,9 +165,9 @@ pub fn icp(
 /// [`icp`] with a Gaussian prior on the pose added to every solve (maximum a posteriori
 /// rather than maximum likelihood), as real-time correlative matchers weigh the odometry
 /// (Olson 2009, eq. 2; Cartographer's translation and rotation weights).
-pub fn icp_with_prior(
+pub fn icp_with_prior<T: Target + ?Sized>(
     source: &[Point2<f64>],
-    target: &dyn Target,
+    target: &T,
     guess: Pose2,
     prior: Option<PosePrior>,
     params: &IcpParams,
@@ -177,9 +177,9 @@ pub fn icp_with_prior(
 
 /// [`icp`] whose every solve keeps the directions the pairs observe and takes the others
 /// from `remap`'s anchor (solution remapping, `solve.rs`), instead of failing as degenerate.
-pub fn icp_remapped(
+pub fn icp_remapped<T: Target + ?Sized>(
     source: &[Point2<f64>],
-    target: &dyn Target,
+    target: &T,
     guess: Pose2,
     remap: Remap,
     params: &IcpParams,
@@ -187,9 +187,9 @@ pub fn icp_remapped(
     icp_solving(source, target, guess, None, Some(remap), params)
 }
 
-fn icp_solving(
+fn icp_solving<T: Target + ?Sized>(
     source: &[Point2<f64>],
-    target: &dyn Target,
+    target: &T,
     guess: Pose2,
     prior: Option<PosePrior>,
     remap: Option<Remap>,
@@ -340,9 +340,9 @@ fn moved_by(pose: &Pose2, (s, c): (f64, f64), p: &Point2<f64>) -> Point2<f64> {
 }
 
 /// Nearest target point for every source point under `pose`, within the association distance.
-fn associate(
+fn associate<T: Target + ?Sized>(
     source: &[Point2<f64>],
-    target: &dyn Target,
+    target: &T,
     pose: &Pose2,
     params: &IcpParams,
     pairs: &mut Vec<Pair>,

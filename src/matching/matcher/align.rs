@@ -51,10 +51,10 @@ impl Matcher {
         Ok(r)
     }
 
-    fn align_unchecked(
+    fn align_unchecked<T: Target + ?Sized>(
         &self,
         points: &[Point2<f64>],
-        target: &dyn Target,
+        target: &T,
         guess: Pose2,
         icp: &IcpParams,
         coarse_search: impl Fn(Pose2) -> Option<Pose2>,
@@ -137,10 +137,10 @@ impl Matcher {
     /// ICP from `start` with the odometry's answer `odometry = (guess, step)` as a prior
     /// (`odometry_prior`; only a real odometry step makes one: identity means "no odometry")
     /// or as the anchor of the directions the scan leaves free.
-    pub(super) fn icp_anchored(
+    pub(super) fn icp_anchored<T: Target + ?Sized>(
         &self,
         points: &[Point2<f64>],
-        target: &dyn Target,
+        target: &T,
         start: Pose2,
         (guess, step): (Pose2, &Pose2),
         icp_params: &IcpParams,
