@@ -366,8 +366,40 @@ impl PointGrid {
 
     /// The nearest point to `q` with squared distance at most `max_d2`, if any.
     pub(crate) fn nearest_within(&self, q: &Point2<f64>, max_d2: f64) -> Option<Hit> {
+        self.search::<false>(q, max_d2).0
+    }
+
+    /// [`Self::nearest_within`], with a margin: while a query stays within it of `q` (less,
+    /// strictly), no other point can be as near as the one found, so it is still the answer
+    /// (and, for a query within the margin, [`Self::again`] gives what this would). The
+    /// margin is half the gap between the nearest distance and a lower bound on every other
+    /// point's (the second nearest among the points the search tried, the cells it skipped
+    /// and the rings it never reached), less 1e-9 m for rounding; when nothing lies within
+    /// the bound, the gap between the bound and every point. 0 when the search proved
+    /// nothing (every point scanned).
+    pub(crate) fn nearest_certified(&self, q: &Point2<f64>, max_d2: f64) -> (Option<Hit>, f64) {
+        self.search::<true>(q, max_d2)
+    }
+
+    /// What a query at `q` within `max_d2` finds when `point` (with `item`) is known to be
+    /// the nearest point to it: `point` if within the bound, the same distance to the bit.
+    #[inline]
+    pub(crate) fn again(
+        q: &Point2<f64>,
+        max_d2: f64,
+        item: u32,
+        point: Point2<f64>,
+    ) -> Option<Hit> {
+        let (dx, dy) = (point.x - q.x, point.y - q.y);
+        let dist2 = dx * dx + dy * dy;
+        (dist2 < just_above(max_d2)).then_some(Hit { item, point, dist2 })
+    }
+
+    /// The nearest point, and with `CERTIFY` its margin (see `nearest_certified`).
+    #[inline(always)]
+    fn search<const CERTIFY: bool>(&self, q: &Point2<f64>, max_d2: f64) -> (Option<Hit>, f64) {
         if self.points.is_empty() || !(q.x.abs() < FAR && q.y.abs() < FAR) {
-            return self.scan_all(q, max_d2);
+            return (self.scan_all(q, max_d2), 0.0);
         }
         let c = self.cell;
         let (kx, ky) = self.key(q);
@@ -380,26 +412,64 @@ impl PointGrid {
         let mut found = Found {
             best: END,
             limit: just_above(max_d2),
+            second: f64::INFINITY,
         };
         let mut cursor = TileCursor {
             key: (i32::MIN, i32::MIN),
             tile: END,
         };
         // Ring 0, the query's own cell, settles most queries alone.
-        if 0.0 < found.limit && self.holds((kx, ky)) {
-            self.walk(self.head((kx, ky), &mut cursor), q, &mut found);
+        let open = 0.0 < found.limit;
+        if open && self.holds((kx, ky)) {
+            self.walk::<CERTIFY>(self.head((kx, ky), &mut cursor), q, &mut found);
+        } else if CERTIFY && !open {
+            // A bound below 0 (or NaN) certifies nothing.
+            found.second = 0.0;
         }
         // Most queries end here; the rings beyond are out of line, so these do not pay for
         // setting them up.
         if self.searched_enough((kx, ky), 0, edges, &found) {
-            return self.hit(&found);
+            return self.certified::<CERTIFY>((kx, ky), 0, edges, &mut found);
         }
-        self.search_rings(q, max_d2, (kx, ky), edges, found, cursor)
+        self.search_rings::<CERTIFY>(q, max_d2, (kx, ky), edges, found, cursor)
+    }
+
+    /// The answer once rings 0..=`ring` are searched, with its margin under `CERTIFY`.
+    #[inline(always)]
+    fn certified<const CERTIFY: bool>(
+        &self,
+        (kx, ky): (i32, i32),
+        ring: i32,
+        (fx, fy, gx, gy): (f64, f64, f64, f64),
+        found: &mut Found,
+    ) -> (Option<Hit>, f64) {
+        let hit = self.hit(found);
+        if !CERTIFY {
+            return (hit, 0.0);
+        }
+        let covered = kx - ring <= self.lo.0
+            && kx + ring >= self.hi.0
+            && ky - ring <= self.lo.1
+            && ky + ring >= self.hi.1;
+        if !covered {
+            // Every point beyond the rings lies at least this far (as `searched_enough`).
+            let edge = fx.min(gx).min(fy).min(gy);
+            let reach = edge + ring as f64 * self.cell - 1e-9;
+            found.second = found
+                .second
+                .min(if reach > 0.0 { reach * reach } else { 0.0 });
+        }
+        // Without a hit, `limit` is just above the bound, and every point at least `second`.
+        let margin = match hit {
+            Some(hit) => 0.5 * (found.second.sqrt() - hit.dist2.sqrt()) - 1e-9,
+            None => found.second.sqrt() - found.limit.sqrt() - 1e-9,
+        };
+        (hit, if margin > 0.0 { margin } else { 0.0 })
     }
 
     /// Rings 1 and up, after ring 0 left the answer open.
     #[inline(never)]
-    fn search_rings(
+    fn search_rings<const CERTIFY: bool>(
         &self,
         q: &Point2<f64>,
         max_d2: f64,
@@ -407,17 +477,17 @@ impl PointGrid {
         edges: (f64, f64, f64, f64),
         mut found: Found,
         mut cursor: TileCursor,
-    ) -> Option<Hit> {
+    ) -> (Option<Hit>, f64) {
         for ring in 1..MAX_RINGS {
             match ring {
-                1 => self.search_ring1(q, (kx, ky), edges, &mut found, &mut cursor),
-                _ => self.search_ring(q, (kx, ky), ring, edges, &mut found, &mut cursor),
+                1 => self.search_ring1::<CERTIFY>(q, (kx, ky), edges, &mut found, &mut cursor),
+                _ => self.search_ring::<CERTIFY>(q, (kx, ky), ring, edges, &mut found, &mut cursor),
             }
             if self.searched_enough((kx, ky), ring, edges, &found) {
-                return self.hit(&found);
+                return self.certified::<CERTIFY>((kx, ky), ring, edges, &mut found);
             }
         }
-        self.scan_all(q, max_d2)
+        (self.scan_all(q, max_d2), 0.0)
     }
 
     /// Whether rings 0..=`ring` around cell `(kx, ky)` (q at `edges` from its cell's sides)
@@ -487,7 +557,7 @@ impl PointGrid {
     /// hold a point below the limit, keeping the nearest. Rows and, in the end rows, columns
     /// too far from q are not stepped through.
     #[inline(never)]
-    fn search_ring(
+    fn search_ring<const CERTIFY: bool>(
         &self,
         q: &Point2<f64>,
         (kx, ky): (i32, i32),
@@ -508,6 +578,11 @@ impl PointGrid {
             let ey2 = ey * ey;
             let y = ky + dy;
             if ey2 >= found.limit || y < self.lo.1 || y > self.hi.1 {
+                // A row ruled out by its distance bounds its points (one outside the box of
+                // occupied cells has none).
+                if CERTIFY && ey2 >= found.limit && y >= self.lo.1 && y <= self.hi.1 {
+                    found.second = found.second.min(ey2);
+                }
                 continue;
             }
             // Inner rows of a ring have only its two end cells.
@@ -522,9 +597,12 @@ impl PointGrid {
                 let x = kx + dx;
                 dx += step;
                 if ex * ex + ey2 >= found.limit || x < self.lo.0 || x > self.hi.0 {
+                    if CERTIFY && ex * ex + ey2 >= found.limit && x >= self.lo.0 && x <= self.hi.0 {
+                        found.second = found.second.min(ex * ex + ey2);
+                    }
                     continue;
                 }
-                self.walk(self.head((x, y), cursor), q, found);
+                self.walk::<CERTIFY>(self.head((x, y), cursor), q, found);
             }
         }
     }
@@ -534,7 +612,7 @@ impl PointGrid {
     /// them, then the rest. A near point found early rules out the farther cells by their
     /// edge distance alone, before their chains are walked.
     #[inline]
-    fn search_ring1(
+    fn search_ring1<const CERTIFY: bool>(
         &self,
         q: &Point2<f64>,
         (kx, ky): (i32, i32),
@@ -565,22 +643,31 @@ impl PointGrid {
         ] {
             let cell = (kx + dx, ky + dy);
             if ex2 + ey2 >= found.limit || !self.holds(cell) {
+                if CERTIFY && ex2 + ey2 >= found.limit && self.holds(cell) {
+                    found.second = found.second.min(ex2 + ey2);
+                }
                 continue;
             }
-            self.walk(self.head(cell, cursor), q, found);
+            self.walk::<CERTIFY>(self.head(cell, cursor), q, found);
         }
     }
 
     /// Tries the points of the chain from `at`, keeping the nearest below the limit.
+    /// Under `CERTIFY` also the least squared distance of the others tried.
     #[inline(always)]
-    fn walk(&self, mut at: u32, q: &Point2<f64>, found: &mut Found) {
+    fn walk<const CERTIFY: bool>(&self, mut at: u32, q: &Point2<f64>, found: &mut Found) {
         while at != END {
             let entry = &self.points[at as usize];
             let (dx, dy) = (entry.point.x - q.x, entry.point.y - q.y);
             let d2 = dx * dx + dy * dy;
             if d2 < found.limit {
+                if CERTIFY && found.best != END {
+                    found.second = found.second.min(found.limit);
+                }
                 found.best = at;
                 found.limit = d2;
+            } else if CERTIFY {
+                found.second = found.second.min(d2);
             }
             at = entry.next;
         }
@@ -592,6 +679,9 @@ impl PointGrid {
 struct Found {
     best: u32,
     limit: f64,
+    /// Under `CERTIFY`: a lower bound on the squared distance of every point but `best`
+    /// seen or ruled out so far.
+    second: f64,
 }
 
 #[cfg(test)]
@@ -682,6 +772,43 @@ mod tests {
                     at_once.nearest_within(&q, max_d2),
                     one_by_one.nearest_within(&q, max_d2)
                 );
+            }
+        }
+    }
+
+    proptest::proptest! {
+        /// A query anywhere within a certified query's margin has, by brute force, the
+        /// nearest point (or none) the certified query found, at the distance `again` gives.
+        #[test]
+        fn a_certified_nearest_stays_the_nearest_within_its_margin(
+            raw in proptest::collection::vec((-3.0f64..3.0, -3.0f64..3.0), 1..120),
+            queries in proptest::collection::vec(
+                (-4.0f64..4.0, -4.0f64..4.0, 0.0f64..1.0, 0.0f64..std::f64::consts::TAU),
+                1..30,
+            ),
+            cell in proptest::sample::select(vec![0.125, 0.25, 0.5]),
+            max_d2 in proptest::sample::select(vec![0.01, 0.25, 0.33, f64::INFINITY]),
+            dense in proptest::bool::ANY,
+        ) {
+            // Dense clusters too (a wall's voxels), where the margins are small.
+            let points: Vec<Point2<f64>> = raw
+                .iter()
+                .map(|&(x, y)| if dense { Point2::new(x * 0.1, y * 0.1) } else { Point2::new(x, y) })
+                .collect();
+            let grid = PointGrid::from_points(cell, &points);
+            for &(x, y, u, a) in &queries {
+                let q = if dense { Point2::new(x * 0.1, y * 0.1) } else { Point2::new(x, y) };
+                let (hit, margin) = grid.nearest_certified(&q, max_d2);
+                proptest::prop_assert_eq!(hit, grid.nearest_within(&q, max_d2));
+                proptest::prop_assert!(margin >= 0.0);
+                let moved = Point2::new(q.x + u * margin * a.cos(), q.y + u * margin * a.sin());
+                if (moved - q).norm_squared() >= margin * margin {
+                    continue;
+                }
+                let want = brute(&points, &moved, max_d2);
+                let got = hit.and_then(|h| PointGrid::again(&moved, max_d2, h.item, h.point));
+                proptest::prop_assert_eq!(got.map(|h| (h.item, h.dist2)), want);
+                proptest::prop_assert_eq!(got, grid.nearest_within(&moved, max_d2));
             }
         }
     }

@@ -6,8 +6,8 @@
 //! costs nothing extra, and the cost per scan depends on the size of the place, not on the
 //! length of the run.
 
-use super::grid::{CellHasher, PointGrid, floor_i64};
-use super::reference::{Line, Neighbour, Target};
+use super::grid::{CellHasher, Hit, PointGrid, floor_i64};
+use super::reference::{Certificate, Line, Neighbour, Target};
 use nalgebra::{Point2, Vector2};
 use std::collections::HashMap;
 use std::hash::BuildHasherDefault;
@@ -146,13 +146,19 @@ impl VoxelMap {
     }
 }
 
-impl Target for VoxelMap {
-    fn nearest_within(&self, p: &Point2<f64>, max_d2: f64) -> Option<Neighbour> {
-        // The nearest first point decides the voxel; its mean lies in the same voxel, at most
-        // a voxel's diagonal away, so a first point farther than that beyond the radius has
-        // its mean outside the radius too.
+impl VoxelMap {
+    /// The grid's bound for a query within `max_d2`: the nearest first point decides the
+    /// voxel; its mean lies in the same voxel, at most a voxel's diagonal away, so a first
+    /// point farther than that beyond the radius has its mean outside the radius too.
+    #[inline]
+    fn reach2(&self, max_d2: f64) -> f64 {
         let reach = max_d2.sqrt() + self.params.voxel_size * std::f64::consts::SQRT_2;
-        let hit = self.grid.nearest_within(p, reach * reach * (1.0 + 1e-9))?;
+        reach * reach * (1.0 + 1e-9)
+    }
+
+    /// The neighbour the grid's `hit` (the nearest first point) gives.
+    #[inline]
+    fn neighbour(&self, p: &Point2<f64>, max_d2: f64, hit: &Hit) -> Option<Neighbour> {
         let voxel = self.voxels.get(hit.item as usize)?;
         let (mean, line) = (voxel.mean, voxel.line);
         let dist2 = (mean - p).norm_squared();
@@ -161,6 +167,36 @@ impl Target for VoxelMap {
             line,
             dist2,
         })
+    }
+}
+
+impl Target for VoxelMap {
+    fn nearest_within(&self, p: &Point2<f64>, max_d2: f64) -> Option<Neighbour> {
+        let hit = self.grid.nearest_within(p, self.reach2(max_d2))?;
+        self.neighbour(p, max_d2, &hit)
+    }
+
+    fn nearest_certified(
+        &self,
+        p: &Point2<f64>,
+        max_d2: f64,
+    ) -> (Option<Neighbour>, Option<Certificate>) {
+        let (hit, margin) = self.grid.nearest_certified(p, self.reach2(max_d2));
+        (
+            hit.as_ref().and_then(|hit| self.neighbour(p, max_d2, hit)),
+            Certificate::new(*p, hit.as_ref(), margin),
+        )
+    }
+
+    #[inline]
+    fn nearest_reusing(
+        &self,
+        p: &Point2<f64>,
+        max_d2: f64,
+        certificate: &Certificate,
+    ) -> Option<Neighbour> {
+        let hit = certificate.again(p, self.reach2(max_d2))?;
+        self.neighbour(p, max_d2, &hit)
     }
 
     fn len(&self) -> usize {

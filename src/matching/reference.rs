@@ -5,7 +5,7 @@
 //! corner the centred window straddles two walls, so the one-sided windows are tried as well
 //! and the flattest fit wins.
 
-use super::grid::{PointGrid, scan_cell};
+use super::grid::{Hit, PointGrid, scan_cell};
 use super::solve::symmetric_eigenvalues_2x2;
 use crate::geometry::minor_axis_2x2;
 use nalgebra::{Matrix2, Point2, Vector2};
@@ -29,10 +29,60 @@ pub trait Target {
     fn nearest(&self, p: &Point2<f64>) -> Option<Neighbour> {
         self.nearest_within(p, f64::INFINITY)
     }
+    /// [`Self::nearest_within`], and what lets a query near `p` skip the search (see
+    /// [`Self::nearest_reusing`]): `None` when it proves nothing.
+    fn nearest_certified(
+        &self,
+        p: &Point2<f64>,
+        max_d2: f64,
+    ) -> (Option<Neighbour>, Option<Certificate>) {
+        (self.nearest_within(p, max_d2), None)
+    }
+    /// What `nearest_within(p, max_d2)` answers, for `p` closer (strictly) than
+    /// `certificate.margin` to `certificate.at` (a query of `nearest_certified` with the
+    /// same `max_d2`): the neighbour found then is still the nearest, so no search is made.
+    fn nearest_reusing(
+        &self,
+        p: &Point2<f64>,
+        max_d2: f64,
+        certificate: &Certificate,
+    ) -> Option<Neighbour> {
+        let _ = certificate;
+        self.nearest_within(p, max_d2)
+    }
     /// Number of points (0 means nothing to match against).
     fn len(&self) -> usize;
     fn is_empty(&self) -> bool {
         self.len() == 0
+    }
+}
+
+/// A query's nearest grid point with how far a later query may move from it and still have
+/// that point as its nearest (`PointGrid::nearest_certified`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Certificate {
+    /// Where the certified query was made.
+    pub at: Point2<f64>,
+    /// Queries closer than this to `at` (strictly) have the same nearest grid point \[m\].
+    pub margin: f64,
+    /// The nearest grid point's item and position; `None`: no point within the bound.
+    nearest: Option<(u32, Point2<f64>)>,
+}
+
+impl Certificate {
+    pub(crate) fn new(at: Point2<f64>, hit: Option<&Hit>, margin: f64) -> Option<Self> {
+        (margin > 0.0).then_some(Self {
+            at,
+            margin,
+            nearest: hit.map(|hit| (hit.item, hit.point)),
+        })
+    }
+
+    /// What the grid answers a query at `p` within `max_d2`, `p` within the margin.
+    #[inline]
+    pub(crate) fn again(&self, p: &Point2<f64>, max_d2: f64) -> Option<Hit> {
+        let (item, point) = self.nearest?;
+        PointGrid::again(p, max_d2, item, point)
     }
 }
 
@@ -171,8 +221,42 @@ impl Target for ScanReference {
         })
     }
 
+    fn nearest_certified(
+        &self,
+        p: &Point2<f64>,
+        max_d2: f64,
+    ) -> (Option<Neighbour>, Option<Certificate>) {
+        let (hit, margin) = self.grid.nearest_certified(p, max_d2);
+        (
+            hit.as_ref().map(|hit| self.neighbour(hit)),
+            Certificate::new(*p, hit.as_ref(), margin),
+        )
+    }
+
+    #[inline]
+    fn nearest_reusing(
+        &self,
+        p: &Point2<f64>,
+        max_d2: f64,
+        certificate: &Certificate,
+    ) -> Option<Neighbour> {
+        certificate.again(p, max_d2).map(|hit| self.neighbour(&hit))
+    }
+
     fn len(&self) -> usize {
         self.points.len()
+    }
+}
+
+impl ScanReference {
+    #[inline]
+    fn neighbour(&self, hit: &Hit) -> Neighbour {
+        let i = hit.item as usize;
+        Neighbour {
+            point: self.points[i],
+            line: self.lines[i],
+            dist2: hit.dist2,
+        }
     }
 }
 
