@@ -7,7 +7,7 @@
 //! over iterations). It stops when the pose changes by less than the thresholds.
 
 use super::covariance::Sandwich;
-use super::reference::Target;
+use super::reference::{Certificate, Target};
 use super::solve::{Remap, Remapped, RigidSolver, symmetric_eigenvalues_2x2};
 use crate::geometry::minor_axis_2x2;
 use crate::geometry::{Pose2, wrap_angle};
@@ -172,7 +172,7 @@ pub fn icp_with_prior<T: Target + ?Sized>(
     prior: Option<PosePrior>,
     params: &IcpParams,
 ) -> Option<IcpResult> {
-    icp_solving(source, target, guess, prior, None, params)
+    icp_solving(source, target, guess, prior, None, params, true)
 }
 
 /// [`icp`] whose every solve keeps the directions the pairs observe and takes the others
@@ -184,7 +184,7 @@ pub fn icp_remapped<T: Target + ?Sized>(
     remap: Remap,
     params: &IcpParams,
 ) -> Option<IcpResult> {
-    icp_solving(source, target, guess, None, Some(remap), params)
+    icp_solving(source, target, guess, None, Some(remap), params, true)
 }
 
 fn icp_solving<T: Target + ?Sized>(
@@ -194,10 +194,14 @@ fn icp_solving<T: Target + ?Sized>(
     prior: Option<PosePrior>,
     remap: Option<Remap>,
     params: &IcpParams,
+    reuse: bool,
 ) -> Option<IcpResult> {
     if target.is_empty() || source.is_empty() {
         return None;
     }
+    // Each source point's last certified association (see `associate`), with `reuse`.
+    let mut certificates: Vec<Option<Certificate>> =
+        vec![None; if reuse { source.len() } else { 0 }];
     let mut pose = guess;
     let mut pairs: Vec<Pair> = Vec::with_capacity(source.len());
     let mut trimming = Trimming::default();
@@ -206,7 +210,14 @@ fn icp_solving<T: Target + ?Sized>(
     let mut associated_at = pose;
     let mut cycle = CycleWatch::default();
     for iteration in 1..=params.max_iterations {
-        associate(source, target, &pose, params, &mut pairs);
+        associate(
+            source,
+            target,
+            &pose,
+            params,
+            reuse.then_some(&mut certificates[..]),
+            &mut pairs,
+        );
         if pairs.is_empty() {
             return None;
         }
@@ -340,19 +351,42 @@ fn moved_by(pose: &Pose2, (s, c): (f64, f64), p: &Point2<f64>) -> Point2<f64> {
 }
 
 /// Nearest target point for every source point under `pose`, within the association distance.
+///
+/// With `certificates` (one per source point), a point still within the margin of the query
+/// that certified its neighbour (the nearest grid point then, with every other one at least
+/// twice the margin farther) has that neighbour still as its nearest, to the bit the same
+/// answer as a new search (ties never get a margin); only its distance is computed anew.
+/// Other points are searched with a certificate. After the first solve the pose moves by
+/// millimetres, so most points keep their neighbour for several iterations; the first
+/// iteration's queries are certified too (on the intel log that costs less than plain first
+/// queries: 2,241M against 2,266M instructions of `levelscan match`).
 fn associate<T: Target + ?Sized>(
     source: &[Point2<f64>],
     target: &T,
     pose: &Pose2,
     params: &IcpParams,
+    mut certificates: Option<&mut [Option<Certificate>]>,
     pairs: &mut Vec<Pair>,
 ) {
     pairs.clear();
     let max_d2 = params.max_correspondence_distance.powi(2);
     let rotation = pose.theta.sin_cos();
-    for p in source {
+    for (i, p) in source.iter().enumerate() {
         let moved = moved_by(pose, rotation, p);
-        let Some(nb) = target.nearest_within(&moved, max_d2) else {
+        let nb = match certificates.as_deref_mut() {
+            None => target.nearest_within(&moved, max_d2),
+            Some(certificates) => match &certificates[i] {
+                Some(c) if (moved - c.at).norm_squared() < c.margin * c.margin => {
+                    target.nearest_reusing(&moved, max_d2, c)
+                }
+                _ => {
+                    let (nb, certificate) = target.nearest_certified(&moved, max_d2);
+                    certificates[i] = certificate;
+                    nb
+                }
+            },
+        };
+        let Some(nb) = nb else {
             continue;
         };
         let line = nb.line.map(|l| (l.normal, l.anchor));
@@ -627,6 +661,75 @@ mod tests {
             proptest::prop_assert_eq!(kept, want.len());
             let got: Vec<usize> = pairs.iter().map(|p| p.p.x as usize).collect();
             proptest::prop_assert_eq!(got, want);
+        }
+    }
+
+    /// Points along a room's walls (a `w` × `h` rectangle with a pillar), every `step`
+    /// metres with the given jitter, in the frame of a scanner at `at`.
+    fn room(w: f64, h: f64, step: f64, jitter: &[f64], at: &Pose2) -> Vec<Point2<f64>> {
+        let mut walls = Vec::new();
+        let n = |len: f64| (len / step) as usize;
+        walls.extend((0..n(w)).map(|k| Point2::new(k as f64 * step, 0.0)));
+        walls.extend((0..n(h)).map(|k| Point2::new(w, k as f64 * step)));
+        walls.extend((0..n(w)).map(|k| Point2::new(w - k as f64 * step, h)));
+        walls.extend((0..n(h)).map(|k| Point2::new(0.0, h - k as f64 * step)));
+        for k in 0..n(0.6) {
+            walls.push(Point2::new(0.4 * w + k as f64 * step, 0.5 * h));
+        }
+        let inverse = at.inverse();
+        walls
+            .iter()
+            .enumerate()
+            .map(|(i, p)| {
+                let e = jitter[i % jitter.len()];
+                inverse.transform_point(&Point2::new(p.x + e, p.y - 0.7 * e))
+            })
+            .collect()
+    }
+
+    proptest::proptest! {
+        /// Reusing certified associations changes nothing: the same result to the bit as
+        /// searching for every point in every iteration, against a scan and against a map.
+        #[test]
+        fn icp_with_reused_associations_equals_icp_searching_every_point(
+            w in 2.0f64..8.0,
+            h in 2.0f64..8.0,
+            step in 0.02f64..0.15,
+            jitter in proptest::collection::vec(-0.02f64..0.02, 1..40),
+            offset in (-0.3f64..0.3, -0.3f64..0.3, -0.2f64..0.2),
+            guess_error in (-0.1f64..0.1, -0.1f64..0.1, -0.05f64..0.05),
+            point_to_point in proptest::bool::ANY,
+        ) {
+            use crate::matching::map::{MapParams, VoxelMap};
+            use crate::matching::reference::{NormalParams, ScanReference};
+            let origin = Pose2::new(0.5 * w, 0.4 * h, 0.0);
+            let target_points = room(w, h, step, &[0.0], &origin);
+            let truth = Pose2::new(offset.0, offset.1, offset.2);
+            let source = room(w, h, step * 1.3, &jitter, &origin.compose(&truth));
+            let guess = Pose2::new(
+                truth.x + guess_error.0,
+                truth.y + guess_error.1,
+                truth.theta + guess_error.2,
+            );
+            let mut params = IcpParams::default();
+            if point_to_point {
+                params.metric = Metric::PointToPoint;
+            }
+            let scan = ScanReference::new(
+                target_points.clone(),
+                &Point2::origin(),
+                &NormalParams::default(),
+            );
+            let lines = scan.lines().to_vec();
+            let run = |target: &dyn Target, reuse: bool| {
+                icp_solving(&source, target, guess, None, None, &params, reuse)
+            };
+            let searched = run(&scan, false);
+            proptest::prop_assert!(searched.is_some());
+            proptest::prop_assert_eq!(run(&scan, true), searched);
+            let mut map = VoxelMap::new(MapParams::default());
+            map.insert(&target_points, &lines);
+            proptest::prop_assert_eq!(run(&map, true), run(&map, false));
         }
     }
 
