@@ -438,23 +438,18 @@ impl PointGrid {
     #[inline(always)]
     fn certified<const CERTIFY: bool>(
         &self,
-        (kx, ky): (i32, i32),
+        key: (i32, i32),
         ring: i32,
-        (fx, fy, gx, gy): (f64, f64, f64, f64),
+        edges: (f64, f64, f64, f64),
         found: &mut Found,
     ) -> (Option<Hit>, f64) {
         let hit = self.hit(found);
         if !CERTIFY {
             return (hit, 0.0);
         }
-        let covered = kx - ring <= self.lo.0
-            && kx + ring >= self.hi.0
-            && ky - ring <= self.lo.1
-            && ky + ring >= self.hi.1;
-        if !covered {
+        if !self.rings_cover(key, ring) {
             // Every point beyond the rings lies at least this far (as `searched_enough`).
-            let edge = fx.min(gx).min(fy).min(gy);
-            let reach = edge + ring as f64 * self.cell - 1e-9;
+            let reach = self.reach(ring, edges);
             found.second = found
                 .second
                 .min(if reach > 0.0 { reach * reach } else { 0.0 });
@@ -498,22 +493,33 @@ impl PointGrid {
     #[inline(always)]
     fn searched_enough(
         &self,
-        (kx, ky): (i32, i32),
+        key: (i32, i32),
         ring: i32,
-        (fx, fy, gx, gy): (f64, f64, f64, f64),
+        edges: (f64, f64, f64, f64),
         found: &Found,
     ) -> bool {
+        let reach = self.reach(ring, edges);
+        self.rings_cover(key, ring) || (reach > 0.0 && reach * reach >= found.limit)
+    }
+
+    /// Whether rings 0..=`ring` around cell `(kx, ky)` cover the box of occupied cells.
+    #[inline(always)]
+    fn rings_cover(&self, (kx, ky): (i32, i32), ring: i32) -> bool {
+        kx - ring <= self.lo.0
+            && kx + ring >= self.hi.0
+            && ky - ring <= self.lo.1
+            && ky + ring >= self.hi.1
+    }
+
+    /// How far at least every point outside rings 0..=`ring` lies from q (at `edges` from its
+    /// cell's sides) \[m\]: `ring` cells beyond the nearest side, less 1e-9 m for the rounding
+    /// of the cell keys.
+    #[inline(always)]
+    fn reach(&self, ring: i32, (fx, fy, gx, gy): (f64, f64, f64, f64)) -> f64 {
         // Plain comparisons: the offsets are finite, so `f64::min`'s NaN handling is not
         // needed.
         let min = |a: f64, b: f64| if a < b { a } else { b };
-        let edge = min(min(fx, gx), min(fy, gy));
-        let r = ring as f64 * self.cell;
-        let reach = edge + r - 1e-9;
-        let covered = kx - ring <= self.lo.0
-            && kx + ring >= self.hi.0
-            && ky - ring <= self.lo.1
-            && ky + ring >= self.hi.1;
-        covered || (reach > 0.0 && reach * reach >= found.limit)
+        min(min(fx, gx), min(fy, gy)) + ring as f64 * self.cell - 1e-9
     }
 
     /// The answer once the search is done.
@@ -577,10 +583,13 @@ impl PointGrid {
             let ey = gap(dy, fy, gy);
             let ey2 = ey * ey;
             let y = ky + dy;
-            if ey2 >= found.limit || y < self.lo.1 || y > self.hi.1 {
-                // A row ruled out by its distance bounds its points (one outside the box of
-                // occupied cells has none).
-                if CERTIFY && ey2 >= found.limit && y >= self.lo.1 && y <= self.hi.1 {
+            // A row outside the box of occupied cells has no points; one ruled out by its
+            // distance bounds its points.
+            if y < self.lo.1 || y > self.hi.1 {
+                continue;
+            }
+            if ey2 >= found.limit {
+                if CERTIFY {
                     found.second = found.second.min(ey2);
                 }
                 continue;
@@ -596,9 +605,13 @@ impl PointGrid {
                 let ex = gap(dx, fx, gx);
                 let x = kx + dx;
                 dx += step;
-                if ex * ex + ey2 >= found.limit || x < self.lo.0 || x > self.hi.0 {
-                    if CERTIFY && ex * ex + ey2 >= found.limit && x >= self.lo.0 && x <= self.hi.0 {
-                        found.second = found.second.min(ex * ex + ey2);
+                if x < self.lo.0 || x > self.hi.0 {
+                    continue;
+                }
+                let d2 = ex * ex + ey2;
+                if d2 >= found.limit {
+                    if CERTIFY {
+                        found.second = found.second.min(d2);
                     }
                     continue;
                 }
@@ -642,8 +655,11 @@ impl PointGrid {
             (xf, yf),
         ] {
             let cell = (kx + dx, ky + dy);
-            if ex2 + ey2 >= found.limit || !self.holds(cell) {
-                if CERTIFY && ex2 + ey2 >= found.limit && self.holds(cell) {
+            if !self.holds(cell) {
+                continue;
+            }
+            if ex2 + ey2 >= found.limit {
+                if CERTIFY {
                     found.second = found.second.min(ex2 + ey2);
                 }
                 continue;

@@ -45,9 +45,8 @@ pub trait Target {
         &self,
         p: &Point2<f64>,
         max_d2: f64,
-        certificate: &Certificate,
+        _certificate: &Certificate,
     ) -> Option<Neighbour> {
-        let _ = certificate;
         self.nearest_within(p, max_d2)
     }
     /// Number of points (0 means nothing to match against).
@@ -212,13 +211,9 @@ impl ScanReference {
 
 impl Target for ScanReference {
     fn nearest_within(&self, p: &Point2<f64>, max_d2: f64) -> Option<Neighbour> {
-        let hit = self.grid.nearest_within(p, max_d2)?;
-        let i = hit.item as usize;
-        Some(Neighbour {
-            point: self.points[i],
-            line: self.lines[i],
-            dist2: hit.dist2,
-        })
+        self.grid
+            .nearest_within(p, max_d2)
+            .map(|hit| self.neighbour(&hit))
     }
 
     fn nearest_certified(

@@ -157,7 +157,7 @@ pub(crate) struct Evaluation {
 /// residual's passes for the cluster-robust covariance at the final state
 /// ([`super::cluster::clustered_meat`]), which would otherwise pass over the rays once more
 /// to compute them again (3% of leveling's instructions).
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Copy, Debug, Default)]
 pub(crate) struct Score {
     pub by_attitude: [f64; 2],
     pub by_placement: [f64; 2],
@@ -234,13 +234,8 @@ fn pass<const RANGE: bool, const ARROW: bool>(
         (true, false) => (rays.len(), 0),
         _ => (0, 0),
     };
-    let blank = Score {
-        by_attitude: [0.0; 2],
-        by_placement: [0.0; 2],
-        weighted: 0.0,
-    };
     out.predicted.resize(n_predicted, 0.0);
-    out.scores.resize(n_scores, blank);
+    out.scores.resize(n_scores, Score::default());
     // Sliced to their sizes, so that the compiler sees every ray's index in range and drops
     // the bounds checks.
     let (predicted_out, scores_out) = (
