@@ -71,15 +71,46 @@ fn final_estimate(
 ) -> Option<MlSolution> {
     let grid = est.grid.as_ref()?;
     let groups = patch_groups(&est.patches, start, params, est.range_sigma);
-    let all = grid_points(grid, scans, est.range_sigma, params.min_sigma);
-    let mut labels = initial_labels(grid, &all, &groups);
-    let neighbours = neighbourhoods(grid, &all.0, params.ml.relabel_window);
-    let mut sol = fit(&all, &labels, &start.up, params)?;
+    let (index, points) = grid_points(grid, scans, est.range_sigma, params.min_sigma);
+    let labels = initial_labels(grid, &index, &groups);
+    let neighbours = Neighbours::new(
+        index,
+        grid.points.len(),
+        grid.cols,
+        params.ml.relabel_window,
+    );
+    let sol = last_stage(
+        &points,
+        &neighbours,
+        labels,
+        &start.up,
+        est.range_sigma,
+        params,
+    )?;
+    gate(&sol, start, params).then_some(sol)
+}
+
+/// The last stage on one segmentation (`labels`, per point of `points`), before the gate: the
+/// core's fit from `up`, relabelled by the fitted model and refitted (an EM over the
+/// segmentation, [`relabel`]), its covariance widened by its distance from the rival
+/// segmentations of the same ranges: the fit before relabelling and, when the range sigma
+/// exceeds `level_edges_above`, the fit without the floor's and ceiling's edges. `None` when
+/// the core refuses the first fit. Fed the true segmentation by `eval accuracy`, it measures
+/// what the stage's own rules cost when the segmentation is right.
+pub(crate) fn last_stage(
+    points: &[LabelledPoint],
+    neighbours: &Neighbours,
+    mut labels: Vec<Option<Surface>>,
+    up: &nalgebra::Vector3<f64>,
+    range_sigma: f64,
+    params: &LevelParams,
+) -> Option<MlSolution> {
+    let mut sol = fit(points, &labels, up, params)?;
     let first = sol.attitude;
     for _ in 0..params.ml.relabel_passes {
         let next = relabel(
-            &all.1,
-            &neighbours,
+            points,
+            neighbours,
             &labels,
             &sol,
             params.ml.huber_k,
@@ -89,21 +120,21 @@ fn final_estimate(
         if next == labels {
             break;
         }
-        let Some(refitted) = fit(&all, &next, &sol.up, params) else {
+        let Some(refitted) = fit(points, &next, &sol.up, params) else {
             break;
         };
         (sol, labels) = (refitted, next);
     }
     widen_by(&mut sol, first);
-    if est.range_sigma > params.ml.level_edges_above {
-        let rival = without_level_edges(&labels, &neighbours, params.ml.level_edge_window);
+    if range_sigma > params.ml.level_edges_above {
+        let rival = without_level_edges(&labels, neighbours, params.ml.level_edge_window);
         if rival != labels {
-            if let Some(without) = fit(&all, &rival, &sol.up, params) {
+            if let Some(without) = fit(points, &rival, &sol.up, params) {
                 widen_by(&mut sol, without.attitude);
             }
         }
     }
-    gate(&sol, start, params).then_some(sol)
+    Some(sol)
 }
 
 /// `sol`'s covariance with `d d^T / 2` added, for `d` its distance from `rival` (the attitude
@@ -123,7 +154,7 @@ fn widen_by(sol: &mut MlSolution, rival: [f64; 2]) {
 
 /// The core's fit of the points labelled, from `up`; `None` when it refuses.
 fn fit(
-    all: &(Vec<usize>, Vec<LabelledPoint>),
+    points: &[LabelledPoint],
     labels: &[Option<Surface>],
     up: &nalgebra::Vector3<f64>,
     params: &LevelParams,
@@ -132,30 +163,12 @@ fn fit(
         approach: false,
         ..params.ml.clone()
     };
-    refine_labelled(&all.1, labels, up, &ml).ok()
+    refine_labelled(points, labels, up, &ml).ok()
 }
 
-/// The valid points' neighbourhoods in `grid` (grid indices `index`, ascending), within
-/// `window` bearings: where a vertical surface standing over a point shows.
-fn neighbourhoods(grid: &PoseGrid, index: &[usize], window: usize) -> Neighbours {
-    let mut at = vec![None; grid.points.len()];
-    for (k, &i) in index.iter().enumerate() {
-        at[i] = Some(k);
-    }
-    Neighbours {
-        at,
-        index: index.to_vec(),
-        cols: grid.cols,
-        window,
-    }
-}
-
-/// Per valid point of `all` (grid indices ascending), the surface of the group holding it.
-fn initial_labels(
-    grid: &PoseGrid,
-    all: &(Vec<usize>, Vec<LabelledPoint>),
-    groups: &[Group<'_>],
-) -> Vec<Option<Surface>> {
+/// Per valid point (`index`: their grid indices, ascending), the surface of the group
+/// holding it.
+fn initial_labels(grid: &PoseGrid, index: &[usize], groups: &[Group<'_>]) -> Vec<Option<Surface>> {
     let mut by_grid = vec![None; grid.points.len()];
     for &(surface, members) in groups {
         for &i in members {
@@ -164,7 +177,7 @@ fn initial_labels(
             }
         }
     }
-    all.0.iter().map(|&i| by_grid[i]).collect()
+    index.iter().map(|&i| by_grid[i]).collect()
 }
 
 /// Whether the core's answer `sol`, started from `start`, passes the leveler's gate: both

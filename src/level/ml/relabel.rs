@@ -31,6 +31,22 @@ pub(crate) struct Neighbours {
 }
 
 impl Neighbours {
+    /// The neighbourhoods of the valid points of a grid of `len` cells, `cols` to a row (rows
+    /// in ascending elevation), whose grid indices are `index` (ascending), within `window`
+    /// bearings: where a vertical surface standing over a point shows.
+    pub(crate) fn new(index: Vec<usize>, len: usize, cols: usize, window: usize) -> Self {
+        let mut at = vec![None; len];
+        for (k, &i) in index.iter().enumerate() {
+            at[i] = Some(k);
+        }
+        Neighbours {
+            at,
+            index,
+            cols,
+            window,
+        }
+    }
+
     /// Whether `f` holds for any valid point within `scans` scans and `window` bearings of
     /// point `i`, itself excluded, tried in row-major order. Plain loops over each row's
     /// stretch of the grid: the chain of iterator adapters it replaces cost more than the
