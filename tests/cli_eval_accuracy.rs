@@ -58,6 +58,7 @@ fn efficiency_figures_agree_with_the_pose_records() {
     let (md, json, poses) = run_accuracy(&dir, &["--estimator", "robust"]);
     assert!(md.contains("### Against each pose's bound"), "{md}");
     assert!(md.contains("ml, true segments"), "{md}");
+    assert!(md.contains("last stage, true segments"), "{md}");
     assert!(md.contains("floor/ceiling kept"), "{md}");
     for c in json["cells"].as_array().unwrap() {
         let of_cell: Vec<&Value> = poses
@@ -100,6 +101,17 @@ fn efficiency_figures_agree_with_the_pose_records() {
         assert!(
             (s - 1.0).abs() < 0.1,
             "the core's sigma is the bound's: {ml}"
+        );
+        // The last stage on the same segmentation fits a subset of its points (relabelling
+        // leaves out those within reach of two surfaces) and only ever widens.
+        let last = &c["true_segments_last_stage"];
+        assert!(last["efficiency_poses"].as_u64().unwrap() > 0, "{c}");
+        let s_last = last["sigma_over_bound"].as_f64().unwrap();
+        assert!(s_last >= 0.98 * s, "{last} against {ml}");
+        let within = c["true_segments_last_stage_within_gate"].as_f64().unwrap();
+        assert!(
+            within <= c["true_segments_ml_within_gate"].as_f64().unwrap() + 0.02,
+            "{c}"
         );
         let rate = c["floor_kept_rate"].as_f64().unwrap();
         assert!((0.0..=1.0).contains(&rate));

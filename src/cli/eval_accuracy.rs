@@ -3,6 +3,7 @@
 use super::{LevelArgs, open_output, write_file};
 use anyhow::Context;
 use levelscan::eval::accuracy::{AccuracyParams, CellStats, Efficiency, run_accuracy_with};
+use levelscan::eval::true_segments::TrueSegmentsFit;
 use levelscan::formats::read_plan;
 use levelscan::level::{Estimator, LevelParams};
 use levelscan::simulate::NoiseModel;
@@ -208,12 +209,8 @@ fn pose_lines(stats: &[CellStats], plans: &[PathBuf]) -> String {
                 "sigma_over_bound": o.sigma_over_bound(),
                 "efficient_over_bound": o.efficient_over_bound,
                 "segmented_deg": o.segmented_deg.filter(|b| b.is_finite()),
-                "true_segments_ml": o.true_segments.map(|f| serde_json::json!({
-                    "estimate_deg": f.attitude.map(f64::to_degrees),
-                    "sigmas_deg": f.sigmas.map(f64::to_degrees),
-                    "inflation": f.inflation,
-                    "converged": f.converged,
-                })),
+                "true_segments_ml": o.true_segments.map(fit_json),
+                "true_segments_last_stage": o.true_segments_last_stage.map(fit_json),
                 "pseudo_valid": o.pseudo_valid,
                 "phantoms": o.phantoms,
                 "floor_kept": o.floor_kept,
@@ -363,8 +360,25 @@ fn efficiency_table(stats: &[CellStats]) -> String {
             );
             row(&mut s, &name, c, &c.true_segments_ml);
         }
+        if last_of_cell && c.true_segments_last_stage.efficiency_poses > 0 {
+            let name = format!(
+                "last stage, true segments ({} within gate)",
+                fmt_pct(c.true_segments_last_stage_within_gate)
+            );
+            row(&mut s, &name, c, &c.true_segments_last_stage);
+        }
     }
     s
+}
+
+/// A fit on the true segmentation as `poses.jsonl` writes it.
+fn fit_json(f: TrueSegmentsFit) -> serde_json::Value {
+    serde_json::json!({
+        "estimate_deg": f.attitude.map(f64::to_degrees),
+        "sigmas_deg": f.sigmas.map(f64::to_degrees),
+        "inflation": f.inflation,
+        "converged": f.converged,
+    })
 }
 
 fn fmt_two(x: f64) -> String {

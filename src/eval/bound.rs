@@ -52,6 +52,8 @@ pub struct BoundRay {
     pub normal_world: Vector3<f64>,
     pub measured: f64,
     pub scan: usize,
+    /// The ray's index in its scan.
+    pub col: usize,
 }
 
 /// A plan's walls as planes: segments on one line are one plane (a wall interrupted by a door
@@ -175,6 +177,7 @@ pub fn pose_rays(
                 normal_world,
                 measured,
                 scan: k,
+                col: i,
             });
         }
     }
@@ -430,6 +433,7 @@ mod tests {
                     normal_world: Vector3::z(),
                     measured: 0.45 / -dir.z,
                     scan: i % 2,
+                    col: i,
                 }
             })
             .collect();

@@ -5,6 +5,7 @@
 
 use super::pose::PoseOutcome;
 use crate::eval::metrics::median;
+use crate::eval::true_segments::TrueSegmentsFit;
 use nalgebra::{Matrix2, Vector2};
 use rand::Rng;
 use rand_distr::{Distribution, StandardNormal};
@@ -35,7 +36,15 @@ impl AxisRecord {
 
     /// The maximum-likelihood core's records on the true segmentation.
     pub fn of_true_segments(o: &PoseOutcome) -> Option<Self> {
-        let fit = o.true_segments?;
+        Self::of_fit(o, o.true_segments?)
+    }
+
+    /// The leveler's last stage's records on the true segmentation.
+    pub fn of_true_segments_last_stage(o: &PoseOutcome) -> Option<Self> {
+        Self::of_fit(o, o.true_segments_last_stage?)
+    }
+
+    fn of_fit(o: &PoseOutcome, fit: TrueSegmentsFit) -> Option<Self> {
         let deg = fit.attitude.map(f64::to_degrees);
         Some(AxisRecord {
             error: [deg[0] - o.truth_deg[0], deg[1] - o.truth_deg[1]],

@@ -18,7 +18,7 @@ pub use pose::{PoseOutcome, evaluate_pose};
 pub use stats::CellStats;
 
 use super::bound::{WallPlanes, attitude_bound_cov, pose_rays, segmented_solution};
-use super::true_segments::fit_true_segments;
+use super::true_segments::{fit_true_segments, last_stage_true_segments};
 use crate::geometry::Pose;
 use crate::level::{Estimator, LevelParams};
 use crate::plan::{Plan, Segment};
@@ -93,8 +93,9 @@ pub struct AccuracyParams {
     /// still use the rays as cast. (The adaptive robot's own leveling keeps them.) Default
     /// false.
     pub drop_ray_elevation: bool,
-    /// Also fit the maximum-likelihood core ([`crate::level::ml`]) to each pose's true
-    /// segmentation, for the `true_segments_ml` statistics. Default true.
+    /// Also fit the maximum-likelihood core ([`crate::level::ml`]) and the leveler's last
+    /// stage to each pose's true segmentation, for the `true_segments_ml` and
+    /// `true_segments_last_stage` statistics. Default true.
     pub true_segments_ml: bool,
     /// Level estimation parameters (the estimator field is overridden per run).
     pub level: LevelParams,
@@ -269,6 +270,7 @@ fn run_pose_cell(
                 efficient_over_bound: reference.efficient_over_bound,
                 segmented_deg: reference.segmented_deg,
                 true_segments: reference.true_segments,
+                true_segments_last_stage: reference.true_segments_last_stage,
                 ..scored
             }
         })
@@ -356,6 +358,10 @@ fn data_reference<R: rand::Rng + ?Sized>(
         true_segments: params
             .true_segments_ml
             .then(|| fit_true_segments(&rays, sigma, &start))
+            .flatten(),
+        true_segments_last_stage: params
+            .true_segments_ml
+            .then(|| last_stage_true_segments(&rays, scans, sigma, &start, &params.level))
             .flatten(),
         ..PoseOutcome::default()
     }

@@ -64,6 +64,10 @@ pub struct PoseOutcome {
     /// The maximum-likelihood core on the true segmentation ([`crate::eval::true_segments`]),
     /// when computed and it could fix up.
     pub true_segments: Option<TrueSegmentsFit>,
+    /// The leveler's last stage on the true segmentation
+    /// ([`crate::eval::true_segments::last_stage_true_segments`]), when computed and the core
+    /// could fix up.
+    pub true_segments_last_stage: Option<TrueSegmentsFit>,
 }
 
 impl PoseOutcome {

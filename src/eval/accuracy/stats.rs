@@ -4,6 +4,7 @@ use super::efficiency::{AxisRecord, Efficiency};
 use super::paper_mean;
 use super::pose::PoseOutcome;
 use crate::eval::metrics::{median, nearest_rank};
+use crate::eval::true_segments::TrueSegmentsFit;
 use crate::level::Estimator;
 use std::collections::BTreeMap;
 
@@ -65,6 +66,12 @@ pub struct CellStats {
     pub true_segments_ml: Efficiency,
     /// Poses whose maximum-likelihood sigma on the true segmentation lies within the gate.
     pub true_segments_ml_within_gate: f64,
+    /// The leveler's last stage told the true segmentation (relabelled and widened by its
+    /// rivals as on the leveler's own), over every pose it fixes up at: what the stage's rules
+    /// cost where the segmentation is right.
+    pub true_segments_last_stage: Efficiency,
+    /// Poses whose last-stage sigma on the true segmentation lies within the gate.
+    pub true_segments_last_stage_within_gate: f64,
     /// Failed poses by reason.
     pub failures: BTreeMap<String, usize>,
     /// Every leveled pose's error \[deg\], in pose order (for histograms).
@@ -145,14 +152,15 @@ pub(crate) fn cell_stats(
     let n = sorted.len();
     let bounds: Vec<f64> = o.iter().filter_map(|p| p.bound_deg).collect();
     let segmented: Vec<f64> = o.iter().filter_map(|p| p.segmented_deg).collect();
-    let ml_sigmas: Vec<f64> = o
-        .iter()
-        .filter(|p| p.bound_deg.is_some())
-        .map(|p| {
-            p.true_segments
-                .map_or(f64::INFINITY, |f| f.sigmas[0].max(f.sigmas[1]).to_degrees())
-        })
-        .collect();
+    // The larger sigma of a fit on the true segmentation, per pose with a bound.
+    let fit_sigmas = |fit: fn(&PoseOutcome) -> Option<TrueSegmentsFit>| -> Vec<f64> {
+        o.iter()
+            .filter(|p| p.bound_deg.is_some())
+            .map(|p| fit(p).map_or(f64::INFINITY, |f| f.sigmas[0].max(f.sigmas[1]).to_degrees()))
+            .collect()
+    };
+    let ml_sigmas = fit_sigmas(|p| p.true_segments);
+    let last_stage_sigmas = fit_sigmas(|p| p.true_segments_last_stage);
     let leveled: Vec<&&PoseOutcome> = o.iter().filter(|p| p.error_deg.is_some()).collect();
     let sum = |f: fn(&PoseOutcome) -> usize| leveled.iter().map(|p| f(p)).sum::<usize>();
     let valid = sum(|p| p.pseudo_valid);
@@ -208,6 +216,8 @@ pub(crate) fn cell_stats(
         efficiency: Efficiency::of(&records(AxisRecord::of_leveled)),
         true_segments_ml: Efficiency::of(&records(AxisRecord::of_true_segments)),
         true_segments_ml_within_gate: within_gate(&ml_sigmas),
+        true_segments_last_stage: Efficiency::of(&records(AxisRecord::of_true_segments_last_stage)),
+        true_segments_last_stage_within_gate: within_gate(&last_stage_sigmas),
         failures: failure_counts(o),
         errors_deg: errors,
         outcomes: o.iter().map(|&p| p.clone()).collect(),
@@ -275,6 +285,20 @@ mod tests {
                 inflation: 1.0,
                 converged: true,
             }),
+            // The last stage: sigma 2 degrees (beyond the gate) on the pose with error 3.
+            true_segments_last_stage: Some(TrueSegmentsFit {
+                attitude: [0.0, -0.02],
+                sigmas: [
+                    if e == Some(3.0) {
+                        2f64.to_radians()
+                    } else {
+                        0.02
+                    },
+                    0.01,
+                ],
+                inflation: 1.0,
+                converged: true,
+            }),
             ..PoseOutcome::default()
         };
         let outcomes = [mk(Some(1.0)), mk(Some(3.0)), mk(None), mk(Some(6.0))];
@@ -317,5 +341,10 @@ mod tests {
         let err = 0.01f64.to_degrees();
         assert!((ml.error_over_bound - err / 0.25).abs() < 1e-9);
         assert!((s.true_segments_ml_within_gate - 1.0).abs() < 1e-12);
+        // The last stage: its error 0.02 rad in y; three of the four within the gate.
+        let last = &s.true_segments_last_stage;
+        assert_eq!(last.efficiency_poses, 3);
+        assert!((last.error_over_bound - 2.0 * err / 0.25).abs() < 1e-9);
+        assert!((s.true_segments_last_stage_within_gate - 0.75).abs() < 1e-12);
     }
 }
