@@ -64,7 +64,7 @@ impl TrueSegmentsFit {
     }
 }
 
-/// The leveler's last stage ([`last_stage`]: the core's fit, relabelled and refitted, widened
+/// The leveler's last stage (`ml::from_segmentation::last_stage`: the core's fit, relabelled and refitted, widened
 /// by its rival segmentations) on the true segmentation from `start`, before the leveler's gate;
 /// `None` when the core refuses. The rays' grid is the leveler's: the scans of `scans` as rows
 /// in ascending elevation, the rays' indices as columns.
