@@ -8,6 +8,7 @@
 
 use super::bound::{BoundRay, Surface as BoundSurface};
 use crate::level::LevelParams;
+use crate::level::grid::PoseGrid;
 use crate::level::ml::from_segmentation::last_stage;
 use crate::level::ml::relabel::Neighbours;
 use crate::level::ml::{self, LabelledPoint, MlParams, MlSolution, Surface};
@@ -64,10 +65,11 @@ impl TrueSegmentsFit {
     }
 }
 
-/// The leveler's last stage (`ml::from_segmentation::last_stage`: the core's fit, relabelled and refitted, widened
-/// by its rival segmentations) on the true segmentation from `start`, before the leveler's gate;
-/// `None` when the core refuses. The rays' grid is the leveler's: the scans of `scans` as rows
-/// in ascending elevation, the rays' indices as columns.
+/// The leveler's last stage (`ml::from_segmentation::last_stage`: the core's fit, relabelled
+/// and refitted, widened by its rival segmentations) on the true segmentation from `start`,
+/// before the leveler's gate; `None` when the core refuses or the scans make no grid. The rays
+/// sit in the leveler's own grid ([`PoseGrid::from_scans`]: rows by ascending elevation, the
+/// rays' indices as columns).
 pub fn last_stage_true_segments(
     rays: &[BoundRay],
     scans: &[Scan],
@@ -75,24 +77,26 @@ pub fn last_stage_true_segments(
     start: &Vector3<f64>,
     params: &LevelParams,
 ) -> Option<TrueSegmentsFit> {
-    let mut order: Vec<usize> = (0..scans.len()).collect();
-    order.sort_by(|&a, &b| {
-        let elevation = |k: usize| scans[k].elevation.unwrap_or(f64::NAN);
-        elevation(a).total_cmp(&elevation(b)).then(a.cmp(&b))
-    });
-    let mut row_of = vec![0; scans.len()];
-    for (row, &k) in order.iter().enumerate() {
-        row_of[k] = row;
+    let grid = PoseGrid::from_scans(scans).ok()?;
+    let mut row_of = vec![None; scans.len()];
+    for (row, &k) in grid.scan_index.iter().enumerate() {
+        row_of[k] = Some(row);
     }
-    let cols = scans.iter().map(|s| s.theta.len()).max()?;
-    let cell = |r: &BoundRay| row_of[r.scan] * cols + r.col;
-    let mut sorted: Vec<&BoundRay> = rays.iter().collect();
-    sorted.sort_by_key(|r| cell(r));
-    let rays: Vec<BoundRay> = sorted.into_iter().copied().collect();
+    // Each ray with its grid index, in the grid's order.
+    let mut placed: Vec<(usize, BoundRay)> = rays
+        .iter()
+        .filter_map(|r| Some((row_of[r.scan]? * grid.cols + r.col, *r)))
+        .collect();
+    placed.sort_by_key(|&(cell, _)| cell);
+    let (index, rays): (Vec<usize>, Vec<BoundRay>) = placed.into_iter().unzip();
     let points = labelled_points(&rays, sigma);
     let labels = points.iter().map(|p| Some(p.surface)).collect();
-    let index = rays.iter().map(cell).collect();
-    let neighbours = Neighbours::new(index, scans.len() * cols, cols, params.ml.relabel_window);
+    let neighbours = Neighbours::new(
+        index,
+        grid.points.len(),
+        grid.cols,
+        params.ml.relabel_window,
+    );
     let sol = last_stage(&points, &neighbours, labels, start, sigma, params)?;
     Some(TrueSegmentsFit::of(&sol))
 }
@@ -139,8 +143,8 @@ mod tests {
     /// Noise-free, from 3 degrees off: the relabelled fit is the truth (within a hundredth of
     /// its sigma: the stage stops a thousandth of a sigma from its optimum), and the rival (the
     /// fit before relabelling) lies on it, so nothing widens its sigmas: they are the core's
-    /// on every point, a little looser for the points relabelling leaves out (within reach of
-    /// two surfaces, at the corners and the walls' feet), never tighter.
+    /// on every point, a little looser for the points relabelling leaves out (floor points a
+    /// wall stands over, grazing rays), never tighter.
     #[test]
     fn last_stage_on_noise_free_truth_is_exact() {
         let (truth, scans, world, planes) = pose_scans(0.0, 1);
