@@ -9,12 +9,13 @@
 //! `readings_sigma` when given). The core starts from the leveler's up; its answer replaces the
 //! leveler's up and sigmas when it passes the same gate. Its covariance is the information
 //! matrix's (inflated by its own chi-square test, covering the cluster-robust one), widened by
-//! the distance to rival segmentations of the same ranges: the fit before relabelling and,
-//! above `level_edges_above`, the fit without the floor's and ceiling's edges. Where the core
+//! the distance to rival segmentations of the same ranges: the fit on the points relabelling
+//! left where they were and, above `level_edges_above`, the fit without the floor's and
+//! ceiling's edges. Where the core
 //! refuses, the leveler's answer stands, or the pose fails as before.
 
 use super::relabel::{Neighbours, relabel, without_level_edges};
-use super::solve::refine_labelled;
+use super::solve::{one_step, refine_labelled_from};
 use super::{LabelledPoint, MlParams, MlSolution, Surface};
 use crate::geometry::Attitude;
 use crate::level::attitude::attitude_sigmas;
@@ -91,50 +92,89 @@ fn final_estimate(
 }
 
 /// The last stage on one segmentation (`labels`, per point of `points`), before the gate: the
-/// core's fit from `up`, relabelled by the fitted model and refitted (an EM over the
-/// segmentation, [`relabel`]), its covariance widened by its distance from the rival
-/// segmentations of the same ranges: the fit before relabelling and, when the range sigma
-/// exceeds `level_edges_above`, the fit without the floor's and ceiling's edges. `None` when
-/// the core refuses the first fit. Fed the true segmentation by `eval accuracy`, it measures
-/// what the stage's own rules cost when the segmentation is right.
+/// core's fit from `up`, relabelled by the fitted model and refitted until the labels settle
+/// (an EM over the segmentation, [`relabel`], at most `relabel_passes` times, and no more once
+/// a refit moves the attitude by less than `relabel_settle_sigmas`), its covariance
+/// widened by its distance from the rival segmentations of the same ranges: the fit on only
+/// the points relabelling left where they were ([`agreed`]) and, when the range sigma exceeds
+/// `level_edges_above`, the fit without the floor's and ceiling's edges. `None` when the core
+/// refuses the first fit. Fed the true segmentation by `eval accuracy`, it measures what the
+/// stage's own rules cost when the segmentation is right.
 pub(crate) fn last_stage(
     points: &[LabelledPoint],
     neighbours: &Neighbours,
-    mut labels: Vec<Option<Surface>>,
+    labels: Vec<Option<Surface>>,
     up: &nalgebra::Vector3<f64>,
     range_sigma: f64,
     params: &LevelParams,
 ) -> Option<MlSolution> {
-    let mut sol = fit(points, &labels, up, params)?;
+    let mut sol = fit(points, &labels, up, None, params)?;
     let first = sol.attitude;
+    let mut current = labels.clone();
     for _ in 0..params.ml.relabel_passes {
         let next = relabel(
             points,
             neighbours,
-            &labels,
+            &current,
             &sol,
             params.ml.huber_k,
             params.ml.relabel_margin,
             params.ml.min_incidence,
         );
-        if next == labels {
+        if next == current {
             break;
         }
-        let Some(refitted) = fit(points, &next, &sol.up, params) else {
+        let Some(refitted) = fit(points, &next, &sol.up, Some(&sol), params) else {
             break;
         };
-        (sol, labels) = (refitted, next);
+        let settled = moved_sigmas(&refitted, &sol) < params.ml.relabel_settle_sigmas;
+        (sol, current) = (refitted, next);
+        if settled {
+            break;
+        }
     }
-    widen_by(&mut sol, first);
+    let agreed = agreed(&labels, &current);
+    if agreed != current {
+        let rival = one_step(points, &agreed, &sol, &params.ml);
+        widen_by(&mut sol, rival.unwrap_or(first));
+    }
     if range_sigma > params.ml.level_edges_above {
-        let rival = without_level_edges(&labels, neighbours, params.ml.level_edge_window);
-        if rival != labels {
-            if let Some(without) = fit(points, &rival, &sol.up, params) {
+        let rival = without_level_edges(&current, neighbours, params.ml.level_edge_window);
+        if rival != current {
+            if let Some(without) = fit(points, &rival, &sol.up, Some(&sol), params) {
                 widen_by(&mut sol, without.attitude);
             }
         }
     }
     Some(sol)
+}
+
+/// How far `from`'s attitude lies from `to`'s, in `to`'s sigmas (the Mahalanobis distance
+/// under `to`'s covariance); infinite when that covariance is singular.
+fn moved_sigmas(to: &MlSolution, from: &MlSolution) -> f64 {
+    let d = Vector2::new(
+        to.attitude[0] - from.attitude[0],
+        to.attitude[1] - from.attitude[1],
+    );
+    let c = to.covariance;
+    nalgebra::Matrix2::new(c[0][0], c[0][1], c[1][0], c[1][1])
+        .try_inverse()
+        .map_or(f64::INFINITY, |inv| {
+            (d.transpose() * inv * d)[(0, 0)].sqrt()
+        })
+}
+
+/// The labels `before` and `after` relabelling agree on; a point they give different
+/// surfaces (or only one of them a surface) is left out. Its fit is the rival segmentation
+/// that trusts neither side of a contested point: where relabelling only moved points the
+/// first labels had wrong, it lands where the relabelled fit does; where the contested points
+/// carry the answer, the two fits part (docs/ESTIMATOR.md, section 12).
+fn agreed(before: &[Option<Surface>], after: &[Option<Surface>]) -> Vec<Option<Surface>> {
+    before
+        .iter()
+        .zip(after)
+        .map(|(b, a)| if b == a { *a } else { None })
+        .collect()
 }
 
 /// `sol`'s covariance with `d d^T / 2` added, for `d` its distance from `rival` (the attitude
@@ -152,18 +192,20 @@ fn widen_by(sol: &mut MlSolution, rival: [f64; 2]) {
     }
 }
 
-/// The core's fit of the points labelled, from `up`; `None` when it refuses.
+/// The core's fit of the points labelled, from `up` (and from `warm`'s placements, a fit of
+/// nearly the same labels, when given); `None` when it refuses.
 fn fit(
     points: &[LabelledPoint],
     labels: &[Option<Surface>],
     up: &nalgebra::Vector3<f64>,
+    warm: Option<&MlSolution>,
     params: &LevelParams,
 ) -> Option<MlSolution> {
     let ml = MlParams {
         approach: false,
         ..params.ml.clone()
     };
-    refine_labelled(points, labels, up, &ml).ok()
+    refine_labelled_from(points, labels, up, warm, &ml).ok()
 }
 
 /// Per valid point (`index`: their grid indices, ascending), the surface of the group
@@ -278,4 +320,20 @@ fn grid_points(
         });
     }
     (index, points)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A point keeps its label where relabelling left it, and none where it moved (to another
+    /// surface, onto one or off one).
+    #[test]
+    fn agreed_labels_are_those_relabelling_left() {
+        let (w0, w1) = (Some(Surface::Wall(0)), Some(Surface::Wall(1)));
+        let floor = Some(Surface::Floor);
+        let before = [w0, floor, None, w1, w1];
+        let after = [w0, w1, floor, None, w1];
+        assert_eq!(agreed(&before, &after), vec![w0, None, None, None, w1]);
+    }
 }

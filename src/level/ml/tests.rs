@@ -623,3 +623,80 @@ fn cluster_robust_covariance_covers_a_mislabelled_foot() {
     assert!(robust >= model + 0.03, "model {model}, robust {robust}");
     assert!((1.0..1.15).contains(&median), "clean widening {median}");
 }
+
+/// Points of a noisy 5 cm pose with every seventh point's label dropped: a fit of the whole
+/// segmentation and the labels of a near rival of it.
+fn near_rival() -> (Vec<LabelledPoint>, Vec<Option<Surface>>, MlSolution) {
+    let plan = box_plan(7.0, 5.0, 2.6, true);
+    let pts = points(
+        &plan,
+        &pose(2.0, 1.5, 0.4, 9.0 * DEG, -6.0 * DEG),
+        4,
+        0.05,
+        11,
+    );
+    let all: Vec<Option<Surface>> = pts.iter().map(|p| Some(p.surface)).collect();
+    let full = solve::refine_labelled(&pts, &all, &Vector3::z(), &MlParams::default()).unwrap();
+    let rival = pts
+        .iter()
+        .enumerate()
+        .map(|(i, p)| (i % 7 != 3).then_some(p.surface))
+        .collect();
+    (pts, rival, full)
+}
+
+/// A fit started at a near fit's placements reaches the fresh fit's optimum (to far below its
+/// sigma) in no more steps.
+#[test]
+fn a_warm_start_reaches_the_fresh_fit() {
+    let (pts, rival, full) = near_rival();
+    let params = MlParams::default();
+    let fresh = solve::refine_labelled(&pts, &rival, &full.up, &params).unwrap();
+    let warm = solve::refine_labelled_from(&pts, &rival, &full.up, Some(&full), &params).unwrap();
+    let sigma = fresh.sigmas()[0].min(fresh.sigmas()[1]);
+    for k in 0..2 {
+        assert!(
+            (warm.attitude[k] - fresh.attitude[k]).abs() < 1e-3 * sigma,
+            "{:?} {:?}",
+            warm.attitude,
+            fresh.attitude
+        );
+    }
+    assert!(warm.iterations <= fresh.iterations);
+    // The rival is a different fit: the test would pass trivially if it were the same.
+    assert!((fresh.attitude[0] - full.attitude[0]).abs() > 1e-3 * sigma);
+}
+
+/// One Gauss-Newton step from a near fit lands on the rival's own fit: within a twentieth of
+/// the distance between the two fits (its error is second order in that distance).
+#[test]
+fn one_step_from_a_near_fit_lands_on_the_whole_fit() {
+    let (pts, rival, full) = near_rival();
+    let params = MlParams::default();
+    let whole = solve::refine_labelled(&pts, &rival, &full.up, &params).unwrap();
+    let step = solve::one_step(&pts, &rival, &full, &params).unwrap();
+    let apart = Vector2::new(
+        whole.attitude[0] - full.attitude[0],
+        whole.attitude[1] - full.attitude[1],
+    )
+    .norm();
+    let miss = Vector2::new(step[0] - whole.attitude[0], step[1] - whole.attitude[1]).norm();
+    assert!(apart > 0.0);
+    assert!(miss < 0.05 * apart, "miss {miss:e}, apart {apart:e}");
+}
+
+/// A surface the solution kept is placed where it put it; one it did not keep has no
+/// placement.
+#[test]
+fn a_solution_gives_the_placements_it_fitted() {
+    let (_, _, full) = near_rival();
+    for w in &full.walls {
+        let p = full.placement_of(w.surface).unwrap();
+        assert_eq!((p.offset, p.azimuth), (w.offset, w.azimuth));
+    }
+    assert_eq!(
+        full.placement_of(Surface::Floor).map(|p| p.offset),
+        full.floor
+    );
+    assert!(full.placement_of(Surface::Wall(usize::MAX)).is_none());
+}
