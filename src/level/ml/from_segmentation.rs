@@ -326,6 +326,25 @@ fn grid_points(
 mod tests {
     use super::*;
 
+    /// The distance between two fits' attitudes in the second's sigmas: along an axis, the
+    /// difference over that axis' sigma; across correlated axes, the Mahalanobis distance.
+    #[test]
+    fn a_refit_moves_by_its_own_sigmas() {
+        let at = |a: [f64; 2], covariance: [[f64; 2]; 2]| MlSolution {
+            attitude: a,
+            covariance,
+            ..MlSolution::default()
+        };
+        let to = at([0.03, 0.0], [[1e-4, 0.0], [0.0, 4e-4]]);
+        assert!((moved_sigmas(&to, &at([0.0, 0.0], to.covariance)) - 3.0).abs() < 1e-12);
+        assert!((moved_sigmas(&to, &at([0.03, 0.04], to.covariance)) - 2.0).abs() < 1e-12);
+        let correlated = at([0.01, 0.01], [[1e-4, 0.9e-4], [0.9e-4, 1e-4]]);
+        // Along the correlation: sqrt(2 d^2 / (1.9e-4)) for d = 0.01.
+        let along = (2.0 * 1e-4 / 1.9e-4f64).sqrt();
+        assert!((moved_sigmas(&correlated, &at([0.0, 0.0], to.covariance)) - along).abs() < 1e-9);
+        assert!(moved_sigmas(&at([0.1, 0.0], [[0.0; 2]; 2]), &to).is_infinite());
+    }
+
     /// A point keeps its label where relabelling left it, and none where it moved (to another
     /// surface, onto one or off one).
     #[test]

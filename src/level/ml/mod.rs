@@ -209,7 +209,7 @@ pub(crate) struct SurfaceFit {
 }
 
 /// The refined estimate.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, Default, PartialEq)]
 pub(crate) struct MlSolution {
     /// `(theta_x, theta_y)` \[rad\].
     pub attitude: [f64; 2],
