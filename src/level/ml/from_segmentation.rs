@@ -135,6 +135,8 @@ pub(crate) fn last_stage(
     }
     let agreed = agreed(&labels, &current);
     if agreed != current {
+        // Where the agreed points no longer fix the attitude, the fit before relabelling
+        // stands in as the rival (the rule before section 12).
         let rival = one_step(points, &agreed, &sol, &params.ml);
         widen_by(&mut sol, rival.unwrap_or(first));
     }
