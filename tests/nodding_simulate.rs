@@ -212,6 +212,10 @@ proptest! {
         rate_deg in prop_oneof![20.0f64..120.0, -120.0f64..-20.0],
         scan_rate in 10.0f64..40.0, offset in any::<bool>(), seed in any::<u64>(),
     ) {
+        // In the room, not inside (or against) its pillar: from inside, every ray meets a
+        // pillar wall a few centimetres away, where a 1-degree elevation error moves a point
+        // by less than the 0.1 mm the nominal check below needs (found: (5.12, 4.43), 0.09 mm).
+        prop_assume!(!((4.7..=5.9).contains(&x) && (3.7..=4.8).contains(&y)));
         let plan = room();
         let world = World::from_plan(&plan);
         let params = ScannerParams {
