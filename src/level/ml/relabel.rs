@@ -135,8 +135,15 @@ pub(crate) fn relabel(
     let rot = Rotations::at(&Vector2::new(sol.attitude[0], sol.attitude[1]));
     let level: Vec<Leveled> = points.iter().map(|p| leveled(p, &rot)).collect();
     let fitted = fitted_surfaces(&level, labels, sol, margin);
-    let mut next = assign(points, &level, &fitted, k, min_incidence);
+    let assigned = assign(points, &level, &fitted, k, min_incidence);
+    let mut next: Vec<Option<Surface>> = assigned.iter().map(|a| a.label).collect();
     for (i, l) in next.iter_mut().enumerate() {
+        // A wall of the model predicts this range too: the model has the wall whose foot the
+        // point may lie at, and `assign` already gave the point to the surface its ray meets
+        // first. The test below is for the walls the model lacks.
+        if assigned[i].wall_too {
+            continue;
+        }
         let level_plane = match (*l, sol.floor, sol.ceiling) {
             (Some(Surface::Floor), Some(h), _) => (1.0, h),
             (Some(Surface::Ceiling), _, Some(h)) => (-1.0, h),
@@ -156,7 +163,7 @@ pub(crate) fn relabel(
 /// `(side, height)` (side 1 for the floor, -1 for the ceiling), as on a vertical surface:
 /// horizontally within `k` sigmas of the pair's horizontal noise, and off the plane, on its
 /// room side, by more than `k` of `q`'s own vertical noise. Such a `p` is within the noise of
-/// a wall's foot (or top) whether or not the model has that wall: traced at 10 cm noise,
+/// a wall's foot (or top), asked only where the model lacks that wall: traced at 10 cm noise,
 /// 5-20% of the floor's points were hits on a wall the model lacked within 9 cm of the floor,
 /// and their pull put the pose 3-7 sigmas off. Judging `q` against the fitted plane rather
 /// than against `p` (whose own vertical noise at a steep ray is a third of the range noise)
@@ -176,6 +183,14 @@ fn stands_over(
     dh2 <= k * k * var_h && off > 0.0 && off * off > k * k * (db.z * q.sigma).powi(2)
 }
 
+/// A point's surface under the fitted model, and whether a wall of the model predicts its
+/// range within `k` sigmas as well.
+#[derive(Clone, Copy)]
+struct Assigned {
+    label: Option<Surface>,
+    wall_too: bool,
+}
+
 /// Each point to the fitted surface its ray meets first (the shortest predicted range) among
 /// those that predict its range within `k` sigmas, `None` when none does.
 fn assign(
@@ -184,7 +199,7 @@ fn assign(
     fitted: &[Fitted],
     k: f64,
     min_incidence: f64,
-) -> Vec<Option<Surface>> {
+) -> Vec<Assigned> {
     // Each surface's plane once, not per point (a wall's takes a sine and a cosine).
     let planes: Vec<Plane> = fitted
         .iter()
@@ -194,7 +209,7 @@ fn assign(
         .iter()
         .zip(level)
         .map(|(p, l)| {
-            let (mut found, mut nearest) = (None, f64::INFINITY);
+            let (mut found, mut nearest, mut wall_too) = (None, f64::INFINITY, false);
             for (f, plane) in fitted.iter().zip(&planes) {
                 if plane.normal.dot(&l.u).abs() < min_incidence {
                     continue;
@@ -208,11 +223,17 @@ fn assign(
                 // The range at which the ray meets the plane.
                 let t = predict_level(plane, &l.u, &l.o).0;
                 let rho = (p.range - t) / p.sigma;
-                if rho.abs() <= k && t < nearest {
-                    (found, nearest) = (Some(f.surface), t);
+                if rho.abs() <= k {
+                    wall_too |= matches!(f.surface, Surface::Wall(_));
+                    if t < nearest {
+                        (found, nearest) = (Some(f.surface), t);
+                    }
                 }
             }
-            found
+            Assigned {
+                label: found,
+                wall_too,
+            }
         })
         .collect()
 }
@@ -296,6 +317,7 @@ pub(crate) fn without_level_edges(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::level::ml::WallLine;
     use nalgebra::Point3;
 
     /// A level scanner at the origin, the floor 0.45 m below, a wall at x = 2 (stretch
@@ -349,8 +371,50 @@ mod tests {
         // Both orders of the surfaces give the same labels.
         for fitted in [[wall, floor], [floor, wall]] {
             let got = assign(&points, &level, &fitted, 3.0, 0.02);
-            assert_eq!(got, [Some(Surface::Floor), Some(Surface::Wall(0)), None]);
+            let labels: Vec<Option<Surface>> = got.iter().map(|a| a.label).collect();
+            assert_eq!(labels, [Some(Surface::Floor), Some(Surface::Wall(0)), None]);
+            // The first two are the wall's too (its foot); the third is nobody's.
+            let wall_too: Vec<bool> = got.iter().map(|a| a.wall_too).collect();
+            assert_eq!(wall_too, [true, true, false]);
         }
+    }
+
+    /// A floor point 10 cm before a wall's foot, and a wall point 25 cm up standing over it in
+    /// the next scan: where the model has the wall, the ray met the floor first and the point
+    /// stays on the floor; where the model lacks the wall, the point is within the noise of an
+    /// unmodelled wall's foot and is left out.
+    #[test]
+    fn a_foot_is_left_out_only_where_the_model_lacks_its_wall() {
+        let sigma = 0.1;
+        let ray = |x: f64, z: f64| {
+            let dir = Vector3::new(x, 0.0, z).normalize();
+            LabelledPoint {
+                origin: Point3::origin(),
+                dir,
+                range: (x * x + z * z).sqrt(),
+                sigma,
+                surface: Surface::Floor,
+            }
+        };
+        let points = [ray(1.9, -0.45), ray(2.0, -0.2)];
+        let labels = [Some(Surface::Floor), Some(Surface::Wall(0))];
+        let neighbours = Neighbours::new(vec![0, 1], 2, 1, 1);
+        let floor_only = MlSolution {
+            floor: Some(-0.45),
+            ..MlSolution::default()
+        };
+        let with_wall = MlSolution {
+            walls: vec![WallLine {
+                surface: Surface::Wall(0),
+                azimuth: 0.0,
+                offset: 2.0,
+            }],
+            ..floor_only.clone()
+        };
+        let relabelled =
+            |sol: &MlSolution| relabel(&points, &neighbours, &labels, sol, 3.0, 0.3, 0.02);
+        assert_eq!(relabelled(&with_wall), labels);
+        assert_eq!(relabelled(&floor_only), [None, None]);
     }
 
     /// Two scans of 8 bearings (one invalid reading): a floor point loses its label where a
