@@ -188,7 +188,8 @@ pub(crate) fn one_step(
 
 impl<'a> State<'a> {
     /// Groups the points by surface (keeping surfaces with enough points whose placement can
-    /// be fitted at the starting attitude) and places each surface.
+    /// be fitted at the starting attitude) and places each surface: where `warm` placed it,
+    /// else by its points' own fit.
     fn new(
         points: &'a [LabelledPoint],
         labels: &[Option<Surface>],
