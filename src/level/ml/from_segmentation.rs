@@ -158,8 +158,7 @@ fn moved_sigmas(to: &MlSolution, from: &MlSolution) -> f64 {
         to.attitude[0] - from.attitude[0],
         to.attitude[1] - from.attitude[1],
     );
-    let c = to.covariance;
-    nalgebra::Matrix2::new(c[0][0], c[0][1], c[1][0], c[1][1])
+    to.covariance_matrix()
         .try_inverse()
         .map_or(f64::INFINITY, |inv| {
             (d.transpose() * inv * d)[(0, 0)].sqrt()

@@ -198,6 +198,16 @@ pub(crate) struct WallLine {
     pub offset: f64,
 }
 
+impl WallLine {
+    /// Its line as the fit's placement.
+    pub(crate) fn placement(&self) -> model::Placement {
+        model::Placement {
+            offset: self.offset,
+            azimuth: self.azimuth,
+        }
+    }
+}
+
 /// How one surface fits: its points (those used), their clipped chi-square and its degrees of
 /// freedom.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -248,25 +258,20 @@ impl MlSolution {
 
     /// Where this solution placed `surface`, if it kept it.
     pub(crate) fn placement_of(&self, surface: Surface) -> Option<model::Placement> {
-        let level = |height: Option<f64>| {
-            height.map(|offset| model::Placement {
-                offset,
-                azimuth: 0.0,
-            })
-        };
         match surface {
-            Surface::Floor => level(self.floor),
-            Surface::Ceiling => level(self.ceiling),
-            Surface::Wall(_) => {
-                self.walls
-                    .iter()
-                    .find(|w| w.surface == surface)
-                    .map(|w| model::Placement {
-                        offset: w.offset,
-                        azimuth: w.azimuth,
-                    })
-            }
+            Surface::Floor => self.floor.map(model::Placement::level),
+            Surface::Ceiling => self.ceiling.map(model::Placement::level),
+            Surface::Wall(_) => self
+                .walls
+                .iter()
+                .find(|w| w.surface == surface)
+                .map(WallLine::placement),
         }
+    }
+
+    /// The covariance of `(theta_x, theta_y)` as a matrix.
+    pub(crate) fn covariance_matrix(&self) -> nalgebra::Matrix2<f64> {
+        nalgebra::Matrix2::from_fn(|i, j| self.covariance[i][j])
     }
 }
 

@@ -50,6 +50,14 @@ pub(crate) struct Placement {
 }
 
 impl Placement {
+    /// The floor's or ceiling's placement at `height`.
+    pub fn level(height: f64) -> Self {
+        Placement {
+            offset: height,
+            azimuth: 0.0,
+        }
+    }
+
     pub fn normal(&self, surface: Surface) -> Vector3<f64> {
         match surface {
             Surface::Wall(_) => {
@@ -227,10 +235,9 @@ pub(crate) fn initial_placement(
         .collect();
     let n = level.len() as f64;
     match surface {
-        Surface::Floor | Surface::Ceiling => Some(Placement {
-            offset: level.iter().map(|p| p.z).sum::<f64>() / n,
-            azimuth: 0.0,
-        }),
+        Surface::Floor | Surface::Ceiling => {
+            Some(Placement::level(level.iter().map(|p| p.z).sum::<f64>() / n))
+        }
         Surface::Wall(_) => {
             let c = level
                 .iter()

@@ -135,28 +135,28 @@ pub(crate) fn relabel(
     let rot = Rotations::at(&Vector2::new(sol.attitude[0], sol.attitude[1]));
     let level: Vec<Leveled> = points.iter().map(|p| leveled(p, &rot)).collect();
     let fitted = fitted_surfaces(&level, labels, sol, margin);
-    let assigned = assign(points, &level, &fitted, k, min_incidence);
-    let mut next: Vec<Option<Surface>> = assigned.iter().map(|a| a.label).collect();
-    for (i, l) in next.iter_mut().enumerate() {
-        // A wall of the model predicts this range too: the model has the wall whose foot the
-        // point may lie at, and `assign` already gave the point to the surface its ray meets
-        // first. The test below is for the walls the model lacks.
-        if assigned[i].wall_too {
-            continue;
-        }
-        let level_plane = match (*l, sol.floor, sol.ceiling) {
-            (Some(Surface::Floor), Some(h), _) => (1.0, h),
-            (Some(Surface::Ceiling), _, Some(h)) => (-1.0, h),
-            _ => continue,
-        };
-        let on = (&points[i], &level[i]);
-        if neighbours.any_of(i, |j| {
-            stands_over(on, (&points[j], &level[j]), k, level_plane)
-        }) {
-            *l = None;
-        }
-    }
-    next
+    assign(points, &level, &fitted, k, min_incidence)
+        .into_iter()
+        .enumerate()
+        .map(|(i, a)| {
+            // A wall of the model predicts this range too: the model has the wall whose foot
+            // the point may lie at, and `assign` already gave the point to the surface its ray
+            // meets first. The test below is for the walls the model lacks.
+            if a.wall_too {
+                return a.label;
+            }
+            let level_plane = match (a.label, sol.floor, sol.ceiling) {
+                (Some(Surface::Floor), Some(h), _) => (1.0, h),
+                (Some(Surface::Ceiling), _, Some(h)) => (-1.0, h),
+                _ => return a.label,
+            };
+            let on = (&points[i], &level[i]);
+            let stood_over = neighbours.any_of(i, |j| {
+                stands_over(on, (&points[j], &level[j]), k, level_plane)
+            });
+            if stood_over { None } else { a.label }
+        })
+        .collect()
 }
 
 /// Whether `q` (a point near `p` in the grid) stands over `p`, a point of the level plane
@@ -251,10 +251,7 @@ fn fitted_surfaces(
         .iter()
         .map(|w| Fitted {
             surface: w.surface,
-            placement: Placement {
-                offset: w.offset,
-                azimuth: w.azimuth,
-            },
+            placement: w.placement(),
             stretch: (f64::INFINITY, f64::NEG_INFINITY),
             sin_cos: w.azimuth.sin_cos(),
         })
@@ -274,10 +271,7 @@ fn fitted_surfaces(
         if let Some(offset) = height {
             fitted.push(Fitted {
                 surface,
-                placement: Placement {
-                    offset,
-                    azimuth: 0.0,
-                },
+                placement: Placement::level(offset),
                 stretch: (f64::NEG_INFINITY, f64::INFINITY),
                 sin_cos: (0.0, 1.0),
             });
