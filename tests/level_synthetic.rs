@@ -6,7 +6,7 @@ mod common;
 use common::{Room, elevations, scans_at};
 use levelscan::formats::read_plan;
 use levelscan::geometry::{Attitude, Pose};
-use levelscan::level::{Estimator, FailReason, LevelParams, level_pose};
+use levelscan::level::{Estimator, FailReason, LevelParams, MlParams, level_pose};
 use levelscan::pseudo_level::{PseudoLevelParams, pseudo_level_scan};
 use levelscan::scan::Scan;
 use levelscan::simulate::{ScannerParams, World, elevations_centred, simulate_pose};
@@ -508,10 +508,20 @@ fn the_floor_line_at_a_walls_foot_is_trimmed_from_the_wall() {
         ..ScannerParams::default()
     };
     // Either test takes the line out: the edge row's, or the one of runs at the rows' ends.
+    // The control leaves out the last stage too: its fit of the same segmentation leaves such
+    // a wrong answer, and the pose then fails as `last_stage_disagrees`, a second guard.
     let untrimmed = LevelParams {
         trim_sigmas: 0.0,
         front_end_sigmas: 0.0,
+        ml: MlParams {
+            enabled: false,
+            ..MlParams::default()
+        },
         ..LevelParams::default()
+    };
+    let untrimmed_with_last_stage = LevelParams {
+        ml: MlParams::default(),
+        ..untrimmed.clone()
     };
     let (mut wrong, mut wrong_untrimmed, mut leveled) = (0, 0, 0);
     for seed in 0..30 {
@@ -522,6 +532,8 @@ fn the_floor_line_at_a_walls_foot_is_trimmed_from_the_wall() {
                 .map(|a| a.max_abs_error(&pose.attitude()).to_degrees() > 5.0)
         };
         wrong_untrimmed += usize::from(off(&untrimmed) == Some(true));
+        // The second guard alone: the last stage's refusal fails the wrong reading.
+        assert_ne!(off(&untrimmed_with_last_stage), Some(true), "seed {seed}");
         match off(&LevelParams::default()) {
             Some(true) => wrong += 1,
             Some(false) => leveled += 1,

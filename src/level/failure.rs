@@ -39,6 +39,10 @@ pub enum FailCause {
     /// The re-segmented and the first solution (or the refined one and its start) disagree:
     /// the kept one, widened by their distance, has a sigma above `max_sigma_deg`.
     ResegmentationDisagrees,
+    /// The last stage's fit of the same segmentation left the leveler's answer (it failed the
+    /// gate), and the leveler's answer, widened by their distance, has a sigma above
+    /// `max_sigma_deg`.
+    LastStageDisagrees,
 }
 
 impl FailCause {
@@ -54,7 +58,8 @@ impl FailCause {
             | FailCause::WallsParallel
             | FailCause::BeyondWallAngle
             | FailCause::SigmaAboveGate
-            | FailCause::ResegmentationDisagrees => FailReason::ParallelWalls,
+            | FailCause::ResegmentationDisagrees
+            | FailCause::LastStageDisagrees => FailReason::ParallelWalls,
         }
     }
 
@@ -72,6 +77,7 @@ impl FailCause {
             FailCause::BeyondWallAngle => "beyond_wall_angle",
             FailCause::SigmaAboveGate => "sigma_above_gate",
             FailCause::ResegmentationDisagrees => "resegmentation_disagrees",
+            FailCause::LastStageDisagrees => "last_stage_disagrees",
         }
     }
 }

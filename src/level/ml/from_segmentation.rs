@@ -49,21 +49,48 @@ pub(crate) fn finish(
         .enabled
         .then(|| final_estimate(est, scans, &leveler, params))
         .flatten();
-    let Some(sol) = ml else {
-        est.attitude = Some(leveler.attitude());
-        est.sigmas = Some(attitude_sigmas(&leveler, params));
-        est.up = Some(leveler.up);
-        return;
-    };
-    est.attitude = Some(Attitude::new(sol.attitude[0], sol.attitude[1]));
-    est.sigmas = Some(sol.sigmas());
-    est.up = Some(sol.up);
-    est.failure = None;
-    est.cause = None;
+    match ml {
+        Some(sol) if gate(&sol, &leveler, params) => {
+            est.attitude = Some(Attitude::new(sol.attitude[0], sol.attitude[1]));
+            est.sigmas = Some(sol.sigmas());
+            est.up = Some(sol.up);
+            est.failure = None;
+            est.cause = None;
+        }
+        refused => {
+            let attitude = leveler.attitude();
+            let mut sigmas = attitude_sigmas(&leveler, params);
+            if let Some(rival) = refused {
+                widen_sigmas_by(&mut sigmas, &attitude, rival.attitude);
+                let max_sigma = params.max_sigma_deg.to_radians();
+                if sigmas.iter().any(|&s| s > max_sigma) {
+                    return est.fail(failure::reported(est, FailCause::LastStageDisagrees));
+                }
+            }
+            est.attitude = Some(attitude);
+            est.sigmas = Some(sigmas);
+            est.up = Some(leveler.up);
+        }
+    }
 }
 
-/// The core's answer on the segmentation behind the leveler's result, when it gives one that
-/// passes the gate; `None` to keep the leveler's result.
+/// The leveler's `sigmas` (at `attitude`) widened as [`widen_by`] widens a covariance, by
+/// their distance from `rival`, the last stage's answer on the same segmentation that the
+/// gate refused: the refinement left the leveler's answer by more than its basin allows, so
+/// the two readings of the same ranges disagree and either may be the right one. Keeping the
+/// leveler's answer with its own sigmas, as before, kept a class whose errors lay beyond three
+/// sigmas four times as often as the rest's and held half of the poses reported ok and more
+/// than 5 degrees off (docs/ESTIMATOR.md, section 13). The leveler's sigmas are per axis, so
+/// the widening is `d d^T / 2`'s diagonal.
+fn widen_sigmas_by(sigmas: &mut [f64; 2], attitude: &Attitude, rival: [f64; 2]) {
+    let d = [attitude.theta_x - rival[0], attitude.theta_y - rival[1]];
+    for (s, d) in sigmas.iter_mut().zip(d) {
+        *s = (*s * *s + 0.5 * d * d).sqrt();
+    }
+}
+
+/// The core's answer on the segmentation behind the leveler's result, before the gate; `None`
+/// when the core refuses.
 fn final_estimate(
     est: &LevelEstimate,
     scans: &[Scan],
@@ -80,15 +107,14 @@ fn final_estimate(
         grid.cols,
         params.ml.relabel_window,
     );
-    let sol = last_stage(
+    last_stage(
         &points,
         &neighbours,
         labels,
         &start.up,
         est.range_sigma,
         params,
-    )?;
-    gate(&sol, start, params).then_some(sol)
+    )
 }
 
 /// The last stage on one segmentation (`labels`, per point of `points`), before the gate: the
@@ -355,5 +381,26 @@ mod tests {
         let before = [w0, floor, None, w1, w1];
         let after = [w0, w1, floor, None, w1];
         assert_eq!(agreed(&before, &after), vec![w0, None, None, None, w1]);
+    }
+
+    /// The leveler's sigmas widened by their distance from a refused rival: each axis gains
+    /// half its squared difference (3-4-5 triangles exactly), an equal rival changes nothing,
+    /// and the sign of the difference does not matter.
+    #[test]
+    fn a_refused_rival_widens_the_sigmas_by_half_its_squared_distance() {
+        let attitude = Attitude::new(0.10, -0.20);
+        let mut sigmas = [0.03, 0.004];
+        // d = (0.04 * sqrt 2, -0.003 * sqrt 2): d^2 / 2 = (0.0016, 9e-6).
+        let rival = [0.10 - 0.04 * 2f64.sqrt(), -0.20 + 0.003 * 2f64.sqrt()];
+        widen_sigmas_by(&mut sigmas, &attitude, rival);
+        assert!((sigmas[0] - 0.05).abs() < 1e-12, "{sigmas:?}");
+        assert!((sigmas[1] - 0.005).abs() < 1e-12, "{sigmas:?}");
+        let mut same = [0.03, 0.004];
+        widen_sigmas_by(&mut same, &attitude, [0.10, -0.20]);
+        assert_eq!(same, [0.03, 0.004]);
+        let mut mirrored = [0.03, 0.004];
+        let other_side = [0.10 + 0.04 * 2f64.sqrt(), -0.20 - 0.003 * 2f64.sqrt()];
+        widen_sigmas_by(&mut mirrored, &attitude, other_side);
+        assert!((mirrored[0] - 0.05).abs() < 1e-12 && (mirrored[1] - 0.005).abs() < 1e-12);
     }
 }
