@@ -90,14 +90,14 @@ pub fn last_stage_true_segments(
     placed.sort_by_key(|&(cell, _)| cell);
     let (index, rays): (Vec<usize>, Vec<BoundRay>) = placed.into_iter().unzip();
     let points = labelled_points(&rays, sigma);
-    let labels = points.iter().map(|p| Some(p.surface)).collect();
+    let labels: Vec<Option<Surface>> = points.iter().map(|p| Some(p.surface)).collect();
     let neighbours = Neighbours::new(
         index,
         grid.points.len(),
         grid.cols,
         params.ml.relabel_window,
     );
-    let sol = last_stage(&points, &neighbours, labels, start, sigma, params)?;
+    let sol = last_stage(&points, &neighbours, &labels, start, sigma, params)?;
     Some(TrueSegmentsFit::of(&sol))
 }
 

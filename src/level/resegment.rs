@@ -8,7 +8,7 @@ use super::failure::{FailCause, acceptable, acceptable_within};
 use super::first_pass::robust_obs;
 use super::grid::{PlaneFit, PoseGrid};
 use super::patches::Patch;
-use super::up::{self, UpSolution};
+use super::up::{self, UpSolution, mahalanobis2};
 use super::{Estimator, LevelEstimate, LevelParams, SurfaceKind, refine};
 use crate::level::params::resegment::*;
 
@@ -257,8 +257,8 @@ pub(crate) fn widened_beyond(
     spread: nalgebra::Matrix2<f64>,
     sigmas: f64,
 ) -> Option<UpSolution> {
-    let d = nalgebra::Vector2::new(other.up.dot(&kept.basis[0]), other.up.dot(&kept.basis[1]));
-    let z2 = (d.transpose() * spread.try_inverse()? * d)[(0, 0)];
+    let d = kept.offset_to(&other.up);
+    let z2 = mahalanobis2(&d, &spread)?;
     (z2 > sigmas * sigmas).then(|| UpSolution {
         cov: kept.cov + d * d.transpose(),
         ..*kept

@@ -213,6 +213,18 @@ impl UpSolution {
         let j = Matrix2::from_fn(|i, k| basis[i].dot(&self.basis[k]));
         j * self.cov * j.transpose()
     }
+
+    /// Another `up`'s coordinates in this solution's tangent plane (its `basis`): the distance
+    /// between the two, to first order \[rad\].
+    pub(crate) fn offset_to(&self, up: &Vector3<f64>) -> Vector2<f64> {
+        Vector2::new(up.dot(&self.basis[0]), up.dot(&self.basis[1]))
+    }
+}
+
+/// The squared Mahalanobis distance `d^T cov^-1 d` of an offset `d` under `cov`; `None` when
+/// `cov` is singular.
+pub(crate) fn mahalanobis2(d: &Vector2<f64>, cov: &Matrix2<f64>) -> Option<f64> {
+    Some((d.transpose() * cov.try_inverse()? * d)[(0, 0)])
 }
 
 /// Unit vector along the smallest eigenvalue of a symmetric matrix, rectified to `z >= 0`.

@@ -22,7 +22,7 @@ use crate::level::attitude::attitude_sigmas;
 use crate::level::failure::within_wall_angle;
 use crate::level::grid::PoseGrid;
 use crate::level::patches::Patch;
-use crate::level::up::UpSolution;
+use crate::level::up::{UpSolution, mahalanobis2};
 use crate::level::{FailCause, LevelEstimate, LevelParams, SurfaceKind, failure};
 use crate::scan::Scan;
 use nalgebra::Vector2;
@@ -74,18 +74,18 @@ pub(crate) fn finish(
     }
 }
 
-/// The leveler's `sigmas` (at `attitude`) widened as [`widen_by`] widens a covariance, by
+/// The leveler's `sigmas` (at `attitude`) widened as [`widen_by`] widens a covariance (by
+/// [`rival_spread`]'s diagonal, the leveler's sigmas being per axis), by
 /// their distance from `rival`, the last stage's answer on the same segmentation that the
 /// gate refused: the refinement left the leveler's answer by more than its basin allows, so
 /// the two readings of the same ranges disagree and either may be the right one. Keeping the
 /// leveler's answer with its own sigmas, as before, kept a class whose errors lay beyond three
 /// sigmas four times as often as the rest's and held half of the poses reported ok and more
-/// than 5 degrees off (docs/ESTIMATOR.md, section 13). The leveler's sigmas are per axis, so
-/// the widening is `d d^T / 2`'s diagonal.
+/// than 5 degrees off (docs/ESTIMATOR.md, section 13).
 fn widen_sigmas_by(sigmas: &mut [f64; 2], attitude: &Attitude, rival: [f64; 2]) {
-    let d = [attitude.theta_x - rival[0], attitude.theta_y - rival[1]];
-    for (s, d) in sigmas.iter_mut().zip(d) {
-        *s = (*s * *s + 0.5 * d * d).sqrt();
+    let spread = rival_spread([attitude.theta_x, attitude.theta_y], rival);
+    for (i, s) in sigmas.iter_mut().enumerate() {
+        *s = (*s * *s + spread[i][i]).sqrt();
     }
 }
 
@@ -110,7 +110,7 @@ fn final_estimate(
     last_stage(
         &points,
         &neighbours,
-        labels,
+        &labels,
         &start.up,
         est.range_sigma,
         params,
@@ -129,14 +129,14 @@ fn final_estimate(
 pub(crate) fn last_stage(
     points: &[LabelledPoint],
     neighbours: &Neighbours,
-    labels: Vec<Option<Surface>>,
+    labels: &[Option<Surface>],
     up: &nalgebra::Vector3<f64>,
     range_sigma: f64,
     params: &LevelParams,
 ) -> Option<MlSolution> {
-    let mut sol = fit(points, &labels, up, None, params)?;
+    let mut sol = fit(points, labels, up, None, params)?;
     let first = sol.attitude;
-    let mut current = labels.clone();
+    let mut current = labels.to_vec();
     for _ in 0..params.ml.relabel_passes {
         let next = relabel(
             points,
@@ -159,7 +159,7 @@ pub(crate) fn last_stage(
             break;
         }
     }
-    let agreed = agreed(&labels, &current);
+    let agreed = agreed(labels, &current);
     if agreed != current {
         // Where the agreed points no longer fix the attitude, the fit before relabelling
         // stands in as the rival (the rule before section 12).
@@ -180,15 +180,23 @@ pub(crate) fn last_stage(
 /// How far `from`'s attitude lies from `to`'s, in `to`'s sigmas (the Mahalanobis distance
 /// under `to`'s covariance); infinite when that covariance is singular.
 fn moved_sigmas(to: &MlSolution, from: &MlSolution) -> f64 {
-    let d = Vector2::new(
-        to.attitude[0] - from.attitude[0],
-        to.attitude[1] - from.attitude[1],
-    );
-    to.covariance_matrix()
-        .try_inverse()
-        .map_or(f64::INFINITY, |inv| {
-            (d.transpose() * inv * d)[(0, 0)].sqrt()
-        })
+    let d = Vector2::from(apart(to.attitude, from.attitude));
+    mahalanobis2(&d, &to.covariance_matrix()).map_or(f64::INFINITY, f64::sqrt)
+}
+
+/// `a - b`, two attitudes `(theta_x, theta_y)` \[rad\].
+fn apart(a: [f64; 2], b: [f64; 2]) -> [f64; 2] {
+    [a[0] - b[0], a[1] - b[1]]
+}
+
+/// `d d^T / 2` for `d` the distance between `sol`'s attitude and `rival`'s: with either of
+/// two segmentations as likely to be the right one, the truth lies at one or the other, and
+/// this is the expected squared error of reporting `sol` (docs/ESTIMATOR.md, section 6: at
+/// 5 cm, sigma / bound 1.26-1.34 -> 1.21-1.27 with 99.1-99.5% within three sigmas, where the
+/// whole `d d^T`, as if the first were surely right, padded).
+fn rival_spread(sol: [f64; 2], rival: [f64; 2]) -> [[f64; 2]; 2] {
+    let d = apart(sol, rival);
+    [0, 1].map(|i| [0, 1].map(|j| 0.5 * d[i] * d[j]))
 }
 
 /// The labels `before` and `after` relabelling agree on; a point they give different
@@ -204,17 +212,13 @@ fn agreed(before: &[Option<Surface>], after: &[Option<Surface>]) -> Vec<Option<S
         .collect()
 }
 
-/// `sol`'s covariance with `d d^T / 2` added, for `d` its distance from `rival` (the attitude
-/// the same data gave under the other segmentation) \[rad\]: with either segmentation as
-/// likely to be the right one, the truth lies at `sol` or at `rival`, and `d d^T / 2` is the
-/// reported answer's expected squared error between the two (docs/ESTIMATOR.md, section 6:
-/// at 5 cm, sigma / bound 1.26-1.34 -> 1.21-1.27 with 99.1-99.5% within three sigmas, where the
-/// whole `d d^T`, as if the first were surely right, padded).
+/// `sol`'s covariance widened by its distance from `rival` (the attitude the same data gave
+/// under another segmentation) \[rad\], by [`rival_spread`].
 fn widen_by(sol: &mut MlSolution, rival: [f64; 2]) {
-    let d = [sol.attitude[0] - rival[0], sol.attitude[1] - rival[1]];
-    for (i, row) in sol.covariance.iter_mut().enumerate() {
-        for (j, c) in row.iter_mut().enumerate() {
-            *c += 0.5 * d[i] * d[j];
+    let spread = rival_spread(sol.attitude, rival);
+    for (row, add) in sol.covariance.iter_mut().zip(spread) {
+        for (c, a) in row.iter_mut().zip(add) {
+            *c += a;
         }
     }
 }
@@ -256,11 +260,7 @@ fn initial_labels(grid: &PoseGrid, index: &[usize], groups: &[Group<'_>]) -> Vec
 fn gate(sol: &MlSolution, start: &UpSolution, params: &LevelParams) -> bool {
     let max_sigma = params.max_sigma_deg.to_radians();
     let tight = sol.sigmas().iter().all(|&s| s <= max_sigma);
-    let d = Vector2::new(sol.up.dot(&start.basis[0]), sol.up.dot(&start.basis[1]));
-    let near = start
-        .cov
-        .try_inverse()
-        .map(|inv| (d.transpose() * inv * d)[(0, 0)])
+    let near = mahalanobis2(&start.offset_to(&sol.up), &start.cov)
         .is_some_and(|z2| z2 <= params.ml.max_shift_sigmas.powi(2));
     tight && near && within_wall_angle(&sol.up, params)
 }
