@@ -203,7 +203,13 @@ fn along_a_corridor_without_an_end_the_length_carries_the_odometry_variance() {
         let rho = c[(0, k)] / (c[(0, 0)] * c[(k, k)]).sqrt();
         assert!(rho.abs() < 0.1, "{c}");
     }
-    assert!(c[(1, 1)] < 0.01 * odometry[(1, 1)] && c[(2, 2)] < 0.01 * odometry[(2, 2)]);
+    // A sigma under a fifth of the odometry's: the walls' far samples, 1 degree apart, carry
+    // their sampling error (`CovarianceParams::sampling_fraction`), about a ninth and an
+    // eighth of the odometry's here.
+    for k in [1, 2] {
+        let ratio = (c[(k, k)] / odometry[(k, k)]).sqrt();
+        assert!(ratio < 0.2, "axis {k}: sigma / odometry's = {ratio}");
+    }
     assert!(c.determinant() > 0.0);
 }
 

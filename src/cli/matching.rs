@@ -152,6 +152,10 @@ pub struct MatchOptions {
     /// Covariance: RMS residual at which the variance factor doubles (m).
     #[arg(long, default_value_t = CovarianceParams::default().noise_knee)]
     pub cov_knee: f64,
+    /// Covariance: a pair's surface error between samples, as a fraction of the beam spacing
+    /// at its range (0 takes the residuals alone).
+    #[arg(long, default_value_t = CovarianceParams::default().sampling_fraction)]
+    pub cov_sampling: f64,
 }
 
 impl MatchOptions {
@@ -212,6 +216,9 @@ impl MatchOptions {
         }
         if !(self.window_theta.is_finite() && self.window_theta >= 0.0) {
             anyhow::bail!("--window-theta must be >= 0, got {}", self.window_theta);
+        }
+        if !(self.cov_sampling.is_finite() && self.cov_sampling >= 0.0) {
+            anyhow::bail!("--cov-sampling must be >= 0, got {}", self.cov_sampling);
         }
         if self.max_iterations == 0 {
             anyhow::bail!("--max-iterations must be at least 1");
@@ -280,6 +287,7 @@ impl MatchOptions {
             covariance: CovarianceParams {
                 noise_inflation: self.cov_inflation,
                 noise_knee: self.cov_knee,
+                sampling_fraction: self.cov_sampling,
             },
         }
     }

@@ -8,6 +8,12 @@
 //! measurement noise through the ICP minimum). It needs no assumed noise level: the residuals
 //! themselves say how noisy the pairs are, and the weights cancel when they are only a scale.
 //!
+//! A pair's residual does not show the error of the line it is matched to where that line,
+//! fitted through samples a beam spacing apart, misses the surface between them (far walls,
+//! corners): the same in every iteration, so it biases the match rather than scattering it.
+//! Its spread is therefore the residual and, in quadrature, `IcpParams::sampling_error` times
+//! the pair's range.
+//!
 //! The sandwich treats pairs as independent. They are not (neighbouring rays share their
 //! reference line, trimming keeps the smallest residuals), so the matcher widens it by
 //! `inflation` before reporting it.
@@ -222,6 +228,7 @@ mod tests {
         let p = CovarianceParams {
             noise_inflation: 2.0,
             noise_knee: 0.01,
+            ..CovarianceParams::default()
         };
         assert!((inflation(&p, 0.01, 0.5) - 4.0).abs() < 1e-12);
         assert!((inflation(&p, 0.0, 2.0) - 4.0).abs() < 1e-12);

@@ -63,6 +63,13 @@ pub struct IcpParams {
     /// Point-to-line pairs are weighted by `1 / (cos² α + floor)`, α the angle between the
     /// source ray and the reference normal; `None` weighs all pairs alike [-]. Default 0.2.
     pub incidence_floor: Option<f64>,
+    /// The covariance's spread of each kept pair also holds its surface's error between
+    /// samples: this angle times the pair's range is added in quadrature to its residual in
+    /// the sandwich \[rad\]. Lines fitted through samples a beam spacing apart, and around
+    /// corners, do not lie where the surface is, the same way in both scans, so their error
+    /// grows with the range and never shows in the residuals. Default 0 (the residuals alone);
+    /// the matcher sets it from the scan's beam spacing (`CovarianceParams::sampling_fraction`).
+    pub sampling_error: f64,
 }
 
 impl Default for IcpParams {
@@ -78,6 +85,7 @@ impl Default for IcpParams {
             kernel: Kernel::Huber,
             kernel_scale: 0.03,
             incidence_floor: Some(0.2),
+            sampling_error: 0.0,
         }
     }
 }
@@ -310,8 +318,9 @@ fn solve(
     Ok((next, Some(how)))
 }
 
-/// The sandwich covariance over the kept pairs, each residual with the weight it had in the
-/// last solve and its Jacobian w.r.t. (t_x, t_y, θ) at `pose`: for `r = n · (R p + t - q)`,
+/// The sandwich covariance over the kept pairs, each residual (with the sampling error of
+/// its range in quadrature) with the weight it had in the last solve and its Jacobian w.r.t.
+/// (t_x, t_y, θ) at `pose`: for `r = n · (R p + t - q)`,
 /// `∂r/∂t = n` and `∂r/∂θ = n · R' p`, `R' p = (-sin θ p_x - cos θ p_y, cos θ p_x - sin θ p_y)`.
 /// With free directions, over the observed ones only.
 fn sandwich(
@@ -326,8 +335,14 @@ fn sandwich(
         let w = weight(pair.residual, params) * incidence_weight(pair, (s, c), params);
         let moved = moved_by(pose, (s, c), &pair.p);
         let lever = Vector2::new(-s * pair.p.x - c * pair.p.y, c * pair.p.x - s * pair.p.y);
-        let mut row =
-            |n: Vector2<f64>, r: f64| acc.add(Vector3::new(n.x, n.y, n.dot(&lever)), r, w);
+        let sampling2 = (params.sampling_error * pair.p.coords.norm()).powi(2);
+        let mut row = |n: Vector2<f64>, r: f64| {
+            acc.add(
+                Vector3::new(n.x, n.y, n.dot(&lever)),
+                (r * r + sampling2).sqrt(),
+                w,
+            )
+        };
         match (params.metric, pair.line) {
             (Metric::PointToLine, Some((n, anchor))) => row(n, n.dot(&(moved - anchor))),
             _ => {
@@ -586,6 +601,72 @@ mod tests {
             line: None,
             residual: r,
         }
+    }
+
+    /// Pairs on three walls of a room (x = 3, y = 2, y = -4) at several ranges, each on its
+    /// own line with the residual `r`.
+    fn room_pairs(r: f64) -> Vec<Pair> {
+        let mut pairs = Vec::new();
+        for k in 0..5 {
+            let t = -1.0 + 0.5 * k as f64;
+            for (p, n) in [
+                (Point2::new(3.0, t), Vector2::new(-1.0, 0.0)),
+                (Point2::new(t, 2.0), Vector2::new(0.0, -1.0)),
+                (Point2::new(2.0 * t, -4.0), Vector2::new(0.0, 1.0)),
+            ] {
+                pairs.push(Pair {
+                    p,
+                    q: p,
+                    line: Some((n, p - n * r)),
+                    residual: r,
+                });
+            }
+        }
+        pairs
+    }
+
+    #[test]
+    fn the_sampling_error_adds_the_pairs_range_in_quadrature_to_their_residual() {
+        // A brute-force twin of the sandwich at the identity: rows J = (n, n x p), unit
+        // weights (no incidence weighting, residuals inside Huber's scale), and each pair's
+        // spread r^2 + (s |p|)^2.
+        let twin = |pairs: &[Pair], s: f64| {
+            let (mut h, mut b) = (Matrix3::zeros(), Matrix3::zeros());
+            for pair in pairs {
+                let (n, _) = pair.line.unwrap();
+                let j = Vector3::new(n.x, n.y, n.x * -pair.p.y + n.y * pair.p.x);
+                h += j * j.transpose();
+                let spread = pair.residual.powi(2) + (s * pair.p.coords.norm()).powi(2);
+                b += spread * j * j.transpose();
+            }
+            let h_inv: Matrix3<f64> = h.try_inverse().unwrap();
+            h_inv * b * h_inv
+        };
+        for (r, s) in [(0.0, 0.01), (0.0, 0.02), (0.01, 0.0), (0.01, 0.005)] {
+            let params = IcpParams {
+                incidence_floor: None,
+                sampling_error: s,
+                ..IcpParams::default()
+            };
+            let pairs = room_pairs(r);
+            let got = sandwich(&pairs, &Pose2::identity(), &params, None).unwrap();
+            let want = twin(&pairs, s);
+            assert!(
+                (got - want).norm() <= 1e-12 * want.norm(),
+                "{got} vs {want}"
+            );
+        }
+        // Noise-free pairs: the covariance is the sampling term alone, four times as large when
+        // the sampling error doubles, and none at all without it.
+        let at = |s: f64| {
+            let params = IcpParams {
+                sampling_error: s,
+                ..IcpParams::default()
+            };
+            sandwich(&room_pairs(0.0), &Pose2::identity(), &params, None).unwrap()
+        };
+        assert!((at(0.02) - 4.0 * at(0.01)).norm() <= 1e-12 * at(0.02).norm());
+        assert_eq!(at(0.0), Matrix3::zeros());
     }
 
     #[test]

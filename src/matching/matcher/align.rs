@@ -125,12 +125,27 @@ impl Matcher {
         self.loosened(self.params.local_tolerance_factor)
     }
 
+    /// The ICP settings for the current scan: the configured ones, with the sampling error of
+    /// its beam spacing (`CovarianceParams::sampling_fraction`) in the covariance.
+    pub(super) fn scan_icp(&self) -> IcpParams {
+        let spacing = if self.rays_per_degree > 0.0 {
+            (1.0 / self.rays_per_degree).to_radians()
+        } else {
+            0.0
+        };
+        IcpParams {
+            sampling_error: self.params.covariance.sampling_fraction * spacing,
+            ..self.params.icp
+        }
+    }
+
     /// The ICP settings with both convergence thresholds `factor` times the configured ones.
     fn loosened(&self, factor: f64) -> IcpParams {
+        let icp = self.scan_icp();
         IcpParams {
-            epsilon_xy: self.params.icp.epsilon_xy * factor,
-            epsilon_theta: self.params.icp.epsilon_theta * factor,
-            ..self.params.icp
+            epsilon_xy: icp.epsilon_xy * factor,
+            epsilon_theta: icp.epsilon_theta * factor,
+            ..icp
         }
     }
 

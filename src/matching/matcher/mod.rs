@@ -213,7 +213,7 @@ impl Matcher {
                 &guess,
             );
         }
-        let (result, coarse) = self.align(points, &keyframe.reference, guess, &self.params.icp);
+        let (result, coarse) = self.align(points, &keyframe.reference, guess, &self.scan_icp());
         let (result, current) = match result {
             Ok(r) => {
                 let (r, current) = self.symmetrize(points, &keyframe.reference, r);
@@ -253,7 +253,7 @@ impl Matcher {
             reference.points(),
             &current,
             r.pose.inverse(),
-            &self.params.icp,
+            &self.scan_icp(),
         );
         let Some(back) = back.filter(|b| self.check(*b).is_ok()) else {
             return (r, Some(current));
