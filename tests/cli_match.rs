@@ -300,6 +300,38 @@ fn a_missing_file_is_an_error_not_a_panic() {
 }
 
 #[test]
+fn a_bad_covariance_flag_is_named() {
+    let file = TempFile::new("cov.jsonl", &simulated_level_scans(2));
+    for (flag, value) in [
+        ("--cov-sampling", "-0.1"),
+        ("--cov-sampling", "NaN"),
+        ("--cov-inflation", "0"),
+    ] {
+        let out = bin()
+            .arg("match")
+            .arg(&file.0)
+            .arg(format!("{flag}={value}"))
+            .output()
+            .unwrap();
+        assert!(!out.status.success(), "{flag} {value} was taken");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(err.contains(flag) && !err.contains("panicked"), "{err}");
+    }
+    // 0 is allowed: the residuals alone, as before the sampling error.
+    let out = bin()
+        .arg("match")
+        .arg(&file.0)
+        .args(["--cov-sampling", "0"])
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+#[test]
 fn help_shows_every_default() {
     let out = bin().args(["match", "--help"]).output().unwrap();
     let help = String::from_utf8_lossy(&out.stdout);
