@@ -66,8 +66,9 @@ pub struct IcpParams {
     /// The covariance's spread of each kept pair also holds its surface's error between
     /// samples: this angle times the pair's range is added in quadrature to its residual in
     /// the sandwich \[rad\]. Lines fitted through samples a beam spacing apart, and around
-    /// corners, do not lie where the surface is, the same way in both scans, so their error
-    /// grows with the range and never shows in the residuals. Default 0 (the residuals alone);
+    /// corners, do not lie where the surface is; that error grows with the range (the samples'
+    /// spacing) and biases the pairs rather than scattering them, so the residuals never show
+    /// it. Default 0 (the residuals alone);
     /// the matcher sets it from the scan's beam spacing (`CovarianceParams::sampling_fraction`).
     pub sampling_error: f64,
 }
