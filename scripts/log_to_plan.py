@@ -4,17 +4,21 @@
 usage: scripts/log_to_plan.py LOG[.gz] OUT.wall [--every K] [--eps M] [--gap M] [--max-range M]
                                                 [--clear M]
 
-Every K-th `FLASER` scan is placed at its corrected pose; runs of consecutive beams whose points
-lie within --gap metres (or 3 beam spacings at their range) of each other become polylines,
+Every K-th scan is placed at its corrected pose; runs of consecutive beams whose points lie
+within --gap metres (or 3 beam spacings at their range) of each other become polylines,
 simplified by Douglas-Peucker at --eps metres so that a wall seen in one scan is a few straight
-segments, not its range noise. A segment that passes within --clear metres of a pose on the
-path is dropped: the robot drove there, so what the scan saw there moved (people, doors). The plan's poses are the log's corrected poses, one per scan
-(heading in degrees, z 0.3 m, level). `levelscan simulate OUT.wall --flat --elevations 0`
-then gives scans along the log's path through its own geometry with an exact true pose: a
-control for `eval real`, whose reference (the corrected poses) is not exact.
+segments, not its range noise. A segment that passes within --clear metres of a pose on the path
+is dropped: the robot drove there, so what the scan saw there moved (people, doors). The plan's
+poses are the log's corrected poses, one per scan (heading in degrees, z 0.3 m, level).
+`levelscan simulate OUT.wall --flat --elevations 0` then gives scans along the log's path
+through its own geometry with an exact true pose: a control for `eval real`, whose reference
+(the corrected poses) is not exact (docs/RESULTS.md).
 
-Beams are spread as `formats::carmen::flaser_bearings` spreads them. Standard library only.
+Reads `FLASER` lines (beams spread as `formats::carmen::flaser_bearings` spreads them, pose the
+line's first) and `ROBOTLASER1` lines (bearings from `start_angle` by `angular_res`, pose the
+laser's). Standard library only.
 """
+import argparse
 import gzip
 import json
 import math
@@ -27,16 +31,38 @@ def flaser_bearings(n):
 
 
 def read_scans(path):
+    """(ranges, bearings, (x, y, heading)) per scan line, or exits naming the line."""
     opener = gzip.open if path.endswith(".gz") else open
-    with opener(path, "rt") as f:
-        for line in f:
-            t = line.split()
-            if not t or t[0] != "FLASER":
-                continue
-            n = int(t[1])
-            ranges = [float(r) for r in t[2 : 2 + n]]
-            x, y, th = (float(v) for v in t[2 + n : 5 + n])
-            yield ranges, (x, y, th)
+    try:
+        with opener(path, "rt") as f:
+            for number, line in enumerate(f, 1):
+                t = line.split()
+                if not t or t[0] not in ("FLASER", "ROBOTLASER1"):
+                    continue
+                try:
+                    yield parse(t)
+                except (ValueError, IndexError):
+                    sys.exit(f"{path}:{number}: a {t[0]} line that does not parse")
+    except (OSError, UnicodeDecodeError) as e:
+        sys.exit(f"{path}: cannot read it as a CARMEN log ({e})")
+
+
+def parse(t):
+    if t[0] == "FLASER":
+        n = int(t[1])
+        ranges = [float(r) for r in t[2 : 2 + n]]
+        pose = tuple(float(v) for v in t[2 + n : 5 + n])
+        bearings = flaser_bearings(n)
+    else:
+        start, res = float(t[2]), float(t[4])
+        n = int(t[8])
+        ranges = [float(r) for r in t[9 : 9 + n]]
+        m = int(t[9 + n])
+        pose = tuple(float(v) for v in t[10 + n + m : 13 + n + m])
+        bearings = [start + res * i for i in range(n)]
+    if len(ranges) != n or len(pose) != 3:
+        raise ValueError
+    return ranges, bearings, pose
 
 
 def simplify(points, eps):
@@ -104,45 +130,52 @@ def clear_path(walls, poses, radius):
 
 
 def main():
-    args = sys.argv[1:]
-    opts = {"--every": 5, "--eps": 0.015, "--gap": 0.15, "--max-range": 30.0, "--clear": 0.3}
-    pos = []
-    i = 0
-    while i < len(args):
-        if args[i] in opts:
-            opts[args[i]] = type(opts[args[i]])(args[i + 1])
-            i += 2
-        else:
-            pos.append(args[i])
-            i += 1
-    if len(pos) != 2:
-        sys.exit(__doc__)
-    log, out = pos
+    ap = argparse.ArgumentParser(
+        description="A floor plan (.wall) from a CARMEN log's own scans, on the log's own path."
+    )
+    ap.add_argument("log", help="CARMEN log (FLASER or ROBOTLASER1 lines), gzipped or not")
+    ap.add_argument("out", help="the plan to write (.wall)")
+    ap.add_argument("--every", type=int, default=5, help="walls from every K-th scan (5)")
+    ap.add_argument("--eps", type=float, default=0.015,
+                    help="Douglas-Peucker tolerance [m] (0.015: about the range noise)")
+    ap.add_argument("--gap", type=float, default=0.15,
+                    help="neighbouring points farther apart break a polyline [m] (0.15, or "
+                         "3 beam spacings at their range)")
+    ap.add_argument("--max-range", type=float, default=30.0,
+                    help="readings at or beyond it are no return [m] (30)")
+    ap.add_argument("--clear", type=float, default=0.3,
+                    help="drop segments within this of a pose on the path [m] (0.3; 0 keeps all)")
+    a = ap.parse_args()
+    if a.every < 1 or a.eps < 0 or a.gap <= 0 or a.max_range <= 0 or a.clear < 0:
+        ap.error("--every must be at least 1, --gap and --max-range positive, --eps and --clear >= 0")
+    log, out = a.log, a.out
     walls, poses = [], []
-    for k, (ranges, (x, y, th)) in enumerate(read_scans(log)):
+    for k, (ranges, bearings, (x, y, th)) in enumerate(read_scans(log)):
         poses.append([round(x, 5), round(y, 5), 0.3, round(math.degrees(th), 5), 0.0, 0.0])
-        if k % opts["--every"]:
+        if k % a.every or len(ranges) < 2:
             continue
-        bearings = flaser_bearings(len(ranges))
-        spacing = bearings[1] - bearings[0]
-        run, prev_r = [], None
+        spacing = abs(bearings[1] - bearings[0])
+        run = []
         for r, b in zip(ranges + [0.0], bearings + [0.0]):
-            ok = 0.05 < r < opts["--max-range"]
+            ok = 0.05 < r < a.max_range
             if ok:
                 p = (x + r * math.cos(th + b), y + r * math.sin(th + b))
-                gap = max(opts["--gap"], 3 * spacing * r)
+                gap = max(a.gap, 3 * spacing * r)
                 if run and math.dist(run[-1], p) > gap:
                     ok = False
             if not ok:
                 if len(run) >= 2:
-                    walls.append([[round(a, 4), round(c, 4)] for a, c in simplify(run, opts["--eps"])])
+                    kept = simplify(run, a.eps)
+                    walls.append([[round(u, 4), round(v, 4)] for u, v in kept])
                 run = []
-                if 0.05 < r < opts["--max-range"]:
+                if 0.05 < r < a.max_range:
                     run = [(x + r * math.cos(th + b), y + r * math.sin(th + b))]
                 continue
             run.append(p)
-    if opts["--clear"] > 0:
-        walls = clear_path(walls, poses, opts["--clear"])
+    if not poses:
+        sys.exit(f"{log}: no FLASER or ROBOTLASER1 lines: not a CARMEN laser log")
+    if a.clear > 0:
+        walls = clear_path(walls, poses, a.clear)
     plan = {"version": "w0.1", "wallheight": 3.0, "walls": walls, "poses": poses}
     with open(out, "w") as f:
         json.dump(plan, f, separators=(",", ":"))

@@ -61,8 +61,9 @@ fn scans_of(plan: &Path) -> Vec<Value> {
     records(&out)
 }
 
-/// The scans as `FLASER` lines (a reading of 0 where a ray met nothing), at their true poses.
-fn carmen_log(scans: &[Value]) -> String {
+/// The scans as `FLASER` lines, or as `ROBOTLASER1` lines over the same bearings (a reading of
+/// 0 where a ray met nothing), at their true poses.
+fn carmen_log(scans: &[Value], robotlaser: bool) -> String {
     let mut log = String::new();
     for (k, s) in scans.iter().enumerate() {
         let ranges: Vec<f64> = s["readings"]
@@ -78,11 +79,25 @@ fn carmen_log(scans: &[Value]) -> String {
             t[1].as_f64().unwrap(),
             t[3].as_f64().unwrap(),
         );
-        write!(log, "FLASER {}", ranges.len()).unwrap();
+        let (pi, n) = (std::f64::consts::PI, ranges.len());
+        if robotlaser {
+            let res = pi / (n - 1) as f64;
+            write!(log, "ROBOTLASER1 0 {} {pi} {res} 30 0.01 0 {n}", -pi / 2.0).unwrap();
+        } else {
+            write!(log, "FLASER {n}").unwrap();
+        }
         for r in &ranges {
             write!(log, " {r:.4}").unwrap();
         }
-        writeln!(log, " {x} {y} {th} {x} {y} {th} {k}.0 test {k}.0").unwrap();
+        if robotlaser {
+            writeln!(
+                log,
+                " 0 {x} {y} {th} {x} {y} {th} 0 0 0 0 0 {k}.0 test {k}.0"
+            )
+            .unwrap();
+        } else {
+            writeln!(log, " {x} {y} {th} {x} {y} {th} {k}.0 test {k}.0").unwrap();
+        }
     }
     log
 }
@@ -98,26 +113,57 @@ fn a_log_becomes_a_plan_that_scans_back_into_its_own_ranges() {
     std::fs::write(&room, ROOM).unwrap();
     let original = scans_of(&room);
     assert_eq!(original.len(), 5);
-    let log = dir.0.join("room.log");
-    std::fs::write(&log, carmen_log(&original)).unwrap();
-
-    let plan = dir.0.join("from_log.wall");
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("scripts/log_to_plan.py");
+    let plan_of = |name: &str, robotlaser: bool| {
+        let log = dir.0.join(format!("{name}.log"));
+        std::fs::write(&log, carmen_log(&original, robotlaser)).unwrap();
+        let plan = dir.0.join(format!("{name}.wall"));
+        let out = Command::new(&python)
+            .arg(&script)
+            .args([
+                log.to_str().unwrap(),
+                plan.to_str().unwrap(),
+                "--every",
+                "1",
+            ])
+            .args(["--eps", "0.002"])
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        plan
+    };
+    // A file that is no laser log is refused by name, without a plan or a traceback.
+    let not_a_log = dir.0.join("room_copy.wall");
+    std::fs::write(&not_a_log, ROOM).unwrap();
     let out = Command::new(&python)
         .arg(&script)
         .args([
-            log.to_str().unwrap(),
-            plan.to_str().unwrap(),
-            "--every",
-            "1",
+            not_a_log.to_str().unwrap(),
+            dir.0.join("x.wall").to_str().unwrap(),
         ])
-        .args(["--eps", "0.002"])
         .output()
         .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
     assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+        !out.status.success() && !dir.0.join("x.wall").exists(),
+        "{err}"
+    );
+    assert!(
+        err.contains("room_copy.wall")
+            && err.contains("not a CARMEN laser log")
+            && !err.contains("Traceback"),
+        "{err}"
+    );
+    let plan = plan_of("flaser", false);
+    // The same scans as ROBOTLASER1 lines give the same plan.
+    let robotlaser = plan_of("robotlaser", true);
+    assert_eq!(
+        std::fs::read_to_string(&plan).unwrap(),
+        std::fs::read_to_string(&robotlaser).unwrap()
     );
 
     // The path is the log's, pose for pose.
