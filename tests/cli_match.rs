@@ -305,6 +305,7 @@ fn a_bad_covariance_flag_is_named() {
     for (flag, value) in [
         ("--cov-sampling", "-0.1"),
         ("--cov-sampling", "NaN"),
+        ("--cov-sampling", "1e200"),
         ("--cov-inflation", "0"),
     ] {
         let out = bin()

@@ -153,7 +153,7 @@ pub struct MatchOptions {
     #[arg(long, default_value_t = CovarianceParams::default().noise_knee)]
     pub cov_knee: f64,
     /// Covariance: a pair's surface error between samples, as a fraction of the beam spacing
-    /// at its range (0 takes the residuals alone).
+    /// at its range, 0 to 10 (0 takes the residuals alone).
     #[arg(long, default_value_t = CovarianceParams::default().sampling_fraction)]
     pub cov_sampling: f64,
 }
@@ -217,8 +217,12 @@ impl MatchOptions {
         if !(self.window_theta.is_finite() && self.window_theta >= 0.0) {
             anyhow::bail!("--window-theta must be >= 0, got {}", self.window_theta);
         }
-        if !(self.cov_sampling.is_finite() && self.cov_sampling >= 0.0) {
-            anyhow::bail!("--cov-sampling must be >= 0, got {}", self.cov_sampling);
+        // A fraction of the beam spacing: more than ten spacings is no longer a sampling error.
+        if !(0.0..=10.0).contains(&self.cov_sampling) {
+            anyhow::bail!(
+                "--cov-sampling must be between 0 and 10 (a fraction of the beam spacing), got {:?}",
+                self.cov_sampling
+            );
         }
         if self.max_iterations == 0 {
             anyhow::bail!("--max-iterations must be at least 1");
