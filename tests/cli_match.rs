@@ -307,6 +307,8 @@ fn a_bad_covariance_flag_is_named() {
         ("--cov-sampling", "NaN"),
         ("--cov-sampling", "1e200"),
         ("--cov-inflation", "0"),
+        ("--cov-inflation", "1e300"),
+        ("--cov-knee", "1e-300"),
     ] {
         let out = bin()
             .arg("match")

@@ -217,6 +217,14 @@ impl MatchOptions {
         if !(self.window_theta.is_finite() && self.window_theta >= 0.0) {
             anyhow::bail!("--window-theta must be >= 0, got {}", self.window_theta);
         }
+        // Beyond these the reported covariance overflows to infinity (written as null).
+        if self.cov_knee < 1e-6 || self.cov_inflation > 1e6 {
+            anyhow::bail!(
+                "--cov-knee must be at least 1e-6 m and --cov-inflation at most 1e6, got {:?} and {:?}",
+                self.cov_knee,
+                self.cov_inflation
+            );
+        }
         // A fraction of the beam spacing: more than ten spacings is no longer a sampling error.
         if !(0.0..=10.0).contains(&self.cov_sampling) {
             anyhow::bail!(
