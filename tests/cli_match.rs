@@ -300,7 +300,7 @@ fn a_missing_file_is_an_error_not_a_panic() {
 }
 
 #[test]
-fn a_bad_covariance_flag_is_named() {
+fn a_bad_covariance_or_search_flag_is_named() {
     let file = TempFile::new("cov.jsonl", &simulated_level_scans(2));
     for (flag, value) in [
         ("--cov-sampling", "-0.1"),
@@ -309,6 +309,9 @@ fn a_bad_covariance_flag_is_named() {
         ("--cov-inflation", "0"),
         ("--cov-inflation", "1e300"),
         ("--cov-knee", "1e-300"),
+        // The coarse search's table: a huge window ran out of memory or overflowed.
+        ("--window-xy", "1e300"),
+        ("--window-theta", "1e300"),
     ] {
         let out = bin()
             .arg("match")

@@ -214,8 +214,19 @@ impl MatchOptions {
         if !(self.min_overlap > 0.0 && self.min_overlap <= 1.0) {
             anyhow::bail!("--min-overlap must be in (0, 1], got {}", self.min_overlap);
         }
-        if !(self.window_theta.is_finite() && self.window_theta >= 0.0) {
-            anyhow::bail!("--window-theta must be >= 0, got {}", self.window_theta);
+        if !(0.0..=180.0).contains(&self.window_theta) {
+            anyhow::bail!(
+                "--window-theta must be between 0 and 180 degrees (180 tries every heading), got {:?}",
+                self.window_theta
+            );
+        }
+        // The search's table grows with the window's area: at 25 m it holds a million cells.
+        if self.window_xy > 25.0 {
+            anyhow::bail!(
+                "--window-xy must be at most 25 m (an odometry error between two scans, not a \
+                 map's size), got {:?}",
+                self.window_xy
+            );
         }
         // Beyond these the reported covariance overflows to infinity (written as null).
         if self.cov_knee < 1e-6 || self.cov_inflation > 1e6 {
