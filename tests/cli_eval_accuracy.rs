@@ -215,3 +215,22 @@ fn a_bad_quad_tolerance_is_refused_by_name() {
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr).contains("--quad-tolerance"));
 }
+
+#[test]
+fn elevations_beyond_a_turn_and_tilts_beyond_90_degrees_are_refused_by_name() {
+    for (args, flag) in [
+        (["--step", "1e300"], "--step"),
+        (["--scans", "200"], "--step"),
+        (["--tilt", "1e9"], "--tilt"),
+    ] {
+        let out = bin()
+            .args(["eval", "accuracy", plan("office").to_str().unwrap()])
+            .args(["--poses", "2"])
+            .args(args)
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success(), "{args:?} was taken");
+        assert!(err.contains(flag) && !err.contains("panicked"), "{err}");
+    }
+}
