@@ -156,22 +156,15 @@ def main():
             continue
         spacing = abs(bearings[1] - bearings[0])
         run = []
+        # A trailing no-return closes the last run.
         for r, b in zip(ranges + [0.0], bearings + [0.0]):
-            ok = 0.05 < r < a.max_range
-            if ok:
-                p = (x + r * math.cos(th + b), y + r * math.sin(th + b))
-                gap = max(a.gap, 3 * spacing * r)
-                if run and math.dist(run[-1], p) > gap:
-                    ok = False
-            if not ok:
-                if len(run) >= 2:
-                    kept = simplify(run, a.eps)
-                    walls.append([[round(u, 4), round(v, 4)] for u, v in kept])
-                run = []
-                if 0.05 < r < a.max_range:
-                    run = [(x + r * math.cos(th + b), y + r * math.sin(th + b))]
+            p = (x + r * math.cos(th + b), y + r * math.sin(th + b)) if 0.05 < r < a.max_range else None
+            if p is not None and run and math.dist(run[-1], p) <= max(a.gap, 3 * spacing * r):
+                run.append(p)
                 continue
-            run.append(p)
+            if len(run) >= 2:
+                walls.append([[round(u, 4), round(v, 4)] for u, v in simplify(run, a.eps)])
+            run = [p] if p is not None else []
     if not poses:
         sys.exit(f"{log}: no FLASER or ROBOTLASER1 lines: not a CARMEN laser log")
     if a.clear > 0:

@@ -94,17 +94,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         "--quad-tolerance must be a positive number of sigmas"
     );
     // The scans' elevations are centred on level, `step` apart; `simulate`'s limit applies.
-    let widest = args
-        .scans
-        .iter()
-        .max()
-        .map_or(0.0, |&n| (n - 1) as f64 / 2.0);
+    let most = args.scans.iter().copied().max().unwrap_or(1);
     anyhow::ensure!(
-        args.step.is_finite() && args.step > 0.0 && widest * args.step <= 360.0,
-        "--step {:?} with --scans up to {}: the elevations must lie within +-360 degrees and \
+        args.step.is_finite() && args.step > 0.0 && (most - 1) as f64 / 2.0 * args.step <= 360.0,
+        "--step {:?} with --scans up to {most}: the elevations must lie within +-360 degrees and \
          the step be positive",
         args.step,
-        args.scans.iter().max().unwrap_or(&0)
     );
     anyhow::ensure!(
         args.tilt.is_finite() && (0.0..=90.0).contains(&args.tilt),

@@ -28,13 +28,18 @@ pub fn run_with_stdin(args: &[&str], stdin: &[u8]) -> Output {
     out
 }
 
-/// The JSON Lines records a successful run wrote (fails the test with its stderr otherwise).
-pub fn records(out: &Output) -> Vec<Value> {
+/// Fails the test with the run's standard error unless it succeeded.
+pub fn assert_ran(out: &Output) {
     assert!(
         out.status.success(),
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
+}
+
+/// The JSON Lines records a successful run wrote (fails the test with its stderr otherwise).
+pub fn records(out: &Output) -> Vec<Value> {
+    assert_ran(out);
     String::from_utf8(out.stdout.clone())
         .unwrap()
         .lines()
