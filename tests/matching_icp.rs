@@ -43,6 +43,48 @@ fn point_to_line_recovers_a_known_motion_exactly_without_noise() {
 }
 
 #[test]
+fn a_view_of_two_walls_keeps_the_rotation_it_started_near() {
+    // From where the office loop passes its north-west side, the scan sees the west and
+    // south walls and little else: their lines meet at the corner, so a scan scaled about the
+    // corner fits them too, and the rotation's mirror image fits as well as the rotation.
+    // ICP from the exact step must stay there, not jump to the mirror image (it did, and the
+    // match fell back to odometry as a large correction).
+    let walls = office();
+    let truth = office_loop(120);
+    for k in [52, 54] {
+        let reference = ScanReference::new(
+            scan_at(&truth[k - 1], &walls, 181, 0.0, 1),
+            &Point2::origin(),
+            &NormalParams::default(),
+        );
+        let source = scan_at(&truth[k], &walls, 181, 0.0, 2);
+        let step = truth[k - 1].between(&truth[k]);
+        let r = icp(&source, &reference, step, &IcpParams::default()).unwrap();
+        assert!(
+            close(&r.pose, &step, 1e-9, 1e-9),
+            "{k}: {:?} vs {step:?}",
+            r.pose
+        );
+    }
+    let inputs: Vec<_> = truth
+        .iter()
+        .map(|p| (scan_at(p, &walls, 181, 0.0, 1), Some(*p)))
+        .collect();
+    for mode in [Mode::Pairwise, Mode::Metascan] {
+        let params = MatcherParams {
+            mode,
+            ..MatcherParams::default()
+        };
+        let reports = match_run(&inputs, &params);
+        let fallbacks = reports
+            .iter()
+            .filter(|r| matches!(r.status, MatchStatus::Fallback(_)))
+            .count();
+        assert_eq!(fallbacks, 0, "{mode:?}");
+    }
+}
+
+#[test]
 fn point_to_point_recovers_a_known_motion_exactly_with_exact_partners() {
     // Point-to-point is exact only when every source point has its true partner in the
     // reference, and finds it when the motion is small against the spacing: scattered posts

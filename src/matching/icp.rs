@@ -310,7 +310,7 @@ fn solve(
     pose: &Pose2,
 ) -> Result<(Pose2, Option<Remapped>), super::solve::SolveError> {
     let Some(remap) = remap else {
-        return solver.solve().map(|next| (next, None));
+        return solver.solve_near(pose.theta).map(|next| (next, None));
     };
     let sliding = scatter
         .filter(|(ratio, _)| *ratio < remap.min_constraint_ratio)

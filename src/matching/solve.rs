@@ -82,6 +82,24 @@ impl RigidSolver {
 
     /// The pose `T = (t, θ)` minimising `Σ w (n · (R p + t - q))²`, so that `T · p ≈ q`.
     pub fn solve(&self) -> Result<Pose2, SolveError> {
+        self.solve_with(min_quadratic_on_circle)
+    }
+
+    /// [`solve`](Self::solve) as one step of a local method from heading `theta`: where the
+    /// cost has two minima over the rotation, the one nearer `theta`. A scan that sees two
+    /// walls and nothing else leaves its scale free (both lines pass through their corner,
+    /// so scaling about it fits as well), and then the mirror image of the right rotation
+    /// fits exactly as well as the rotation itself; the global minimum is a coin toss between
+    /// them, where ICP from a good start wants the one it started near.
+    pub fn solve_near(&self, theta: f64) -> Result<Pose2, SolveError> {
+        let (sin, cos) = theta.sin_cos();
+        self.solve_with(|s, h| min_quadratic_on_circle_near(s, h, &Vector2::new(cos, sin)))
+    }
+
+    fn solve_with(
+        &self,
+        min_on_circle: impl Fn(&Matrix2<f64>, &Vector2<f64>) -> Vector2<f64>,
+    ) -> Result<Pose2, SolveError> {
         let a = self.m.fixed_view::<2, 2>(0, 0).into_owned();
         let b = self.m.fixed_view::<2, 2>(0, 2).into_owned();
         let d = self.m.fixed_view::<2, 2>(2, 2).into_owned();
@@ -96,7 +114,7 @@ impl RigidSolver {
         let s = d - b.transpose() * a_inv * b;
         let s = (s + s.transpose()) * 0.5;
         let h = gr - b.transpose() * a_inv * gt;
-        let r = min_quadratic_on_circle(&s, &h);
+        let r = min_on_circle(&s, &h);
         let t = a_inv * (gt - b * r);
         Ok(Pose2::new(t.x, t.y, r.y.atan2(r.x)))
     }
@@ -233,7 +251,7 @@ impl RigidSolver {
             ratios,
         };
         match free {
-            0 => return self.solve().map(|p| (p, remapped)),
+            0 => return self.solve_near(at.theta).map(|p| (p, remapped)),
             3 => return Err(SolveError::Degenerate),
             _ => {}
         }
@@ -337,6 +355,63 @@ fn min_quadratic_on_circle(s: &Matrix2<f64>, h: &Vector2<f64>) -> Vector2<f64> {
     let mu = 0.5 * (lo + hi);
     let r = v1 * (h1 / mu) + v2 * (h2 / (mu + gap));
     r / r.norm()
+}
+
+/// [`min_quadratic_on_circle`]'s minimum, or the other local minimum on the circle where there
+/// is one and it lies nearer `current` (a unit vector). A quadratic on a circle has at most
+/// two local minima (Martínez 1994, "Local minimizers of quadratic functions on Euclidean
+/// balls and spheres"): the global one, whose multiplier makes `S + λI` positive
+/// semidefinite, and at most one more, with `λ` between `-s2` and `-s1`, on the rising
+/// branch of the secular function between its poles. In the eigenbasis it lies on the other
+/// side of the axis `v2` from the global one: where `S` is singular (`s1 = h1 = 0`) the two are
+/// mirror images across it and tie.
+fn min_quadratic_on_circle_near(
+    s: &Matrix2<f64>,
+    h: &Vector2<f64>,
+    current: &Vector2<f64>,
+) -> Vector2<f64> {
+    let global = min_quadratic_on_circle(s, h);
+    let (s1, s2, v1) = symmetric_eigen_2x2(s);
+    let v2 = Vector2::new(-v1.y, v1.x);
+    let (h1, h2) = (v1.dot(h), v2.dot(h));
+    let gap = s2 - s1;
+    let other = if h1 == 0.0 {
+        // The hard case (or no pull at all): the mirror image across v2 ties.
+        Some(global - 2.0 * v1.dot(&global) * v1)
+    } else if h2 == 0.0 {
+        // r2 = 0 at any multiplier: the other candidate is -v1 sign(h1), a minimum while the
+        // curvature across v1 (gap) beats the pull |h1|.
+        (h1.abs() < gap).then(|| -v1 * h1.signum())
+    } else if gap > 0.0 {
+        // mu = λ + s1 in (-gap, 0): g(mu) = h1²/mu² + h2²/(mu + gap)² has its least value where
+        // (-mu) / (mu + gap) = (h1² / h2²)^(1/3); a second minimum needs it below 1.
+        let g = |mu: f64| (h1 / mu).powi(2) + (h2 / (mu + gap)).powi(2);
+        let k = (h1 * h1 / (h2 * h2)).cbrt();
+        let low = -k * gap / (1.0 + k);
+        (g(low) < 1.0).then(|| {
+            let (mut lo, mut hi) = (low, 0.0f64);
+            for _ in 0..200 {
+                let mid = 0.5 * (lo + hi);
+                if mid <= lo || mid >= hi {
+                    break;
+                }
+                if g(mid) > 1.0 {
+                    hi = mid;
+                } else {
+                    lo = mid;
+                }
+            }
+            let mu = 0.5 * (lo + hi);
+            let r = v1 * (h1 / mu) + v2 * (h2 / (mu + gap));
+            r / r.norm()
+        })
+    } else {
+        None
+    };
+    match other {
+        Some(r) if r.iter().all(|v| v.is_finite()) && r.dot(current) > global.dot(current) => r,
+        _ => global,
+    }
 }
 
 /// Eigen-decomposition of a symmetric 2x2 matrix in closed form:
@@ -483,6 +558,20 @@ mod tests {
     }
 
     #[test]
+    fn a_pull_along_one_eigenvector_leaves_its_opposite_a_local_minimum() {
+        // f = 2 sin² φ - cos φ: the global minimum at φ = 0, a local one at φ = π.
+        let s = Matrix2::new(0.0, 0.0, 0.0, 2.0);
+        let h = Vector2::new(0.5, 0.0);
+        let near = |a: f64| min_quadratic_on_circle_near(&s, &h, &Vector2::new(a.cos(), a.sin()));
+        assert!((near(0.4) - Vector2::new(1.0, 0.0)).norm() < 1e-12);
+        assert!((near(3.0) - Vector2::new(-1.0, 0.0)).norm() < 1e-12);
+        // Pulled harder than the curvature holds, φ = π is no minimum: the global one.
+        let strong = Vector2::new(3.0, 0.0);
+        let r = min_quadratic_on_circle_near(&s, &strong, &Vector2::new(-1.0, 0.0));
+        assert!((r - Vector2::new(1.0, 0.0)).norm() < 1e-12);
+    }
+
+    #[test]
     fn parallel_lines_are_degenerate() {
         let mut s = RigidSolver::new();
         for i in 0..10 {
@@ -527,6 +616,63 @@ mod tests {
             let est = s.solve().unwrap();
             prop_assert!((est.x - x).abs() < 1e-8 && (est.y - y).abs() < 1e-8);
             prop_assert!(crate::geometry::wrap_angle(est.theta - th).abs() < 1e-8);
+        }
+
+        #[test]
+        fn two_walls_alone_leave_a_mirror_image_and_the_local_solve_keeps_its_start(
+            x in -1.0f64..1.0, y in -1.0f64..1.0, th in -3.0f64..3.0, off in -0.2f64..0.2,
+        ) {
+            // The corner's two walls and nothing else: scaling about the corner fits too, and
+            // the rotation's mirror image fits exactly as well (the global solve picks one).
+            let truth = Pose2::new(x, y, th);
+            let inv = truth.inverse();
+            let mut s = RigidSolver::new();
+            for i in 0..8 {
+                let qa = Point2::new(2.0, -1.0 + 0.3 * i as f64);
+                let qb = Point2::new(-1.0 + 0.25 * i as f64, 3.0);
+                s.add_line(Vector2::x(), &apply(&inv, &qa), &qa, 1.0);
+                s.add_line(Vector2::y(), &apply(&inv, &qb), &qb, 1.0);
+            }
+            let est = s.solve_near(th + off).unwrap();
+            prop_assert!((est.x - x).abs() < 1e-6 && (est.y - y).abs() < 1e-6, "{est:?}");
+            prop_assert!(crate::geometry::wrap_angle(est.theta - th).abs() < 1e-6, "{est:?}");
+        }
+
+        #[test]
+        fn the_local_circle_minimum_is_the_sampled_minimum_nearest_the_start(
+            s11 in -5.0f64..5.0, s12 in -5.0f64..5.0, s22 in -5.0f64..5.0,
+            h1 in -5.0f64..5.0, h2 in -5.0f64..5.0, start in -3.2f64..3.2,
+        ) {
+            let s = Matrix2::new(s11, s12, s12, s22);
+            let h = Vector2::new(h1, h2);
+            let f = |a: f64| {
+                let r = Vector2::new(a.cos(), a.sin());
+                (r.transpose() * s * r)[0] - 2.0 * h.dot(&r)
+            };
+            // Brute force: every sampled local minimum of f on the circle.
+            let n = 7200;
+            let step = std::f64::consts::TAU / n as f64;
+            let values: Vec<f64> = (0..n).map(|k| f(k as f64 * step)).collect();
+            let minima: Vec<f64> = (0..n)
+                .filter(|&k| {
+                    let (prev, next) = (values[(k + n - 1) % n], values[(k + 1) % n]);
+                    values[k] < prev && values[k] <= next
+                })
+                .map(|k| k as f64 * step)
+                .collect();
+            prop_assume!(!minima.is_empty() && minima.len() <= 2);
+            let current = Vector2::new(start.cos(), start.sin());
+            let got = min_quadratic_on_circle_near(&s, &h, &current);
+            let got = got.y.atan2(got.x);
+            let gap = |a: f64, b: f64| crate::geometry::wrap_angle(a - b).abs();
+            // The answer is one of the sampled minima, and the one nearest the start.
+            let nearest = minima
+                .iter()
+                .copied()
+                .min_by(|a, b| gap(*a, start).total_cmp(&gap(*b, start)))
+                .unwrap();
+            prop_assert!(minima.iter().any(|m| gap(*m, got) < 2.0 * step), "{got} not in {minima:?}");
+            prop_assert!(gap(nearest, got) < 2.0 * step, "{got} against {nearest} of {minima:?}");
         }
 
         #[test]
