@@ -1,16 +1,16 @@
 //! `levelscan eval matching` (paper Figs. 8-10, 12) and `levelscan eval real` (real CARMEN logs
 //! with perturbed odometry).
 
-use super::matching::MatchOptions;
+use super::matching::{MatchOptions, time_increment};
 use super::scan_input::open_scans;
 use super::{open_output, write_file};
 use anyhow::Context;
 use levelscan::eval::drift::{DRIFT_LENGTHS, Drift};
 use levelscan::eval::matching::{ExperimentParams, matching_experiment};
-use levelscan::eval::real::{RealLog, RealResult, evaluate_real};
+use levelscan::eval::real::{RealLog, RealResult, RealSweep, evaluate_real};
 use levelscan::formats::bag::BagOptions;
 use levelscan::formats::{CarmenParams, read_plan};
-use levelscan::matching::{Mode, scan_points};
+use levelscan::matching::{DeskewParams, Mode, scan_points, timed_scan_points};
 use levelscan::simulate::{AdaptiveParams, ScannerParams, elevations_centred};
 use levelscan::viz::plots::{MapPanel, map_panels_png, map_panels_svg, run_map_panel};
 use std::fmt::Write as _;
@@ -202,6 +202,7 @@ fn load_real_log(
     ranges: &levelscan::matching::RangeParams,
     carmen: CarmenParams,
     bag: &BagOptions,
+    deskew: Option<DeskewParams>,
 ) -> anyhow::Result<RealLog> {
     let input = open_scans(Some(path), carmen, bag)?;
     let name = input.name.clone();
@@ -212,6 +213,11 @@ fn load_real_log(
         points: Vec::new(),
         reference: Vec::new(),
         times: Vec::new(),
+        sweep: deskew.map(|params| RealSweep {
+            params,
+            ray_times: Vec::new(),
+            stamps: Vec::new(),
+        }),
     };
     let bag = input.survey.is_some();
     let mut last_sequence = None;
@@ -233,7 +239,16 @@ fn load_real_log(
                 format!("{name}:{line}: no reference pose (a CARMEN pose or `true_pose`)")
             }
         })?;
-        log.points.push(scan_points(&scan, ranges));
+        match &mut log.sweep {
+            Some(real) => {
+                let dt = time_increment(&real.params, &scan, log.points.len(), &name, line)?;
+                let (points, times) = timed_scan_points(&scan, ranges, dt);
+                log.points.push(points);
+                real.ray_times.push(times);
+                real.stamps.push(scan.timestamp.map(|t| t.seconds()));
+            }
+            None => log.points.push(scan_points(&scan, ranges)),
+        }
         log.reference.push(reference.to_pose2());
         let index = log.times.len() as f64;
         log.times
@@ -257,6 +272,7 @@ pub fn run_real(args: RealArgs) -> anyhow::Result<()> {
             &params.ranges,
             args.options.carmen(),
             &args.bag.options(false, Some("/scan_level")),
+            args.options.deskew(),
         )?;
         let result = evaluate_real(&log, &params, &noise, args.seed)
             .with_context(|| format!("{}: fewer than two scans", path.display()))?;

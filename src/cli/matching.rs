@@ -7,14 +7,16 @@ use super::reference_tum::ReferenceTum;
 use super::scan_input::{BagArgs, open_scans};
 use super::summary::{Kind, Outcome, Tally};
 use clap::ValueEnum;
+use levelscan::formats::bag::convert::ScanMeta;
 use levelscan::formats::{CarmenParams, write_tum};
 use levelscan::geometry::Pose;
 use levelscan::matching::{
-    CheckParams, Coarse, CorrelativeParams, CovarianceParams, IcpParams, Kernel, MapParams,
-    MatchReport, MatchStatus, Matcher, MatcherParams, Metric, Mode, NormalParams, OdometryPrior,
-    RangeParams, scan_points,
+    CheckParams, Coarse, CorrelativeParams, CovarianceParams, DeskewParams, IcpParams, Kernel,
+    MapParams, MatchReport, MatchStatus, Matcher, MatcherParams, Metric, Mode, NormalParams,
+    OdometryPrior, RangeParams, SweepTracker, deskew, scan_points, timed_scan_points,
 };
 use levelscan::scan::Scan;
+use nalgebra::Point2;
 use serde_json::json;
 use std::path::PathBuf;
 
@@ -156,6 +158,16 @@ pub struct MatchOptions {
     /// at its range, 0 to 10 (0 takes the residuals alone).
     #[arg(long, default_value_t = CovarianceParams::default().sampling_fraction)]
     pub cov_sampling: f64,
+    /// Deskew: move each ray to where the scanner was at the scan's stamp, from the odometry's
+    /// velocity between the previous scan and this one (at most 0.5 s before) and each ray's
+    /// time (the scans' `time_increment`, as ROS bags give it, or --time-increment). For a
+    /// robot that turns while it scans.
+    #[arg(long)]
+    pub deskew: bool,
+    /// Deskew with this time between consecutive rays (s) instead of the scans' own; implies
+    /// --deskew. Negative when the rays are listed in the reverse of the order they were cast.
+    #[arg(long, allow_hyphen_values = true)]
+    pub time_increment: Option<f64>,
 }
 
 impl MatchOptions {
@@ -246,7 +258,23 @@ impl MatchOptions {
         if self.max_iterations == 0 {
             anyhow::bail!("--max-iterations must be at least 1");
         }
+        // A hundredth of a second between rays is already a sweep of seconds.
+        if let Some(dt) = self.time_increment
+            && !(dt.is_finite() && dt.abs() <= 0.01)
+        {
+            anyhow::bail!(
+                "--time-increment must be at most 0.01 s either way (the time between two rays), got {dt:?}"
+            );
+        }
         Ok(())
+    }
+
+    /// Deskewing's settings, when --deskew or --time-increment asks for it.
+    pub fn deskew(&self) -> Option<DeskewParams> {
+        (self.deskew || self.time_increment.is_some()).then(|| DeskewParams {
+            time_increment: self.time_increment,
+            ..DeskewParams::default()
+        })
     }
 
     /// The matcher's parameters from these flags, as given ([`Self::check`] vets them).
@@ -380,9 +408,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     )?;
     let mut matcher = Matcher::new(params);
     let mut tally = Tally::new(Kind::Match);
+    let mut sweep = args.options.deskew().map(Sweep::new);
     for (index, item) in input.source.enumerate() {
-        let (_, mut scan) = item?;
-        let points = scan_points(&scan, &params.ranges);
+        let (line, mut scan) = item?;
+        let points = match sweep.as_mut() {
+            Some(sweep) => sweep.points(&scan, &params.ranges, index, &input.name, line)?,
+            None => scan_points(&scan, &params.ranges),
+        };
         let odometry = scan.odometry.map(|p| p.to_pose2());
         let report = matcher.push(&points, odometry);
         annotate(&mut scan, &report);
@@ -409,7 +441,84 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     reference.finish(&input.name)?;
     tally.report(&input.name);
+    if let Some(sweep) = sweep {
+        eprintln!("{}", sweep.summary());
+    }
     Ok(())
+}
+
+/// The time between scan `index`'s rays (at `line` of `name`) for deskewing: --time-increment,
+/// else the scan's own (a ROS LaserScan's); an error naming the scan when neither gives one.
+pub fn time_increment(
+    params: &DeskewParams,
+    scan: &Scan,
+    index: usize,
+    name: &str,
+    line: usize,
+) -> anyhow::Result<f64> {
+    if let Some(dt) = params.time_increment {
+        return Ok(dt);
+    }
+    let own = f64::from(ScanMeta::of(scan, index).time_increment);
+    if own != 0.0 && own.is_finite() {
+        return Ok(own);
+    }
+    anyhow::bail!(
+        "{name}:{line}: --deskew needs the time between rays, and this scan has no \
+         time_increment (a ROS LaserScan's): give it with --time-increment SECONDS"
+    )
+}
+
+/// Deskewing a run as it streams (`--deskew`): each scan's points, moved to the scanner's frame
+/// at its stamp where the odometry gives a velocity.
+pub struct Sweep {
+    params: DeskewParams,
+    tracker: SweepTracker,
+    deskewed: usize,
+    total: usize,
+}
+
+impl Sweep {
+    pub fn new(params: DeskewParams) -> Self {
+        Self {
+            params,
+            tracker: SweepTracker::new(),
+            deskewed: 0,
+            total: 0,
+        }
+    }
+
+    /// Scan `index`'s (at `line` of `name`) usable points, deskewed when the odometry gives a
+    /// velocity; an error when neither the scan nor --time-increment gives its rays' timing.
+    pub fn points(
+        &mut self,
+        scan: &Scan,
+        ranges: &RangeParams,
+        index: usize,
+        name: &str,
+        line: usize,
+    ) -> anyhow::Result<Vec<Point2<f64>>> {
+        let time_increment = time_increment(&self.params, scan, index, name, line)?;
+        let time = scan.timestamp.map(|t| t.seconds());
+        let odometry = scan.odometry.map(|p| p.to_pose2());
+        self.total += 1;
+        let (mut points, times) = timed_scan_points(scan, ranges, time_increment);
+        if let Some(motion) = self.tracker.next(odometry, time, self.params.max_gap) {
+            deskew(&mut points, &times, &motion);
+            self.deskewed += 1;
+        }
+        Ok(points)
+    }
+
+    /// How many scans were deskewed, and why the others were not.
+    pub fn summary(&self) -> String {
+        let left = self.total - self.deskewed;
+        format!(
+            "levelscan match: deskewed {} of {} scans; {left} as recorded (the first scan, and \
+             any without odometry and a timestamp, or more than {} s after the previous one)",
+            self.deskewed, self.total, self.params.max_gap
+        )
+    }
 }
 
 /// Fills in `estimate` and the contract's `match` object.

@@ -14,7 +14,9 @@
 use super::drift::{DRIFT_LENGTHS, Drift, segment_drift};
 use super::metrics::{Rpe, rpe};
 use crate::geometry::{Pose, Pose2};
-use crate::matching::{MatchReport, MatchStatus, Matcher, MatcherParams};
+use crate::matching::{
+    DeskewParams, MatchReport, MatchStatus, Matcher, MatcherParams, SweepTracker, deskew,
+};
 use crate::simulate::{OdometryParams, odometry};
 use nalgebra::Point2;
 use serde::Serialize;
@@ -28,6 +30,37 @@ pub struct RealLog {
     pub reference: Vec<Pose2>,
     /// Each scan's time \[s\] (the log's timestamp, else its index), for the trajectories.
     pub times: Vec<f64>,
+    /// What deskewing needs, when the run is deskewed.
+    pub sweep: Option<RealSweep>,
+}
+
+/// Deskewing a log (`match --deskew`) with the odometry the experiment makes: each scan's
+/// velocity from its perturbed odometry and the previous scan's.
+pub struct RealSweep {
+    pub params: DeskewParams,
+    /// Each point's time after its scan's stamp \[s\], as `points`.
+    pub ray_times: Vec<Vec<f64>>,
+    /// Each scan's timestamp \[s\], if it has one.
+    pub stamps: Vec<Option<f64>>,
+}
+
+impl RealSweep {
+    /// The log's points deskewed with `odometry`'s velocities.
+    fn deskewed(&self, points: &[Vec<Point2<f64>>], odometry: &[Pose2]) -> Vec<Vec<Point2<f64>>> {
+        let mut tracker = SweepTracker::new();
+        points
+            .iter()
+            .zip(&self.ray_times)
+            .zip(odometry.iter().zip(&self.stamps))
+            .map(|((points, times), (odometry, stamp))| {
+                let mut points = points.clone();
+                if let Some(motion) = tracker.next(Some(*odometry), *stamp, self.params.max_gap) {
+                    deskew(&mut points, times, &motion);
+                }
+                points
+            })
+            .collect()
+    }
 }
 
 /// What the experiment found on one log.
@@ -78,9 +111,11 @@ pub fn evaluate_real(
         .iter()
         .map(|p| p.to_pose2())
         .collect();
-    let reports = match_all(log.points.iter().zip(&odo), params);
+    let deskewed = log.sweep.as_ref().map(|s| s.deskewed(&log.points, &odo));
+    let points = deskewed.as_ref().unwrap_or(&log.points);
+    let reports = match_all(points.iter().zip(&odo), params);
     let estimate: Vec<Pose2> = reports.iter().map(|r| r.estimate).collect();
-    let every_second = log.points.iter().zip(&odo).step_by(2);
+    let every_second = points.iter().zip(&odo).step_by(2);
     let direct: Vec<Pose2> = match_all(every_second, params)
         .iter()
         .map(|r| r.estimate)
@@ -159,6 +194,7 @@ mod tests {
             name: "box".into(),
             points,
             reference,
+            sweep: None,
             times,
         };
         let r = evaluate_real(

@@ -8,6 +8,8 @@
 //! - [`correlative`]: the coarse correlative search (Olson 2009) that widens the basin.
 //! - [`map`]: the bounded voxel map for metascan matching.
 //! - [`covariance`]: the match's covariance (sandwich estimator, Censi 2007).
+//! - [`deskew`](mod@deskew): each ray moved to where the scanner was at the scan's stamp (the
+//!   robot's motion during the sweep).
 //! - `degeneracy`: where the odometry anchors a degeneracy-aware solve (solution remapping,
 //!   Zhang, Kaess and Singh 2016, in [`solve`]) and whether a match slid where the scan lets it.
 //! - [`params`]: the matcher's settings.
@@ -20,6 +22,7 @@
 pub mod correlative;
 pub mod covariance;
 pub(crate) mod degeneracy;
+pub mod deskew;
 pub(crate) mod grid;
 pub mod icp;
 pub mod map;
@@ -33,10 +36,12 @@ pub use correlative::{
     CorrelativeParams, CorrelativeScratch, correlative_search, correlative_search_with,
 };
 pub use covariance::rays_per_degree;
+pub use deskew::{DeskewParams, SweepMotion, SweepTracker, deskew};
 pub use icp::{IcpParams, IcpResult, Kernel, Metric, PosePrior, icp, icp_with_prior};
 pub use map::{MapParams, VoxelMap};
 pub use matcher::{
     FallbackReason, MatchReport, MatchStatus, Matcher, match_run, odometry_step, scan_points,
+    timed_scan_points,
 };
 pub use params::{
     CheckParams, Coarse, CovarianceParams, MatcherParams, Mode, OdometryPrior, RangeParams,

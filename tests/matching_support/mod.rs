@@ -113,3 +113,60 @@ pub fn noisy_odometry(truth: &[Pose2], sigma_xy: f64, sigma_theta: f64, seed: u6
     let _ = rng.random::<f64>();
     odo
 }
+
+/// The ranges of a scan of `nrays` over 180 degrees (bearings as [`scan_at`]'s) taken while
+/// the scanner moves: ray `i` is cast `i * sweep / (nrays - 1)` seconds after the stamp, from
+/// `start` moved on by `motion` for that long. Noise-free.
+pub fn swept_ranges(
+    start: &Pose2,
+    motion: &levelscan::matching::SweepMotion,
+    sweep: f64,
+    walls: &[Segment],
+    nrays: usize,
+) -> Vec<Option<f64>> {
+    (0..nrays)
+        .map(|i| {
+            let t = sweep * i as f64 / (nrays - 1) as f64;
+            let pose = start.compose(&motion.pose_after(t));
+            let (s, c) = (pose.theta + bearing(i, nrays)).sin_cos();
+            cast(Point2::new(pose.x, pose.y), c, s, walls, 30.0)
+        })
+        .collect()
+}
+
+/// The bearing of ray `i` of `nrays` over 180 degrees, from -90 \[rad\].
+pub fn bearing(i: usize, nrays: usize) -> f64 {
+    -std::f64::consts::FRAC_PI_2 + std::f64::consts::PI * i as f64 / (nrays - 1) as f64
+}
+
+/// A steady turn round the office's pillar, 1.3 m from its centre, in `lap` scans `period`
+/// seconds apart, each swept over `sweep` seconds while the robot moves on towards the next
+/// pose ([`swept_ranges`], `nrays` rays): the true poses and each scan's ranges.
+pub fn steady_turn(
+    lap: usize,
+    period: f64,
+    sweep: f64,
+    nrays: usize,
+) -> (Vec<Pose2>, Vec<Vec<Option<f64>>>) {
+    let truth: Vec<Pose2> = (0..lap)
+        .map(|k| {
+            let a = std::f64::consts::TAU * k as f64 / lap as f64;
+            let (s, c) = a.sin_cos();
+            Pose2::new(
+                3.0 + 1.3 * c,
+                2.0 + 1.3 * s,
+                a + std::f64::consts::FRAC_PI_2,
+            )
+        })
+        .collect();
+    let walls = office();
+    let ranges = (0..lap)
+        .map(|k| {
+            let next = truth[(k + 1) % lap];
+            let motion =
+                levelscan::matching::SweepMotion::between(&truth[k], &next, period).unwrap();
+            swept_ranges(&truth[k], &motion, sweep, &walls, nrays)
+        })
+        .collect();
+    (truth, ranges)
+}

@@ -24,16 +24,34 @@ use std::cell::RefCell;
 
 /// A scan's usable rays as robot-frame 2D points, in ray order.
 pub fn scan_points(scan: &Scan, ranges: &RangeParams) -> Vec<Point2<f64>> {
-    (0..scan.nrays())
-        .filter_map(|i| {
-            let r = scan.range(i)?;
-            if r < ranges.min_range || r >= ranges.max_range || !scan.theta[i].is_finite() {
-                return None;
-            }
-            let (s, c) = scan.theta[i].sin_cos();
-            Some(Point2::new(r * c, r * s))
-        })
-        .collect()
+    usable_rays(scan, ranges).map(|(_, p)| p).collect()
+}
+
+/// [`scan_points`] with each point's time after the scan's stamp \[s\]: ray `i` is cast
+/// `i × time_increment` after it (a ROS `LaserScan`'s timing), for [`deskew`](super::deskew).
+pub fn timed_scan_points(
+    scan: &Scan,
+    ranges: &RangeParams,
+    time_increment: f64,
+) -> (Vec<Point2<f64>>, Vec<f64>) {
+    usable_rays(scan, ranges)
+        .map(|(i, p)| (p, i as f64 * time_increment))
+        .unzip()
+}
+
+/// The index and robot-frame point of each ray with a reading within `ranges`.
+fn usable_rays<'a>(
+    scan: &'a Scan,
+    ranges: &'a RangeParams,
+) -> impl Iterator<Item = (usize, Point2<f64>)> + 'a {
+    (0..scan.nrays()).filter_map(|i| {
+        let r = scan.range(i)?;
+        if r < ranges.min_range || r >= ranges.max_range || !scan.theta[i].is_finite() {
+            return None;
+        }
+        let (s, c) = scan.theta[i].sin_cos();
+        Some((i, Point2::new(r * c, r * s)))
+    })
 }
 
 /// The odometry step from one scan to the next (`prev⁻¹ ⊕ cur`), identity when either is
