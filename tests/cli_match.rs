@@ -706,18 +706,23 @@ fn deskew_without_the_rays_timing_or_with_a_bad_one_is_refused_by_name() {
         err.contains(&at) && err.contains("time_increment") && err.contains("--time-increment"),
         "{err}"
     );
-    for bad in ["0.5", "NaN", "-inf"] {
+    for (flag, bad) in [
+        ("--time-increment", "0.5"),
+        ("--time-increment", "NaN"),
+        ("--time-increment", "-inf"),
+        ("--interlace", "0"),
+        ("--interlace", "17"),
+        ("--sweep-period", "0"),
+        ("--sweep-period", "NaN"),
+    ] {
         let out = bin()
             .arg("match")
             .arg(&file.0)
-            .arg(format!("--time-increment={bad}"))
+            .arg(format!("{flag}={bad}"))
             .output()
             .unwrap();
-        assert!(!out.status.success(), "{bad} was taken");
+        assert!(!out.status.success(), "{flag} {bad} was taken");
         let err = String::from_utf8_lossy(&out.stderr);
-        assert!(
-            err.contains("--time-increment") && !err.contains("panicked"),
-            "{err}"
-        );
+        assert!(err.contains(flag) && !err.contains("panicked"), "{err}");
     }
 }

@@ -1,7 +1,7 @@
 //! `levelscan eval matching` (paper Figs. 8-10, 12) and `levelscan eval real` (real CARMEN logs
 //! with perturbed odometry).
 
-use super::matching::{MatchOptions, time_increment};
+use super::matching::{MatchOptions, ray_timing};
 use super::scan_input::open_scans;
 use super::{open_output, write_file};
 use anyhow::Context;
@@ -241,8 +241,8 @@ fn load_real_log(
         })?;
         match &mut log.sweep {
             Some(real) => {
-                let dt = time_increment(&real.params, &scan, log.points.len(), &name, line)?;
-                let (points, times) = timed_scan_points(&scan, ranges, dt);
+                let timing = ray_timing(&real.params, &scan, log.points.len(), &name, line)?;
+                let (points, times) = timed_scan_points(&scan, ranges, &timing);
                 log.points.push(points);
                 real.ray_times.push(times);
                 real.stamps.push(scan.timestamp.map(|t| t.seconds()));

@@ -13,7 +13,7 @@ use levelscan::geometry::Pose;
 use levelscan::matching::{
     CheckParams, Coarse, CorrelativeParams, CovarianceParams, DeskewParams, IcpParams, Kernel,
     MapParams, MatchReport, MatchStatus, Matcher, MatcherParams, Metric, Mode, NormalParams,
-    OdometryPrior, RangeParams, SweepTracker, deskew, scan_points, timed_scan_points,
+    OdometryPrior, RangeParams, RayTiming, SweepTracker, deskew, scan_points, timed_scan_points,
 };
 use levelscan::scan::Scan;
 use nalgebra::Point2;
@@ -158,16 +158,24 @@ pub struct MatchOptions {
     /// at its range, 0 to 10 (0 takes the residuals alone).
     #[arg(long, default_value_t = CovarianceParams::default().sampling_fraction)]
     pub cov_sampling: f64,
-    /// Deskew: move each ray to where the scanner was at the scan's stamp, from the odometry's
-    /// velocity between the previous scan and this one (at most 0.5 s before) and each ray's
-    /// time (the scans' `time_increment`, as ROS bags give it, or --time-increment). For a
-    /// robot that turns while it scans.
+    /// Deskew: move each ray to where the scanner was at the mean time of the scan's rays, from
+    /// the odometry's velocity between the previous scan and this one (at most 0.5 s before)
+    /// and each ray's time (the scans' `time_increment`, as ROS bags give it, or
+    /// --time-increment). For a robot that turns while it scans.
     #[arg(long)]
     pub deskew: bool,
     /// Deskew with this time between consecutive rays (s) instead of the scans' own; implies
     /// --deskew. Negative when the rays are listed in the reverse of the order they were cast.
     #[arg(long, allow_hyphen_values = true)]
     pub time_increment: Option<f64>,
+    /// Deskew a scan made of this many interleaved sweeps, ray i from sweep i mod K (a SICK
+    /// LMS 2xx at 0.5 degrees: 2, at 0.25: 4); --time-increment is then per ray of the whole
+    /// scan. Implies --deskew.
+    #[arg(long, default_value_t = DeskewParams::default().interlace)]
+    pub interlace: usize,
+    /// Time from one interleaved sweep to the next (s): the scanner's mirror period.
+    #[arg(long, default_value_t = DeskewParams::default().sweep_period)]
+    pub sweep_period: f64,
 }
 
 impl MatchOptions {
@@ -258,6 +266,15 @@ impl MatchOptions {
         if self.max_iterations == 0 {
             anyhow::bail!("--max-iterations must be at least 1");
         }
+        if !(1..=16).contains(&self.interlace) {
+            anyhow::bail!("--interlace must be 1 to 16 sweeps, got {}", self.interlace);
+        }
+        if !(self.sweep_period > 0.0 && self.sweep_period <= 1.0) {
+            anyhow::bail!(
+                "--sweep-period must be above 0 and at most 1 s, got {:?}",
+                self.sweep_period
+            );
+        }
         // A hundredth of a second between rays is already a sweep of seconds.
         if let Some(dt) = self.time_increment
             && !(dt.is_finite() && dt.abs() <= 0.01)
@@ -271,8 +288,10 @@ impl MatchOptions {
 
     /// Deskewing's settings, when --deskew or --time-increment asks for it.
     pub fn deskew(&self) -> Option<DeskewParams> {
-        (self.deskew || self.time_increment.is_some()).then(|| DeskewParams {
+        (self.deskew || self.time_increment.is_some() || self.interlace > 1).then(|| DeskewParams {
             time_increment: self.time_increment,
+            interlace: self.interlace,
+            sweep_period: self.sweep_period,
             ..DeskewParams::default()
         })
     }
@@ -447,30 +466,35 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// The time between scan `index`'s rays (at `line` of `name`) for deskewing: --time-increment,
-/// else the scan's own (a ROS LaserScan's); an error naming the scan when neither gives one.
-pub fn time_increment(
+/// When scan `index`'s rays (at `line` of `name`) were cast, for deskewing: the time between
+/// rays from --time-increment, else the scan's own (a ROS LaserScan's), and the interleaving;
+/// an error naming the scan when neither gives the time.
+pub fn ray_timing(
     params: &DeskewParams,
     scan: &Scan,
     index: usize,
     name: &str,
     line: usize,
-) -> anyhow::Result<f64> {
-    if let Some(dt) = params.time_increment {
-        return Ok(dt);
+) -> anyhow::Result<RayTiming> {
+    let time_increment = match params.time_increment {
+        Some(dt) => dt,
+        None => f64::from(ScanMeta::of(scan, index).time_increment),
+    };
+    if time_increment == 0.0 || !time_increment.is_finite() {
+        anyhow::bail!(
+            "{name}:{line}: --deskew needs the time between rays, and this scan has no \
+             time_increment (a ROS LaserScan's): give it with --time-increment SECONDS"
+        );
     }
-    let own = f64::from(ScanMeta::of(scan, index).time_increment);
-    if own != 0.0 && own.is_finite() {
-        return Ok(own);
-    }
-    anyhow::bail!(
-        "{name}:{line}: --deskew needs the time between rays, and this scan has no \
-         time_increment (a ROS LaserScan's): give it with --time-increment SECONDS"
-    )
+    Ok(RayTiming {
+        time_increment,
+        interlace: params.interlace,
+        sweep_period: params.sweep_period,
+    })
 }
 
 /// Deskewing a run as it streams (`--deskew`): each scan's points, moved to the scanner's frame
-/// at its stamp where the odometry gives a velocity.
+/// at the mean time of its rays where the odometry gives a velocity.
 pub struct Sweep {
     params: DeskewParams,
     tracker: SweepTracker,
@@ -498,11 +522,11 @@ impl Sweep {
         name: &str,
         line: usize,
     ) -> anyhow::Result<Vec<Point2<f64>>> {
-        let time_increment = time_increment(&self.params, scan, index, name, line)?;
+        let timing = ray_timing(&self.params, scan, index, name, line)?;
         let time = scan.timestamp.map(|t| t.seconds());
         let odometry = scan.odometry.map(|p| p.to_pose2());
         self.total += 1;
-        let (mut points, times) = timed_scan_points(scan, ranges, time_increment);
+        let (mut points, times) = timed_scan_points(scan, ranges, &timing);
         if let Some(motion) = self.tracker.next(odometry, time, self.params.max_gap) {
             deskew(&mut points, &times, &motion);
             self.deskewed += 1;

@@ -7,11 +7,15 @@
 //! (`docs/RESULTS.md`, the pairwise heading bias on Freiburg 079). Pairwise matching adds that
 //! error at every step.
 //!
-//! Each ray's point is moved into the scanner's frame at the scan's stamp, with the scanner's
-//! velocity taken constant over the sweep (a body twist; the pose after `t` seconds is its
-//! SE(2) exponential, exact for a constant twist). The velocity is the odometry's between the
-//! previous scan and this one. Ray `i` is cast `i × time_increment` after the stamp, as a ROS
-//! `sensor_msgs/LaserScan` defines it.
+//! Each ray's point is moved into the scanner's frame at the mean time of the scan's rays (the
+//! instant a scan matched as one rigid body stands for, so that deskewing removes the warp and
+//! leaves the pose's meaning), with the scanner's velocity taken constant over the sweep (a
+//! body twist; the pose after `t` seconds is its SE(2) exponential, exact for a constant
+//! twist). The velocity is the odometry's between the previous scan and this one. Ray `i` is
+//! cast `i × time_increment` after the stamp, as a ROS `sensor_msgs/LaserScan` defines it, or,
+//! for a scanner that builds a fine scan from several interleaved sweeps (a SICK LMS 2xx at half
+//! a degree takes its even rays on one turn of its mirror and its odd rays on the next), as
+//! [`RayTiming`] says.
 
 use crate::geometry::Pose2;
 use nalgebra::Point2;
@@ -23,6 +27,11 @@ pub struct DeskewParams {
     /// `time_increment`); negative when the rays are listed in the reverse of the order they
     /// were cast. `None`: each scan's own.
     pub time_increment: Option<f64>,
+    /// Interleaved sweeps per scan [-]. Default 1.
+    pub interlace: usize,
+    /// Time from one interleaved sweep to the next \[s\] (the scanner's mirror period). Default
+    /// 1/75 s, a SICK LMS 2xx's.
+    pub sweep_period: f64,
     /// Longest gap between two scans whose odometry gives the velocity \[s\]. Default 0.5: the
     /// mean velocity over a longer gap misses an indoor robot's starts, stops and turns, and a
     /// wrong velocity warps a scan that was right; such a scan is matched as recorded.
@@ -33,8 +42,52 @@ impl Default for DeskewParams {
     fn default() -> Self {
         Self {
             time_increment: None,
+            interlace: 1,
+            sweep_period: 1.0 / 75.0,
             max_gap: 0.5,
         }
+    }
+}
+
+/// When each ray of a scan is cast, after the scan's stamp.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RayTiming {
+    /// Time between two rays of one sweep, per ray of the whole scan \[s\]: a sweep of `k`
+    /// interleaved ones steps `k` rays in `k × time_increment` (with one sweep, a ROS
+    /// LaserScan's `time_increment`).
+    pub time_increment: f64,
+    /// Interleaved sweeps [-]: ray `i` belongs to sweep `i mod interlace`.
+    pub interlace: usize,
+    /// Time from one sweep to the next \[s\].
+    pub sweep_period: f64,
+}
+
+impl RayTiming {
+    /// One sweep, `time_increment` between rays.
+    pub fn linear(time_increment: f64) -> Self {
+        Self {
+            time_increment,
+            interlace: 1,
+            sweep_period: 0.0,
+        }
+    }
+
+    /// The time ray `i` is cast after the stamp \[s\]: its sweep's start, then its place in
+    /// the sweep.
+    pub fn of_ray(&self, i: usize) -> f64 {
+        let k = self.interlace.max(1);
+        let (sweep, place) = (i % k, i / k);
+        sweep as f64 * self.sweep_period + (place * k) as f64 * self.time_increment
+    }
+
+    /// The mean time of a scan's `nrays` rays after its stamp \[s\]: the instant a scan
+    /// matched as one rigid body stands for (to first order), and the one deskewing moves its
+    /// rays to, so that a deskewed scan's pose means what an undeskewed one's did.
+    pub fn mean(&self, nrays: usize) -> f64 {
+        if nrays == 0 {
+            return 0.0;
+        }
+        (0..nrays).map(|i| self.of_ray(i)).sum::<f64>() / nrays as f64
     }
 }
 
@@ -84,7 +137,8 @@ impl SweepMotion {
             .then_some(motion)
     }
 
-    /// The scanner's pose `t` seconds after the stamp, in its frame at the stamp.
+    /// The scanner's pose `t` seconds after an instant (before it, for negative `t`), in its
+    /// frame at that instant.
     pub fn pose_after(&self, t: f64) -> Pose2 {
         let a = self.yaw_rate * t;
         let (s, c) = exp_coefficients(a);
@@ -94,7 +148,7 @@ impl SweepMotion {
 }
 
 /// Moves each point from the scanner's frame when its ray was cast, `times[i]` seconds after
-/// the stamp, into the scanner's frame at the stamp.
+/// some instant (negative: before it), into the scanner's frame at that instant.
 pub fn deskew(points: &mut [Point2<f64>], times: &[f64], motion: &SweepMotion) {
     for (p, &t) in points.iter_mut().zip(times) {
         *p = motion.pose_after(t).transform_point(p);
@@ -155,12 +209,17 @@ mod tests {
         Point2::new(pose.x + t * dx, pose.y + t * dy)
     }
 
-    /// A scan of 181 rays over 180 degrees, ray i cast `i * dt` after the stamp from the pose
-    /// the motion has reached by then (from `start`): points in each ray's own scanner frame.
-    fn swept_scan(start: &Pose2, motion: &SweepMotion, dt: f64) -> (Vec<Point2<f64>>, Vec<f64>) {
+    /// A scan of 181 rays over 180 degrees, ray i cast `timing.of_ray(i)` after the stamp
+    /// from the pose the motion has reached by then (from `start`): points in each ray's own
+    /// scanner frame, and their times.
+    fn swept_scan(
+        start: &Pose2,
+        motion: &SweepMotion,
+        timing: &RayTiming,
+    ) -> (Vec<Point2<f64>>, Vec<f64>) {
         (0..181)
             .map(|i| {
-                let t = i as f64 * dt;
+                let t = timing.of_ray(i);
                 let pose = start.compose(&motion.pose_after(t));
                 let bearing = -PI / 2.0 + i as f64 * PI / 180.0;
                 (pose.inverse().transform_point(&hit(&pose, bearing)), t)
@@ -172,6 +231,14 @@ mod tests {
         (p.x.abs() - 4.0).abs().min((p.y.abs() - 4.0).abs())
     }
 
+    /// The farthest of `points` (in the scanner's frame at `start`) from the room's walls.
+    fn worst(start: &Pose2, points: &[Point2<f64>]) -> f64 {
+        points
+            .iter()
+            .map(|p| on_a_wall(&start.transform_point(p)))
+            .fold(0.0, f64::max)
+    }
+
     #[test]
     fn a_swept_scan_deskewed_lies_on_the_walls_it_hit() {
         let start = Pose2::new(0.3, -0.7, 0.4);
@@ -181,17 +248,53 @@ mod tests {
             vy: 0.1,
             yaw_rate: PI / 2.0,
         };
-        let (mut points, times) = swept_scan(&start, &motion, 0.1 / 180.0);
-        let worst = |pts: &[Point2<f64>]| {
-            pts.iter()
-                .map(|p| on_a_wall(&start.transform_point(p)))
-                .fold(0.0, f64::max)
-        };
+        let (mut points, times) = swept_scan(&start, &motion, &RayTiming::linear(0.1 / 180.0));
         // Read as if taken at the stamp, the scan misses the walls by centimetres...
-        assert!(worst(&points) > 0.05, "{}", worst(&points));
+        assert!(worst(&start, &points) > 0.05, "{}", worst(&start, &points));
         deskew(&mut points, &times, &motion);
         // ...and deskewed it lies on them, to rounding.
-        assert!(worst(&points) < 1e-9, "{}", worst(&points));
+        assert!(worst(&start, &points) < 1e-9, "{}", worst(&start, &points));
+    }
+
+    #[test]
+    fn interleaved_sweeps_deskew_with_their_own_timing_only() {
+        let start = Pose2::new(-0.5, 0.2, -1.0);
+        let motion = SweepMotion {
+            vx: 0.5,
+            vy: 0.0,
+            yaw_rate: 0.6,
+        };
+        // A SICK LMS 2xx at half a degree: even rays on one mirror turn, odd on the next.
+        let two = RayTiming {
+            time_increment: 1.0 / 75.0 / 2.0 / 180.0,
+            interlace: 2,
+            sweep_period: 1.0 / 75.0,
+        };
+        let (points, times) = swept_scan(&start, &motion, &two);
+        let mut right = points.clone();
+        deskew(&mut right, &times, &motion);
+        assert!(worst(&start, &right) < 1e-9, "{}", worst(&start, &right));
+        // Timed as one sweep, the odd rays stay a mirror turn off.
+        let linear: Vec<f64> = (0..181)
+            .map(|i| RayTiming::linear(two.time_increment).of_ray(i))
+            .collect();
+        let mut wrong = points;
+        deskew(&mut wrong, &linear, &motion);
+        assert!(worst(&start, &wrong) > 1e-3, "{}", worst(&start, &wrong));
+    }
+
+    #[test]
+    fn the_mean_ray_time_is_the_middle_of_the_sweeps() {
+        let linear = RayTiming::linear(0.001);
+        assert!((linear.mean(5) - 0.002).abs() < 1e-15);
+        assert_eq!(linear.mean(0), 0.0);
+        // Two sweeps of 3 rays, 10 ms apart: 0, 2, 4 ms and 10, 12, 14 ms.
+        let two = RayTiming {
+            time_increment: 0.001,
+            interlace: 2,
+            sweep_period: 0.01,
+        };
+        assert!((two.mean(6) - 0.007).abs() < 1e-15, "{}", two.mean(6));
     }
 
     #[test]
@@ -229,6 +332,24 @@ mod tests {
         };
         deskew(&mut points, &[0.0, 0.0], &moving);
         assert_eq!(points, before);
+    }
+
+    #[test]
+    fn interleaved_sweeps_time_each_ray_by_its_sweep_and_place() {
+        let linear = RayTiming::linear(0.001);
+        assert_eq!((linear.of_ray(0), linear.of_ray(3)), (0.0, 0.003));
+        // Two sweeps 10 ms apart, each stepping its rays 2 ms: even rays 0, 2, 4 ms...;
+        // odd rays 10, 12, 14 ms...
+        let two = RayTiming {
+            time_increment: 0.001,
+            interlace: 2,
+            sweep_period: 0.01,
+        };
+        let times: Vec<f64> = (0..6).map(|i| two.of_ray(i)).collect();
+        let want = [0.0, 0.01, 0.002, 0.012, 0.004, 0.014];
+        for (t, w) in times.iter().zip(want) {
+            assert!((t - w).abs() < 1e-15, "{times:?}");
+        }
     }
 
     #[test]

@@ -10,6 +10,7 @@ mod trigger;
 
 use super::correlative::CorrelativeScratch;
 use super::covariance::{fuse, inflation, rays_per_degree, rotate_into};
+use super::deskew::RayTiming;
 use super::icp::{IcpResult, icp};
 use super::map::VoxelMap;
 pub use super::params::{
@@ -27,15 +28,16 @@ pub fn scan_points(scan: &Scan, ranges: &RangeParams) -> Vec<Point2<f64>> {
     usable_rays(scan, ranges).map(|(_, p)| p).collect()
 }
 
-/// [`scan_points`] with each point's time after the scan's stamp \[s\]: ray `i` is cast
-/// `i × time_increment` after it (a ROS `LaserScan`'s timing), for [`deskew`](super::deskew).
+/// [`scan_points`] with each point's time after the mean time of the scan's rays \[s\]
+/// ([`RayTiming::mean`]), for [`deskew`](super::deskew).
 pub fn timed_scan_points(
     scan: &Scan,
     ranges: &RangeParams,
-    time_increment: f64,
+    timing: &RayTiming,
 ) -> (Vec<Point2<f64>>, Vec<f64>) {
+    let mean = timing.mean(scan.nrays());
     usable_rays(scan, ranges)
-        .map(|(i, p)| (p, i as f64 * time_increment))
+        .map(|(i, p)| (p, timing.of_ray(i) - mean))
         .unzip()
 }
 
