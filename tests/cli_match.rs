@@ -687,6 +687,8 @@ fn deskew_takes_the_turn_during_each_sweep_out_of_the_matched_heading() {
         .output()
         .unwrap();
     assert_ran(&out);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("deskewed 119 of 120 scans"), "{err}");
 }
 
 #[test]

@@ -289,6 +289,13 @@ pub fn run_real(args: RealArgs) -> anyhow::Result<()> {
                 .find(|d| d.length == 10.0)
                 .map_or("-".into(), |d| format!("{:.2}%", d.translation_percent))
         );
+        if let Some(n) = result.deskewed {
+            eprintln!(
+                "{}: deskewed {n} of {} scans; the others had no odometry and timestamp within \
+                 0.5 s before",
+                result.name, result.scans
+            );
+        }
         if let Some(dir) = &args.out {
             write_trajectories(dir, &log, &result)?;
         }

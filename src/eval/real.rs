@@ -45,10 +45,15 @@ pub struct RealSweep {
 }
 
 impl RealSweep {
-    /// The log's points deskewed with `odometry`'s velocities.
-    fn deskewed(&self, points: &[Vec<Point2<f64>>], odometry: &[Pose2]) -> Vec<Vec<Point2<f64>>> {
+    /// The log's points deskewed with `odometry`'s velocities, and how many scans had one.
+    fn deskewed(
+        &self,
+        points: &[Vec<Point2<f64>>],
+        odometry: &[Pose2],
+    ) -> (Vec<Vec<Point2<f64>>>, usize) {
         let mut tracker = SweepTracker::new();
-        points
+        let mut count = 0;
+        let points = points
             .iter()
             .zip(&self.ray_times)
             .zip(odometry.iter().zip(&self.stamps))
@@ -56,10 +61,12 @@ impl RealSweep {
                 let mut points = points.clone();
                 if let Some(motion) = tracker.next(Some(*odometry), *stamp, self.params.max_gap) {
                     deskew(&mut points, times, &motion);
+                    count += 1;
                 }
                 points
             })
-            .collect()
+            .collect();
+        (points, count)
     }
 }
 
@@ -85,6 +92,8 @@ pub struct RealResult {
     pub fallbacks: usize,
     /// Scans where the coarse search ran.
     pub coarse: usize,
+    /// Scans deskewed (`match --deskew`), when the run was; the others had no velocity.
+    pub deskewed: Option<usize>,
     /// The matched trajectory, one pose per scan (written as a TUM file beside the tables, for
     /// `evo`; not in the JSON).
     #[serde(skip)]
@@ -112,7 +121,7 @@ pub fn evaluate_real(
         .map(|p| p.to_pose2())
         .collect();
     let deskewed = log.sweep.as_ref().map(|s| s.deskewed(&log.points, &odo));
-    let points = deskewed.as_ref().unwrap_or(&log.points);
+    let points = deskewed.as_ref().map_or(&log.points, |d| &d.0);
     let reports = match_all(points.iter().zip(&odo), params);
     let estimate: Vec<Pose2> = reports.iter().map(|r| r.estimate).collect();
     let every_second = points.iter().zip(&odo).step_by(2);
@@ -134,6 +143,7 @@ pub fn evaluate_real(
             .filter(|r| matches!(r.status, MatchStatus::Fallback(_)))
             .count(),
         coarse: reports.iter().filter(|r| r.coarse).count(),
+        deskewed: deskewed.as_ref().map(|d| d.1),
         matched_poses: estimate,
         odometry_poses: odo,
     })
