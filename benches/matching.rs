@@ -6,6 +6,8 @@
 //! - `coarse_search`: the coarse correlative search of a scan against the previous one from a
 //!   guess 20 cm and 5 degrees off, in buffers kept between calls (as the matcher keeps them).
 //! - `run_40_pairwise` / `run_40_metascan`: a whole 40-scan run through the `Matcher`.
+//! - `deskew_scan`: moving one scan's points to the mean time of its rays (`match --deskew`),
+//!   against `pairwise_step` the share deskewing adds to a scan's matching.
 //!
 //! The per-scan benchmarks take the scanner's ray count as their argument (181 or 361 rays
 //! over the same half turn).
@@ -19,7 +21,8 @@ use levelscan::formats::read_plan;
 use levelscan::geometry::{Pose, Pose2};
 use levelscan::matching::{
     CorrelativeParams, CorrelativeScratch, IcpParams, Matcher, MatcherParams, Mode, NormalParams,
-    RangeParams, ScanReference, correlative_search_with, icp, odometry_step, scan_points,
+    RangeParams, ScanReference, SweepMotion, correlative_search_with, deskew, icp, odometry_step,
+    scan_points,
 };
 use levelscan::simulate::{OdometryParams, ScannerParams, World, odometry, simulate_poses};
 use nalgebra::Point2;
@@ -136,6 +139,26 @@ fn coarse_search(bencher: divan::Bencher, rays: usize) {
             guess,
             &params,
         )
+    });
+}
+
+#[divan::bench(args = [181, 361])]
+fn deskew_scan(bencher: divan::Bencher, rays: usize) {
+    let run = short(rays);
+    let points = &run[11].0;
+    // A 25 ms sweep, centred on the mean time, at 0.5 m/s and 30 degrees a second.
+    let times: Vec<f64> = (0..points.len())
+        .map(|i| 0.025 * (i as f64 / (points.len() - 1) as f64 - 0.5))
+        .collect();
+    let motion = SweepMotion {
+        vx: 0.5,
+        vy: 0.0,
+        yaw_rate: 30f64.to_radians(),
+    };
+    bencher.bench(|| {
+        let mut p = points.clone();
+        deskew(divan::black_box(&mut p), &times, &motion);
+        p
     });
 }
 
