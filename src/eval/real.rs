@@ -38,7 +38,7 @@ pub struct RealLog {
 /// velocity from its perturbed odometry and the previous scan's.
 pub struct RealSweep {
     pub params: DeskewParams,
-    /// Each point's time after its scan's stamp \[s\], as `points`.
+    /// Each point's time after the mean time of its scan's rays \[s\], as `points`.
     pub ray_times: Vec<Vec<f64>>,
     /// Each scan's timestamp \[s\], if it has one.
     pub stamps: Vec<Option<f64>>,
