@@ -5,7 +5,7 @@
 mod matching_support;
 
 use levelscan::geometry::Pose2;
-use levelscan::matching::{MatcherParams, Mode, SweepTracker, deskew, match_run};
+use levelscan::matching::{DeskewParams, MatcherParams, Mode, SweepTracker, deskew, match_run};
 use matching_support::*;
 use nalgebra::Point2;
 
@@ -73,13 +73,14 @@ fn drift_recorded_and_deskewed(
         .map(|((points, _), o)| (points.clone(), Some(*o)))
         .collect();
     let mut tracker = SweepTracker::new();
+    let deskewing = DeskewParams::default();
     let deskewed: Vec<_> = scans
         .iter()
         .zip(odometry)
         .enumerate()
         .map(|(k, ((points, times), o))| {
             let mut points = points.clone();
-            if let Some(motion) = tracker.next(Some(*o), Some(k as f64 * PERIOD), 0.5) {
+            if let Some(motion) = tracker.next(Some(*o), Some(k as f64 * PERIOD), &deskewing) {
                 deskew(&mut points, times, &motion);
             }
             (points, Some(*o))

@@ -291,8 +291,8 @@ pub fn run_real(args: RealArgs) -> anyhow::Result<()> {
         );
         if let Some(n) = result.deskewed {
             eprintln!(
-                "{}: deskewed {n} of {} scans; the others had no odometry and timestamp within \
-                 0.5 s before",
+                "{}: deskewed {n} of {} scans; the others had no plausible velocity (odometry \
+                 and a timestamp within 0.5 s before)",
                 result.name, result.scans
             );
         }

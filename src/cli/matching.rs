@@ -527,7 +527,7 @@ impl Sweep {
         let odometry = scan.odometry.map(|p| p.to_pose2());
         self.total += 1;
         let (mut points, times) = timed_scan_points(scan, ranges, &timing);
-        if let Some(motion) = self.tracker.next(odometry, time, self.params.max_gap) {
+        if let Some(motion) = self.tracker.next(odometry, time, &self.params) {
             deskew(&mut points, &times, &motion);
             self.deskewed += 1;
         }
@@ -539,7 +539,8 @@ impl Sweep {
         let left = self.total - self.deskewed;
         format!(
             "levelscan match: deskewed {} of {} scans; {left} as recorded (the first scan, and \
-             any without odometry and a timestamp, or more than {} s after the previous one)",
+             any without odometry and a timestamp, more than {} s after the previous one, or \
+             moving implausibly fast)",
             self.deskewed, self.total, self.params.max_gap
         )
     }

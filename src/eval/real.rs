@@ -59,7 +59,7 @@ impl RealSweep {
             .zip(odometry.iter().zip(&self.stamps))
             .map(|((points, times), (odometry, stamp))| {
                 let mut points = points.clone();
-                if let Some(motion) = tracker.next(Some(*odometry), *stamp, self.params.max_gap) {
+                if let Some(motion) = tracker.next(Some(*odometry), *stamp, &self.params) {
                     deskew(&mut points, times, &motion);
                     count += 1;
                 }

@@ -36,6 +36,12 @@ pub struct DeskewParams {
     /// mean velocity over a longer gap misses an indoor robot's starts, stops and turns, and a
     /// wrong velocity warps a scan that was right; such a scan is matched as recorded.
     pub max_gap: f64,
+    /// Fastest plausible speed \[m/s\] and yaw rate \[rad/s\]. Defaults 10 m/s and a turn a
+    /// second: beyond them the odometry or the timestamps are wrong (two scans stamped a
+    /// millisecond apart), and a scan deskewed with such a velocity would be torn apart;
+    /// it is matched as recorded.
+    pub max_speed: f64,
+    pub max_yaw_rate: f64,
 }
 
 impl Default for DeskewParams {
@@ -45,6 +51,8 @@ impl Default for DeskewParams {
             interlace: 1,
             sweep_period: 1.0 / 75.0,
             max_gap: 0.5,
+            max_speed: 10.0,
+            max_yaw_rate: std::f64::consts::TAU,
         }
     }
 }
@@ -156,8 +164,8 @@ pub fn deskew(points: &mut [Point2<f64>], times: &[f64], motion: &SweepMotion) {
 }
 
 /// The velocity of each scan of a run, from its odometry and time and the previous scan's:
-/// `None` for the first scan, a scan without odometry or time, or one more than `max_gap`
-/// after the previous (see [`DeskewParams::max_gap`]).
+/// `None` for the first scan, a scan without odometry or time, one more than `max_gap` after
+/// the previous, or a velocity beyond the plausible (see [`DeskewParams`]).
 #[derive(Clone, Debug, Default)]
 pub struct SweepTracker {
     previous: Option<(Pose2, f64)>,
@@ -173,17 +181,19 @@ impl SweepTracker {
         &mut self,
         odometry: Option<Pose2>,
         time: Option<f64>,
-        max_gap: f64,
+        params: &DeskewParams,
     ) -> Option<SweepMotion> {
         let current = odometry.zip(time);
         let motion = match (self.previous, current) {
-            (Some((from, t0)), Some((to, t1))) if t1 - t0 <= max_gap => {
+            (Some((from, t0)), Some((to, t1))) if t1 - t0 <= params.max_gap => {
                 SweepMotion::between(&from, &to, t1 - t0)
             }
             _ => None,
         };
         self.previous = current;
-        motion
+        motion.filter(|m| {
+            m.vx.hypot(m.vy) <= params.max_speed && m.yaw_rate.abs() <= params.max_yaw_rate
+        })
     }
 }
 
@@ -355,16 +365,19 @@ mod tests {
     #[test]
     fn the_tracker_takes_the_velocity_from_the_previous_scan_within_the_gap() {
         let mut tracker = SweepTracker::new();
+        let params = DeskewParams::default();
         let a = Pose2::new(0.0, 0.0, 0.0);
         let b = Pose2::new(0.1, 0.0, 0.05);
-        assert_eq!(tracker.next(Some(a), Some(10.0), 0.5), None);
-        let m = tracker.next(Some(b), Some(10.2), 0.5).unwrap();
+        assert_eq!(tracker.next(Some(a), Some(10.0), &params), None);
+        let m = tracker.next(Some(b), Some(10.2), &params).unwrap();
         assert!((m.yaw_rate - 0.25).abs() < 1e-12, "{m:?}");
         // Too long after: no velocity, but the scan still becomes the previous one.
-        assert_eq!(tracker.next(Some(a), Some(11.0), 0.5), None);
-        assert!(tracker.next(Some(b), Some(11.1), 0.5).is_some());
+        assert_eq!(tracker.next(Some(a), Some(11.0), &params), None);
+        assert!(tracker.next(Some(b), Some(11.1), &params).is_some());
         // No odometry: none, and none for the next either.
-        assert_eq!(tracker.next(None, Some(11.2), 0.5), None);
-        assert_eq!(tracker.next(Some(a), Some(11.3), 0.5), None);
+        assert_eq!(tracker.next(None, Some(11.2), &params), None);
+        assert_eq!(tracker.next(Some(a), Some(11.3), &params), None);
+        // Stamped a millisecond after: 100 m/s is no robot's, so none.
+        assert_eq!(tracker.next(Some(b), Some(11.301), &params), None);
     }
 }
