@@ -693,6 +693,18 @@ fn deskew_takes_the_turn_during_each_sweep_out_of_the_matched_heading() {
 
 #[test]
 fn deskew_without_the_rays_timing_or_with_a_bad_one_is_refused_by_name() {
+    // eval matching's robot scans standing still: the flags are refused, not ignored.
+    let out = bin()
+        .args([
+            "eval",
+            "matching",
+            plan("office").to_str().unwrap(),
+            "--deskew",
+        ])
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--deskew"));
     let (log, _) = swept_turn_log(false);
     let file = TempFile::new("untimed.jsonl", &log);
     let out = bin()

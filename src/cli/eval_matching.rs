@@ -57,6 +57,12 @@ pub fn run_matching(args: MatchingArgs) -> anyhow::Result<()> {
         args.scans >= 3,
         "--scans: leveling needs at least 3 scans per pose"
     );
+    // The simulated robot stands still while it scans: there is nothing to deskew.
+    anyhow::ensure!(
+        args.options.deskew().is_none(),
+        "--deskew, --time-increment and --interlace are for match and eval real: eval matching \
+         simulates a robot that stands still while it scans"
+    );
     anyhow::ensure!(
         args.sigma.is_finite() && args.sigma >= 0.0,
         "--sigma must be >= 0"
