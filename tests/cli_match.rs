@@ -666,6 +666,20 @@ fn deskew_takes_the_turn_during_each_sweep_out_of_the_matched_heading() {
     );
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("deskewed 119 of 120 scans"), "{err}");
+    assert!(!err.contains("warning"), "{err}");
+    // Without timestamps nothing can be deskewed, and the run says so.
+    let untimed: String = String::from_utf8_lossy(&log)
+        .lines()
+        .map(|l| {
+            let mut v: Value = serde_json::from_str(l).unwrap();
+            v.as_object_mut().unwrap().remove("timestamp");
+            format!("{v}\n")
+        })
+        .collect();
+    let out = run_match(&["--time-increment", &dt], untimed.as_bytes());
+    assert_ran(&out);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("warning: deskewed 0 of 120 scans"), "{err}");
     // A bag's own time_increment serves --deskew alone: the same answers, to the float32
     // a LaserScan holds it in.
     let (ros_log, _) = swept_turn_log(true);

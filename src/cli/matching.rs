@@ -534,13 +534,19 @@ impl Sweep {
         Ok(points)
     }
 
-    /// How many scans were deskewed, and why the others were not.
+    /// How many scans were deskewed, and why the others were not; a warning when fewer than
+    /// half were.
     pub fn summary(&self) -> String {
         let left = self.total - self.deskewed;
+        let warning = if 2 * self.deskewed < self.total {
+            "warning: "
+        } else {
+            ""
+        };
         format!(
-            "levelscan match: deskewed {} of {} scans; {left} as recorded (the first scan, and \
-             any without odometry and a timestamp, more than {} s after the previous one, or \
-             moving implausibly fast)",
+            "levelscan match: {warning}deskewed {} of {} scans; {left} as recorded (the first \
+             scan, and any without odometry and a timestamp, more than {} s after the previous \
+             one, or moving implausibly fast)",
             self.deskewed, self.total, self.params.max_gap
         )
     }
