@@ -296,9 +296,14 @@ pub fn run_real(args: RealArgs) -> anyhow::Result<()> {
                 .map_or("-".into(), |d| format!("{:.2}%", d.translation_percent))
         );
         if let Some(n) = result.deskewed {
+            let warning = if 2 * n < result.scans {
+                "warning: "
+            } else {
+                ""
+            };
             eprintln!(
-                "{}: deskewed {n} of {} scans; the others had no plausible velocity (odometry \
-                 and a timestamp within 0.5 s before)",
+                "{}: {warning}deskewed {n} of {} scans; the others had no plausible velocity \
+                 (odometry and a timestamp within 0.5 s before)",
                 result.name, result.scans
             );
         }
