@@ -300,6 +300,19 @@ fn a_missing_file_is_an_error_not_a_panic() {
     assert!(!err.contains("panicked"));
 }
 
+/// `levelscan match FILE FLAG=VALUE` fails, naming the flag, without a panic.
+fn assert_refused_by_name(file: &Path, flag: &str, value: &str) {
+    let out = bin()
+        .arg("match")
+        .arg(file)
+        .arg(format!("{flag}={value}"))
+        .output()
+        .unwrap();
+    assert!(!out.status.success(), "{flag} {value} was taken");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains(flag) && !err.contains("panicked"), "{err}");
+}
+
 #[test]
 fn a_bad_covariance_or_search_flag_is_named() {
     let file = TempFile::new("cov.jsonl", &simulated_level_scans(2));
@@ -314,15 +327,7 @@ fn a_bad_covariance_or_search_flag_is_named() {
         ("--window-xy", "1e300"),
         ("--window-theta", "1e300"),
     ] {
-        let out = bin()
-            .arg("match")
-            .arg(&file.0)
-            .arg(format!("{flag}={value}"))
-            .output()
-            .unwrap();
-        assert!(!out.status.success(), "{flag} {value} was taken");
-        let err = String::from_utf8_lossy(&out.stderr);
-        assert!(err.contains(flag) && !err.contains("panicked"), "{err}");
+        assert_refused_by_name(&file.0, flag, value);
     }
     // 0 is allowed: the residuals alone, as before the sampling error.
     let out = bin()
@@ -743,14 +748,6 @@ fn deskew_without_the_rays_timing_or_with_a_bad_one_is_refused_by_name() {
         ("--sweep-period", "0"),
         ("--sweep-period", "NaN"),
     ] {
-        let out = bin()
-            .arg("match")
-            .arg(&file.0)
-            .arg(format!("{flag}={bad}"))
-            .output()
-            .unwrap();
-        assert!(!out.status.success(), "{flag} {bad} was taken");
-        let err = String::from_utf8_lossy(&out.stderr);
-        assert!(err.contains(flag) && !err.contains("panicked"), "{err}");
+        assert_refused_by_name(&file.0, flag, bad);
     }
 }

@@ -5,7 +5,7 @@
 mod matching_support;
 
 use levelscan::geometry::Pose2;
-use levelscan::matching::{DeskewParams, MatcherParams, Mode, SweepTracker, deskew, match_run};
+use levelscan::matching::{DeskewParams, MatcherParams, Mode, SweepTracker, match_run};
 use matching_support::*;
 use nalgebra::Point2;
 
@@ -80,9 +80,8 @@ fn drift_recorded_and_deskewed(
         .enumerate()
         .map(|(k, ((points, times), o))| {
             let mut points = points.clone();
-            if let Some(motion) = tracker.next(Some(*o), Some(k as f64 * PERIOD), &deskewing) {
-                deskew(&mut points, times, &motion);
-            }
+            let time = Some(k as f64 * PERIOD);
+            tracker.deskew_next(&mut points, times, Some(*o), time, &deskewing);
             (points, Some(*o))
         })
         .collect();

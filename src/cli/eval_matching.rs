@@ -10,7 +10,7 @@ use levelscan::eval::matching::{ExperimentParams, matching_experiment};
 use levelscan::eval::real::{RealLog, RealResult, RealSweep, evaluate_real};
 use levelscan::formats::bag::BagOptions;
 use levelscan::formats::{CarmenParams, read_plan};
-use levelscan::matching::{DeskewParams, Mode, scan_points, timed_scan_points};
+use levelscan::matching::{DeskewParams, Mode, deskew_summary, scan_points, timed_scan_points};
 use levelscan::simulate::{AdaptiveParams, ScannerParams, elevations_centred};
 use levelscan::viz::plots::{MapPanel, map_panels_png, map_panels_svg, run_map_panel};
 use std::fmt::Write as _;
@@ -247,7 +247,7 @@ fn load_real_log(
         })?;
         match &mut log.sweep {
             Some(real) => {
-                let timing = ray_timing(&real.params, &scan, log.points.len(), &name, line)?;
+                let timing = ray_timing(&real.params, &scan, &name, line)?;
                 let (points, times) = timed_scan_points(&scan, ranges, &timing);
                 log.points.push(points);
                 real.ray_times.push(times);
@@ -295,17 +295,9 @@ pub fn run_real(args: RealArgs) -> anyhow::Result<()> {
                 .find(|d| d.length == 10.0)
                 .map_or("-".into(), |d| format!("{:.2}%", d.translation_percent))
         );
-        if let Some(n) = result.deskewed {
-            let warning = if 2 * n < result.scans {
-                "warning: "
-            } else {
-                ""
-            };
-            eprintln!(
-                "{}: {warning}deskewed {n} of {} scans; the others had no plausible velocity \
-                 (odometry and a timestamp within 0.5 s before)",
-                result.name, result.scans
-            );
+        if let (Some(n), Some(sweep)) = (result.deskewed, &log.sweep) {
+            let line = deskew_summary(&result.name, n, result.scans, &sweep.params);
+            eprintln!("{line}");
         }
         if let Some(dir) = &args.out {
             write_trajectories(dir, &log, &result)?;

@@ -7,13 +7,14 @@ use super::reference_tum::ReferenceTum;
 use super::scan_input::{BagArgs, open_scans};
 use super::summary::{Kind, Outcome, Tally};
 use clap::ValueEnum;
-use levelscan::formats::bag::convert::ScanMeta;
+use levelscan::formats::bag::convert::ros_number;
 use levelscan::formats::{CarmenParams, write_tum};
 use levelscan::geometry::Pose;
 use levelscan::matching::{
     CheckParams, Coarse, CorrelativeParams, CovarianceParams, DeskewParams, IcpParams, Kernel,
     MapParams, MatchReport, MatchStatus, Matcher, MatcherParams, Metric, Mode, NormalParams,
-    OdometryPrior, RangeParams, RayTiming, SweepTracker, deskew, scan_points, timed_scan_points,
+    OdometryPrior, RangeParams, RayTiming, SweepTracker, deskew_summary, scan_points,
+    timed_scan_points,
 };
 use levelscan::scan::Scan;
 use nalgebra::Point2;
@@ -431,7 +432,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     for (index, item) in input.source.enumerate() {
         let (line, mut scan) = item?;
         let points = match sweep.as_mut() {
-            Some(sweep) => sweep.points(&scan, &params.ranges, index, &input.name, line)?,
+            Some(sweep) => sweep.points(&scan, &params.ranges, &input.name, line)?,
             None => scan_points(&scan, &params.ranges),
         };
         let odometry = scan.odometry.map(|p| p.to_pose2());
@@ -466,20 +467,19 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// When scan `index`'s rays (at `line` of `name`) were cast, for deskewing: the time between
+/// When the rays of the scan at `line` of `name` were cast, for deskewing: the time between
 /// rays from --time-increment, else the scan's own (a ROS LaserScan's), and the interleaving;
 /// an error naming the scan when neither gives the time.
 pub fn ray_timing(
     params: &DeskewParams,
     scan: &Scan,
-    index: usize,
     name: &str,
     line: usize,
 ) -> anyhow::Result<RayTiming> {
-    let time_increment = match params.time_increment {
-        Some(dt) => dt,
-        None => f64::from(ScanMeta::of(scan, index).time_increment),
-    };
+    let time_increment = params
+        .time_increment
+        .or_else(|| ros_number(scan, "time_increment"))
+        .unwrap_or(0.0);
     if time_increment == 0.0 || !time_increment.is_finite() {
         anyhow::bail!(
             "{name}:{line}: --deskew needs the time between rays, and this scan has no \
@@ -512,43 +512,32 @@ impl Sweep {
         }
     }
 
-    /// Scan `index`'s (at `line` of `name`) usable points, deskewed when the odometry gives a
+    /// The usable points of the scan at `line` of `name`, deskewed when the odometry gives a
     /// velocity; an error when neither the scan nor --time-increment gives its rays' timing.
     pub fn points(
         &mut self,
         scan: &Scan,
         ranges: &RangeParams,
-        index: usize,
         name: &str,
         line: usize,
     ) -> anyhow::Result<Vec<Point2<f64>>> {
-        let timing = ray_timing(&self.params, scan, index, name, line)?;
+        let timing = ray_timing(&self.params, scan, name, line)?;
         let time = scan.timestamp.map(|t| t.seconds());
         let odometry = scan.odometry.map(|p| p.to_pose2());
         self.total += 1;
         let (mut points, times) = timed_scan_points(scan, ranges, &timing);
-        if let Some(motion) = self.tracker.next(odometry, time, &self.params) {
-            deskew(&mut points, &times, &motion);
+        if self
+            .tracker
+            .deskew_next(&mut points, &times, odometry, time, &self.params)
+        {
             self.deskewed += 1;
         }
         Ok(points)
     }
 
-    /// How many scans were deskewed, and why the others were not; a warning when fewer than
-    /// half were.
+    /// How many scans were deskewed, and why the others were not.
     pub fn summary(&self) -> String {
-        let left = self.total - self.deskewed;
-        let warning = if 2 * self.deskewed < self.total {
-            "warning: "
-        } else {
-            ""
-        };
-        format!(
-            "levelscan match: {warning}deskewed {} of {} scans; {left} as recorded (the first \
-             scan, and any without odometry and a timestamp, more than {} s after the previous \
-             one, or moving implausibly fast)",
-            self.deskewed, self.total, self.params.max_gap
-        )
+        deskew_summary("levelscan match", self.deskewed, self.total, &self.params)
     }
 }
 

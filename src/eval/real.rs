@@ -15,7 +15,7 @@ use super::drift::{DRIFT_LENGTHS, Drift, segment_drift};
 use super::metrics::{Rpe, rpe};
 use crate::geometry::{Pose, Pose2};
 use crate::matching::{
-    DeskewParams, MatchReport, MatchStatus, Matcher, MatcherParams, SweepTracker, deskew,
+    DeskewParams, MatchReport, MatchStatus, Matcher, MatcherParams, SweepTracker,
 };
 use crate::simulate::{OdometryParams, odometry};
 use nalgebra::Point2;
@@ -59,8 +59,7 @@ impl RealSweep {
             .zip(odometry.iter().zip(&self.stamps))
             .map(|((points, times), (odometry, stamp))| {
                 let mut points = points.clone();
-                if let Some(motion) = tracker.next(Some(*odometry), *stamp, &self.params) {
-                    deskew(&mut points, times, &motion);
+                if tracker.deskew_next(&mut points, times, Some(*odometry), *stamp, &self.params) {
                     count += 1;
                 }
                 points

@@ -195,6 +195,40 @@ impl SweepTracker {
             m.vx.hypot(m.vy) <= params.max_speed && m.yaw_rate.abs() <= params.max_yaw_rate
         })
     }
+
+    /// [`Self::next`], and `points` (cast `times` after the mean ray time) deskewed with the
+    /// velocity when there is one; whether there was.
+    pub fn deskew_next(
+        &mut self,
+        points: &mut [Point2<f64>],
+        times: &[f64],
+        odometry: Option<Pose2>,
+        time: Option<f64>,
+        params: &DeskewParams,
+    ) -> bool {
+        let motion = self.next(odometry, time, params);
+        if let Some(motion) = &motion {
+            deskew(points, times, motion);
+        }
+        motion.is_some()
+    }
+}
+
+/// The line a deskewed run ends with, `name` first: how many of `total` scans were deskewed,
+/// why the others were not, and a warning when fewer than half were.
+pub fn deskew_summary(name: &str, deskewed: usize, total: usize, params: &DeskewParams) -> String {
+    let warning = if 2 * deskewed < total {
+        "warning: "
+    } else {
+        ""
+    };
+    format!(
+        "{name}: {warning}deskewed {deskewed} of {total} scans; {} as recorded (the first scan, \
+         and any without odometry and a timestamp, more than {} s after the previous one, or \
+         moving implausibly fast)",
+        total - deskewed,
+        params.max_gap
+    )
 }
 
 #[cfg(test)]

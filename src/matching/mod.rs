@@ -36,7 +36,7 @@ pub use correlative::{
     CorrelativeParams, CorrelativeScratch, correlative_search, correlative_search_with,
 };
 pub use covariance::rays_per_degree;
-pub use deskew::{DeskewParams, RayTiming, SweepMotion, SweepTracker, deskew};
+pub use deskew::{DeskewParams, RayTiming, SweepMotion, SweepTracker, deskew, deskew_summary};
 pub use icp::{IcpParams, IcpResult, Kernel, Metric, PosePrior, icp, icp_with_prior};
 pub use map::{MapParams, VoxelMap};
 pub use matcher::{

@@ -318,43 +318,7 @@ fn lift_jacobian(theta: f64) -> nalgebra::Matrix4x3<f64> {
 
 /// Minimises `r' S r - 2 h' r` over unit vectors `r` (S symmetric 2x2).
 fn min_quadratic_on_circle(s: &Matrix2<f64>, h: &Vector2<f64>) -> Vector2<f64> {
-    let (s1, s2, v1) = symmetric_eigen_2x2(s);
-    let v2 = Vector2::new(-v1.y, v1.x);
-    let (h1, h2) = (v1.dot(h), v2.dot(h));
-    let hn = h1.hypot(h2);
-    if hn == 0.0 {
-        return v1;
-    }
-    let gap = s2 - s1;
-    // Secular equation in mu = λ + s1 > 0: h1²/mu² + h2²/(mu + gap)² = 1, decreasing in mu,
-    // and <= 1 at mu = |h|. The global minimum of a quadratic on a sphere has S + λI >= 0.
-    let phi = |mu: f64| (h1 / mu).powi(2) + (h2 / (mu + gap)).powi(2);
-    let at_zero = if h1 == 0.0 {
-        (h2 / gap).powi(2)
-    } else {
-        f64::INFINITY
-    };
-    if at_zero <= 1.0 {
-        // The "hard case": the multiplier sits at -s1 and the rest of r lies along v1.
-        let r2 = if gap > 0.0 { h2 / gap } else { 0.0 };
-        let r1 = (1.0 - r2 * r2).max(0.0).sqrt();
-        return v1 * r1 + v2 * r2;
-    }
-    let (mut lo, mut hi) = (0.0f64, hn);
-    for _ in 0..200 {
-        let mid = 0.5 * (lo + hi);
-        if mid <= lo || mid >= hi {
-            break;
-        }
-        if phi(mid) > 1.0 {
-            lo = mid;
-        } else {
-            hi = mid;
-        }
-    }
-    let mu = 0.5 * (lo + hi);
-    let r = v1 * (h1 / mu) + v2 * (h2 / (mu + gap));
-    r / r.norm()
+    CircleQuadratic::new(s, h).global_minimum()
 }
 
 /// [`min_quadratic_on_circle`]'s minimum, or the other local minimum on the circle where there
@@ -370,48 +334,111 @@ fn min_quadratic_on_circle_near(
     h: &Vector2<f64>,
     current: &Vector2<f64>,
 ) -> Vector2<f64> {
-    let global = min_quadratic_on_circle(s, h);
-    let (s1, s2, v1) = symmetric_eigen_2x2(s);
-    let v2 = Vector2::new(-v1.y, v1.x);
-    let (h1, h2) = (v1.dot(h), v2.dot(h));
-    let gap = s2 - s1;
-    let other = if h1 == 0.0 {
-        // The hard case (or no pull at all): the mirror image across v2 ties.
-        Some(global - 2.0 * v1.dot(&global) * v1)
-    } else if h2 == 0.0 {
-        // r2 = 0 at any multiplier: the other candidate is -v1 sign(h1), a minimum while the
-        // curvature across v1 (gap) beats the pull |h1|.
-        (h1.abs() < gap).then(|| -v1 * h1.signum())
-    } else if gap > 0.0 {
-        // mu = λ + s1 in (-gap, 0): g(mu) = h1²/mu² + h2²/(mu + gap)² has its least value where
-        // (-mu) / (mu + gap) = (h1² / h2²)^(1/3); a second minimum needs it below 1.
-        let g = |mu: f64| (h1 / mu).powi(2) + (h2 / (mu + gap)).powi(2);
-        let k = (h1 * h1 / (h2 * h2)).cbrt();
-        let low = -k * gap / (1.0 + k);
-        (g(low) < 1.0).then(|| {
-            let (mut lo, mut hi) = (low, 0.0f64);
-            for _ in 0..200 {
-                let mid = 0.5 * (lo + hi);
-                if mid <= lo || mid >= hi {
-                    break;
-                }
-                if g(mid) > 1.0 {
-                    hi = mid;
-                } else {
-                    lo = mid;
-                }
-            }
-            let mu = 0.5 * (lo + hi);
-            let r = v1 * (h1 / mu) + v2 * (h2 / (mu + gap));
-            r / r.norm()
-        })
-    } else {
-        None
-    };
-    match other {
+    let q = CircleQuadratic::new(s, h);
+    let global = q.global_minimum();
+    match q.other_minimum(&global) {
         Some(r) if r.iter().all(|v| v.is_finite()) && r.dot(current) > global.dot(current) => r,
         _ => global,
     }
+}
+
+/// `r' S r - 2 h' r` in the eigenbasis of `S` (`s1 <= s2`, unit eigenvectors `v1`, `v2`):
+/// its stationary points on the unit circle are `r(mu) = v1 h1 / mu + v2 h2 / (mu + gap)`
+/// where the secular function `h1²/mu² + h2²/(mu + gap)²` is 1, `mu = λ + s1` for the
+/// multiplier `λ`.
+struct CircleQuadratic {
+    v1: Vector2<f64>,
+    v2: Vector2<f64>,
+    h1: f64,
+    h2: f64,
+    /// `s2 - s1`.
+    gap: f64,
+}
+
+impl CircleQuadratic {
+    fn new(s: &Matrix2<f64>, h: &Vector2<f64>) -> Self {
+        let (s1, s2, v1) = symmetric_eigen_2x2(s);
+        let v2 = Vector2::new(-v1.y, v1.x);
+        Self {
+            v1,
+            v2,
+            h1: v1.dot(h),
+            h2: v2.dot(h),
+            gap: s2 - s1,
+        }
+    }
+
+    fn secular(&self, mu: f64) -> f64 {
+        (self.h1 / mu).powi(2) + (self.h2 / (mu + self.gap)).powi(2)
+    }
+
+    /// The stationary point at `mu`, scaled onto the circle.
+    fn point(&self, mu: f64) -> Vector2<f64> {
+        let r = self.v1 * (self.h1 / mu) + self.v2 * (self.h2 / (mu + self.gap));
+        r / r.norm()
+    }
+
+    fn global_minimum(&self) -> Vector2<f64> {
+        let (v1, v2, h1, h2, gap) = (self.v1, self.v2, self.h1, self.h2, self.gap);
+        let hn = h1.hypot(h2);
+        if hn == 0.0 {
+            return v1;
+        }
+        // Secular equation in mu = λ + s1 > 0: decreasing in mu, and <= 1 at mu = |h|. The
+        // global minimum of a quadratic on a sphere has S + λI >= 0.
+        let at_zero = if h1 == 0.0 {
+            (h2 / gap).powi(2)
+        } else {
+            f64::INFINITY
+        };
+        if at_zero <= 1.0 {
+            // The "hard case": the multiplier sits at -s1 and the rest of r lies along v1.
+            let r2 = if gap > 0.0 { h2 / gap } else { 0.0 };
+            let r1 = (1.0 - r2 * r2).max(0.0).sqrt();
+            return v1 * r1 + v2 * r2;
+        }
+        self.point(bisect(0.0, hn, |mu| self.secular(mu), false))
+    }
+
+    /// The local minimum other than `global` (the global one), if there is one.
+    fn other_minimum(&self, global: &Vector2<f64>) -> Option<Vector2<f64>> {
+        let (v1, h1, h2, gap) = (self.v1, self.h1, self.h2, self.gap);
+        if h1 == 0.0 {
+            // The hard case (or no pull at all): the mirror image across v2 ties.
+            Some(global - 2.0 * v1.dot(global) * v1)
+        } else if h2 == 0.0 {
+            // r2 = 0 at any multiplier: the other candidate is -v1 sign(h1), a minimum while
+            // the curvature across v1 (gap) beats the pull |h1|.
+            (h1.abs() < gap).then(|| -v1 * h1.signum())
+        } else if gap > 0.0 {
+            // mu in (-gap, 0): the secular function has its least value where
+            // (-mu) / (mu + gap) = (h1² / h2²)^(1/3); a second minimum needs it below 1, and
+            // lies on the rising branch above it.
+            let k = (h1 * h1 / (h2 * h2)).cbrt();
+            let low = -k * gap / (1.0 + k);
+            (self.secular(low) < 1.0)
+                .then(|| self.point(bisect(low, 0.0, |mu| self.secular(mu), true)))
+        } else {
+            None
+        }
+    }
+}
+
+/// Where `f` crosses 1 in `(lo, hi)`, bisected to the last representable midpoint: `f` rising
+/// through it when `rising`, falling otherwise.
+fn bisect(mut lo: f64, mut hi: f64, f: impl Fn(f64) -> f64, rising: bool) -> f64 {
+    for _ in 0..200 {
+        let mid = 0.5 * (lo + hi);
+        if mid <= lo || mid >= hi {
+            break;
+        }
+        if (f(mid) > 1.0) == rising {
+            hi = mid;
+        } else {
+            lo = mid;
+        }
+    }
+    0.5 * (lo + hi)
 }
 
 /// Eigen-decomposition of a symmetric 2x2 matrix in closed form:

@@ -62,7 +62,7 @@ impl ScanMeta {
     /// record's bearings are the leveled ones and only approximate them.
     pub fn of(scan: &Scan, index: usize) -> ScanMeta {
         let ros = scan.extra.get("ros");
-        let num = |key: &str| ros.and_then(|r| r.get(key)).and_then(Value::as_f64);
+        let num = |key: &str| ros_number(scan, key);
         let stamp = ros
             .and_then(|r| r.get("stamp"))
             .and_then(stamp_from_json)
@@ -103,6 +103,12 @@ impl ScanMeta {
             frame_id: frame_id.to_string(),
         }
     }
+}
+
+/// A number the bag reader kept in the scan's `extra["ros"]` (`time_increment`, `angle_min`,
+/// ...), if it has one.
+pub fn ros_number(scan: &Scan, key: &str) -> Option<f64> {
+    scan.extra.get("ros")?.get(key)?.as_f64()
 }
 
 /// `[sec, nanosec]` as the reader writes `extra["ros"]["stamp"]`.
