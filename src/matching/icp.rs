@@ -8,7 +8,7 @@
 
 use super::covariance::Sandwich;
 use super::reference::{Certificate, Target};
-use super::solve::{Remap, Remapped, RigidSolver, symmetric_eigenvalues_2x2};
+use super::solve::{PosePrior, Remap, Remapped, RigidSolver, symmetric_eigenvalues_2x2};
 use crate::geometry::minor_axis_2x2;
 use crate::geometry::{Pose2, wrap_angle};
 use nalgebra::{Matrix2, Matrix3, Point2, Vector2, Vector3};
@@ -146,17 +146,6 @@ struct Pair {
     /// Reference line for point-to-line pairs: (normal, anchor).
     line: Option<(Vector2<f64>, Point2<f64>)>,
     residual: f64,
-}
-
-/// A Gaussian prior on the result (e.g. from odometry), as weights in the ICP cost's units.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct PosePrior {
-    /// The prior pose (`target_from_source`).
-    pub pose: Pose2,
-    /// Weight of the squared translation difference [1/m² in residual units: (σ_r/σ_xy)²].
-    pub weight_xy: f64,
-    /// Weight of the squared heading difference [(σ_r/σ_θ)², m²/rad²].
-    pub weight_theta: f64,
 }
 
 /// Aligns `source` (points in the source scanner's frame, the scanner at the origin) to

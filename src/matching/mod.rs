@@ -35,15 +35,14 @@ pub mod solve;
 pub use correlative::{
     CorrelativeParams, CorrelativeScratch, correlative_search, correlative_search_with,
 };
-pub use covariance::rays_per_degree;
+pub use covariance::{CovarianceParams, rays_per_degree};
 pub use deskew::{DeskewParams, RayTiming, SweepMotion, SweepTracker, deskew, deskew_summary};
-pub use icp::{IcpParams, IcpResult, Kernel, Metric, PosePrior, icp, icp_with_prior};
+pub use icp::{IcpParams, IcpResult, Kernel, Metric, icp, icp_with_prior};
 pub use map::{MapParams, VoxelMap};
 pub use matcher::{
     FallbackReason, MatchReport, MatchStatus, Matcher, match_run, odometry_step, scan_points,
     timed_scan_points,
 };
-pub use params::{
-    CheckParams, Coarse, CovarianceParams, MatcherParams, Mode, OdometryPrior, RangeParams,
-};
+pub use params::{CheckParams, Coarse, MatcherParams, Mode, OdometryPrior, RangeParams};
 pub use reference::{Line, NormalParams, ScanReference, Target, estimate_lines};
+pub use solve::PosePrior;

@@ -17,9 +17,19 @@
 //! scan's information whitened by the anchor's (their eigenvalues are how many times more the
 //! scan knows along them than the odometry does).
 
-use super::icp::PosePrior;
 use crate::geometry::{Pose2, minor_axis_2x2, wrap_angle};
 use nalgebra::{Matrix2, Matrix3, Matrix4, Point2, Vector2, Vector3, Vector4};
+
+/// A Gaussian prior on the result (e.g. from odometry), as weights in the ICP cost's units.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PosePrior {
+    /// The prior pose (`target_from_source`).
+    pub pose: Pose2,
+    /// Weight of the squared translation difference [1/m² in residual units: (σ_r/σ_xy)²].
+    pub weight_xy: f64,
+    /// Weight of the squared heading difference [(σ_r/σ_θ)², m²/rad²].
+    pub weight_theta: f64,
+}
 
 /// Accumulates weighted residual rows `n · (R p + t - q)` and solves for `(R, t)`.
 #[derive(Clone, Debug, Default)]

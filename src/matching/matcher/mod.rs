@@ -9,13 +9,12 @@ mod align;
 mod trigger;
 
 use super::correlative::CorrelativeScratch;
+pub use super::covariance::CovarianceParams;
 use super::covariance::{fuse, inflation, rays_per_degree, rotate_into};
 use super::deskew::RayTiming;
 use super::icp::{IcpResult, icp};
 use super::map::VoxelMap;
-pub use super::params::{
-    CheckParams, Coarse, CovarianceParams, MatcherParams, Mode, OdometryPrior, RangeParams,
-};
+pub use super::params::{CheckParams, Coarse, MatcherParams, Mode, OdometryPrior, RangeParams};
 use super::reference::{Line, ScanReference, estimate_lines};
 pub use super::report::{FallbackReason, MatchReport, MatchStatus};
 use crate::geometry::Pose2;
