@@ -14,8 +14,7 @@
 //! complement's effective Jacobian, [`super::solve`]); on a right model the sandwich equals the
 //! information's inverse on average, so it widens nothing then but its own sampling spread.
 
-use super::evaluate::{Arrow, Ray, Score};
-use super::solve::pseudo_inverse;
+use super::evaluate::{Arrow, Ray, Score, pseudo_inverse};
 use nalgebra::{Matrix2, Vector2};
 
 /// `B`: over clusters of at most `cluster_rays` consecutive rays of one surface (`rays` in

@@ -12,7 +12,7 @@
 //! the points are [`super::evaluate`]'s.
 
 use super::cluster::{clustered_meat, widened};
-use super::evaluate::{Arrow, Evaluation, Frame, Ray, Residual, evaluate};
+use super::evaluate::{Arrow, Evaluation, Frame, Ray, Residual, evaluate, pseudo_inverse};
 use super::model::{Placement, Plane, Rotations, initial_placement};
 use super::{LabelledPoint, MlError, MlParams, MlSolution, Surface, SurfaceFit, WallLine};
 use crate::geometry::Attitude;
@@ -464,23 +464,6 @@ impl<'a> State<'a> {
         let i = self.surfaces.iter().position(|&s| s == which)?;
         Some(self.placements[i].offset)
     }
-}
-
-pub(super) fn pseudo_inverse(m: &Matrix2<f64>) -> Option<Matrix2<f64>> {
-    let eig = m.symmetric_eigen();
-    let top = eig.eigenvalues.amax();
-    if !top.is_finite() {
-        return None;
-    }
-    let mut inv = Matrix2::zeros();
-    for k in 0..2 {
-        let l = eig.eigenvalues[k];
-        if l > top * 1e-12 && l > 0.0 {
-            let v = eig.eigenvectors.column(k);
-            inv += v * v.transpose() / l;
-        }
-    }
-    Some(inv)
 }
 
 /// The attitude's information with every placement marginalised, when it fixes both tilts:
