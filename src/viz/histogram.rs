@@ -6,8 +6,8 @@
 //! every error beyond it, so that no pose drops off the chart (the paper's 5 degree axis lost
 //! 3.5% of the poses at 10 cm noise, and left most of the chart empty where errors stop near 2).
 
+use super::error::PlotError;
 use super::legend::{Entry, Mark, draw_legend};
-use super::plots::PlotError;
 use crate::eval::metrics::nearest_rank;
 use plotters::coord::Shift;
 use plotters::prelude::*;

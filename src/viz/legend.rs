@@ -2,7 +2,7 @@
 //! cover data (a legend inside a map's frame sat on a wall). Entries flow left to right and
 //! wrap to the next row when the area is too narrow.
 
-use super::plots::PlotError;
+use super::error::PlotError;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
@@ -46,10 +46,6 @@ const SWATCH: i32 = 18;
 const GAP: i32 = 6;
 const SPACING: i32 = 18;
 
-fn err<E: std::fmt::Debug>(e: E) -> PlotError {
-    PlotError(format!("{e:?}"))
-}
-
 /// The top-left corner of each entry laid out in an area `width` wide, given each entry's
 /// label width: left to right, wrapping; rows `row_height` apart.
 pub fn layout(label_widths: &[u32], width: i32, row_height: i32) -> Vec<(i32, i32)> {
@@ -85,7 +81,7 @@ fn label_widths<DB: DrawingBackend>(
         .iter()
         .map(|e| area.estimate_text_size(&e.label, &style).map(|s| s.0))
         .collect::<Result<_, _>>()
-        .map_err(err)
+        .map_err(PlotError::drawing)
 }
 
 /// The height \[px\] `entries` take when laid out `width` pixels wide on `area`'s backend.
@@ -123,13 +119,13 @@ pub fn draw_legend<DB: DrawingBackend>(
             Mark::Dot(c) => area.draw(&Circle::new((x + SWATCH / 2, mid), 3, c.filled())),
             Mark::Band(c) => area.draw(&Rectangle::new([a, b], c.mix(0.3).filled())),
         }
-        .map_err(err)?;
+        .map_err(PlotError::drawing)?;
         area.draw(&Text::new(
             e.label.clone(),
             (x + SWATCH + GAP, mid),
             style.clone(),
         ))
-        .map_err(err)?;
+        .map_err(PlotError::drawing)?;
     }
     Ok(())
 }
@@ -172,7 +168,7 @@ pub fn draw_scale_bar<DB: DrawingBackend>(
         [(left, y - 5), (left, y + 4), (right, y + 4), (right, y - 5)],
         black,
     ))
-    .map_err(err)?;
+    .map_err(PlotError::drawing)?;
     let style = TextStyle::from(("sans-serif", LEGEND_FONT).into_font())
         .pos(Pos::new(HPos::Right, VPos::Center));
     area.draw(&Text::new(
@@ -180,7 +176,7 @@ pub fn draw_scale_bar<DB: DrawingBackend>(
         (left - GAP, y),
         style,
     ))
-    .map_err(err)?;
+    .map_err(PlotError::drawing)?;
     Ok(px)
 }
 

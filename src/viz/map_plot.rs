@@ -3,8 +3,8 @@
 //! a strip under the map (inside the frame it sat on a wall). Drawn with plotters on any
 //! backend, as PNG files or SVG text.
 
+use super::error::PlotError;
 use super::legend::{Entry, Mark, ROW, draw_legend, draw_scale_bar, legend_height};
-use super::plots::PlotError;
 use crate::eval::matching::RunResult;
 use crate::geometry::Pose2;
 use crate::plan::Plan;
@@ -12,10 +12,6 @@ use plotters::coord::Shift;
 use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
 use std::path::Path;
-
-fn plot_err<E: std::fmt::Debug>(e: E) -> PlotError {
-    PlotError(format!("{e:?}"))
-}
 
 /// One top-down map of a matched run, for side-by-side panels: the floor plan's walls (grey),
 /// the matched scans' points placed with the (aligned) estimates, the true path (green) and the
@@ -88,10 +84,10 @@ pub fn draw_map<DB: DrawingBackend>(
     area: &DrawingArea<DB, Shift>,
     panel: &MapPanel,
 ) -> Result<(), PlotError> {
-    area.fill(&WHITE).map_err(plot_err)?;
+    area.fill(&WHITE).map_err(PlotError::drawing)?;
     let body = area
         .titled(&panel.title, ("sans-serif", 19))
-        .map_err(plot_err)?;
+        .map_err(PlotError::drawing)?;
     let (w, h) = body.dim_in_pixel();
     let entries = map_legend();
     let legend_w = w.saturating_sub(SCALE_WIDTH);
@@ -106,7 +102,7 @@ pub fn draw_map<DB: DrawingBackend>(
         .x_label_area_size(X_LABELS)
         .y_label_area_size(Y_LABELS)
         .build_cartesian_2d(lo[0]..hi[0], lo[1]..hi[1])
-        .map_err(plot_err)?;
+        .map_err(PlotError::drawing)?;
     ctx.configure_mesh()
         .light_line_style(WHITE)
         .bold_line_style(RGBColor(235, 235, 235))
@@ -117,7 +113,7 @@ pub fn draw_map<DB: DrawingBackend>(
         .x_label_formatter(&|v| format!("{v:.0}"))
         .y_label_formatter(&|v| format!("{v:.0}"))
         .draw()
-        .map_err(plot_err)?;
+        .map_err(PlotError::drawing)?;
     draw_map_data(&mut ctx, panel, lo, hi)?;
     let px_per_metre = f64::from(plot_w) / (hi[0] - lo[0]).max(1e-9);
     let (legend, scale) = strip.split_horizontally(legend_w);
@@ -156,7 +152,7 @@ fn draw_map_data<DB: DrawingBackend>(
             [(wall[0], wall[1]), (wall[2], wall[3])],
             WALL_GREY.stroke_width(2),
         ))
-        .map_err(plot_err)?;
+        .map_err(PlotError::drawing)?;
     }
     let inside = |p: &[f64; 2]| p[0] >= lo[0] && p[0] <= hi[0] && p[1] >= lo[1] && p[1] <= hi[1];
     let scan_color = SCAN_RED.mix(0.55);
@@ -167,13 +163,13 @@ fn draw_map_data<DB: DrawingBackend>(
             .filter(|p| inside(p))
             .map(|p| Circle::new((p[0], p[1]), 1, scan_color.filled())),
     )
-    .map_err(plot_err)?;
+    .map_err(PlotError::drawing)?;
     for (path, color) in [(&panel.truth, GREEN), (&panel.estimate, BLUE)] {
         let pts: Vec<(f64, f64)> = path.iter().map(|p| (p[0], p[1])).collect();
         ctx.draw_series(LineSeries::new(pts.clone(), color.stroke_width(2)))
-            .map_err(plot_err)?;
+            .map_err(PlotError::drawing)?;
         ctx.draw_series(pts.iter().map(|&p| Circle::new(p, 3, color.filled())))
-            .map_err(plot_err)?;
+            .map_err(PlotError::drawing)?;
     }
     Ok(())
 }
@@ -183,7 +179,7 @@ pub fn draw_side_by_side<DB: DrawingBackend>(
     area: &DrawingArea<DB, Shift>,
     panels: &[MapPanel],
 ) -> Result<(), PlotError> {
-    area.fill(&WHITE).map_err(plot_err)?;
+    area.fill(&WHITE).map_err(PlotError::drawing)?;
     for (sub, panel) in area
         .split_evenly((1, panels.len().max(1)))
         .iter()
@@ -191,7 +187,7 @@ pub fn draw_side_by_side<DB: DrawingBackend>(
     {
         draw_map(sub, panel)?;
     }
-    area.present().map_err(plot_err)?;
+    area.present().map_err(PlotError::drawing)?;
     Ok(())
 }
 

@@ -4,6 +4,7 @@
 
 pub mod demo_figures;
 pub mod demo_report;
+pub mod error;
 pub mod histogram;
 pub mod html;
 pub mod legend;

@@ -3,21 +3,13 @@
 //! with the paper's own values beside ours), drawn on any plotters backend, and written as SVG
 //! text (for self-contained reports) or PNG files.
 
+pub use super::error::PlotError;
 use super::legend::{Entry, Mark, draw_legend};
 pub use super::map_plot::{MapPanel, map_panels_png, map_panels_svg, run_map_panel};
 use crate::eval::accuracy::paper_mean;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 use std::path::Path;
-
-/// A figure could not be drawn (e.g. no font for its text on this machine).
-#[derive(Debug, thiserror::Error)]
-#[error("cannot draw figure: {0}")]
-pub struct PlotError(pub String);
-
-fn plot_err<E: std::fmt::Debug>(e: E) -> PlotError {
-    PlotError(format!("{e:?}"))
-}
 
 /// One series of a grouped bar chart: a value per group (`None` where there is none).
 #[derive(Clone, Debug, PartialEq)]
@@ -132,12 +124,12 @@ pub fn draw_grouped_bars<DB: DrawingBackend>(
     area: &DrawingArea<DB, Shift>,
     chart: &GroupedBars,
 ) -> Result<(), PlotError> {
-    area.fill(&WHITE).map_err(plot_err)?;
+    area.fill(&WHITE).map_err(PlotError::drawing)?;
     let top = (chart.max_value() * 1.15).max(1e-3);
     let groups = chart.groups.len().max(1);
     let body = area
         .titled(&chart.title, ("sans-serif", 19))
-        .map_err(plot_err)?;
+        .map_err(PlotError::drawing)?;
     let (w, _) = body.dim_in_pixel();
     let (plot, legend) = body.split_horizontally(w.saturating_sub(LEGEND_WIDTH));
     let mut ctx = ChartBuilder::on(&plot)
@@ -145,7 +137,7 @@ pub fn draw_grouped_bars<DB: DrawingBackend>(
         .x_label_area_size(36)
         .y_label_area_size(54)
         .build_cartesian_2d(0.0..groups as f64, 0.0..top)
-        .map_err(plot_err)?;
+        .map_err(PlotError::drawing)?;
     let labels = chart.groups.clone();
     ctx.configure_mesh()
         .disable_x_mesh()
@@ -163,7 +155,7 @@ pub fn draw_grouped_bars<DB: DrawingBackend>(
         .label_style(("sans-serif", 16))
         .axis_desc_style(("sans-serif", 17))
         .draw()
-        .map_err(plot_err)?;
+        .map_err(PlotError::drawing)?;
     let mut entries = Vec::new();
     for (s, series) in chart.series.iter().enumerate() {
         let color = RGBColor(series.color.0, series.color.1, series.color.2);
@@ -182,11 +174,11 @@ pub fn draw_grouped_bars<DB: DrawingBackend>(
                 Some(Rectangle::new([(l, 0.0), (r, v)], style))
             })
             .collect();
-        ctx.draw_series(bars).map_err(plot_err)?;
+        ctx.draw_series(bars).map_err(PlotError::drawing)?;
         entries.push(Entry::new(mark, &series.label));
     }
     draw_legend(&legend.margin(20, 0, 0, 0), &entries)?;
-    area.present().map_err(plot_err)?;
+    area.present().map_err(PlotError::drawing)?;
     Ok(())
 }
 

@@ -2,9 +2,9 @@
 //! 3-sigma band against the truth, failed poses marked; and the position error along the
 //! trajectory, as the path coloured by the error and as the error over the distance travelled.
 
+use super::error::PlotError;
 use super::legend::{Entry, Mark, draw_legend};
 use super::map_plot::equal_aspect;
-use super::plots::PlotError;
 use crate::eval::run::{RunEvaluation, RunPose};
 use plotters::coord::Shift;
 use plotters::coord::types::RangedCoordf64;
@@ -19,10 +19,6 @@ const TRUTH: RGBColor = RGBColor(20, 20, 20);
 const ESTIMATE: RGBColor = RGBColor(20, 70, 220);
 const FAILED: RGBColor = RGBColor(210, 30, 30);
 const REFERENCE: RGBColor = RGBColor(150, 150, 150);
-
-fn err<E: std::fmt::Debug>(e: E) -> PlotError {
-    PlotError(format!("{e:?}"))
-}
 
 /// The x of each pose: its time when every pose has one, else its index; and the axis name.
 fn time_axis(poses: &[RunPose]) -> (Vec<f64>, &'static str) {
@@ -70,7 +66,7 @@ fn draw_band<DB: DrawingBackend>(
             outline,
             ESTIMATE.mix(0.18).filled(),
         )))
-        .map_err(err)?;
+        .map_err(PlotError::drawing)?;
     }
     Ok(())
 }
@@ -108,7 +104,7 @@ fn draw_angle<DB: DrawingBackend>(
         .x_label_area_size(40)
         .y_label_area_size(60)
         .build_cartesian_2d(t0..t1, lo..hi)
-        .map_err(err)?;
+        .map_err(PlotError::drawing)?;
     ctx.configure_mesh()
         .light_line_style(WHITE)
         .x_desc(t_name)
@@ -116,7 +112,7 @@ fn draw_angle<DB: DrawingBackend>(
         .label_style(("sans-serif", FONT))
         .axis_desc_style(("sans-serif", FONT + 1))
         .draw()
-        .map_err(err)?;
+        .map_err(PlotError::drawing)?;
     draw_band(&mut ctx, &band, &t)?;
     let line = |f: &dyn Fn(&RunPose) -> Option<f64>| -> Vec<(f64, f64)> {
         poses
@@ -128,18 +124,18 @@ fn draw_angle<DB: DrawingBackend>(
     let truth = line(&|p| p.true_attitude.map(|a| deg(a[axis])));
     let estimate = line(&|p| p.attitude.map(|a| deg(a[axis])));
     ctx.draw_series(LineSeries::new(truth, TRUTH.stroke_width(2)))
-        .map_err(err)?;
+        .map_err(PlotError::drawing)?;
     ctx.draw_series(LineSeries::new(estimate.clone(), ESTIMATE.stroke_width(2)))
-        .map_err(err)?;
+        .map_err(PlotError::drawing)?;
     ctx.draw_series(
         estimate
             .iter()
             .map(|&p| Circle::new(p, 3, ESTIMATE.filled())),
     )
-    .map_err(err)?;
+    .map_err(PlotError::drawing)?;
     let failed = poses.iter().zip(&t).filter(|(p, _)| p.attitude.is_none());
     ctx.draw_series(failed.map(|(_, &x)| TriangleMarker::new((x, lo), 6, FAILED.filled())))
-        .map_err(err)?;
+        .map_err(PlotError::drawing)?;
     Ok(())
 }
 
@@ -149,8 +145,10 @@ pub fn draw_attitude<DB: DrawingBackend>(
     poses: &[RunPose],
     title: &str,
 ) -> Result<(), PlotError> {
-    area.fill(&WHITE).map_err(err)?;
-    let body = area.titled(title, ("sans-serif", 19)).map_err(err)?;
+    area.fill(&WHITE).map_err(PlotError::drawing)?;
+    let body = area
+        .titled(title, ("sans-serif", 19))
+        .map_err(PlotError::drawing)?;
     let (_, h) = body.dim_in_pixel();
     let (charts, strip) = body.split_vertically(h.saturating_sub(34));
     let panels = charts.split_evenly((1, 2));
@@ -184,8 +182,10 @@ pub fn draw_trajectory_error<DB: DrawingBackend>(
     eval: &RunEvaluation,
     title: &str,
 ) -> Result<(), PlotError> {
-    area.fill(&WHITE).map_err(err)?;
-    let body = area.titled(title, ("sans-serif", 19)).map_err(err)?;
+    area.fill(&WHITE).map_err(PlotError::drawing)?;
+    let body = area
+        .titled(title, ("sans-serif", 19))
+        .map_err(PlotError::drawing)?;
     let (w, h) = body.dim_in_pixel();
     let (charts, strip) = body.split_vertically(h.saturating_sub(34));
     let (left, right) = charts.split_horizontally(w / 2);
@@ -236,7 +236,7 @@ fn draw_error_path<DB: DrawingBackend>(
         .x_label_area_size(40)
         .y_label_area_size(60)
         .build_cartesian_2d(lo[0]..hi[0], lo[1]..hi[1])
-        .map_err(err)?;
+        .map_err(PlotError::drawing)?;
     ctx.configure_mesh()
         .light_line_style(WHITE)
         .x_desc("x [m]")
@@ -244,15 +244,15 @@ fn draw_error_path<DB: DrawingBackend>(
         .label_style(("sans-serif", FONT))
         .axis_desc_style(("sans-serif", FONT + 1))
         .draw()
-        .map_err(err)?;
+        .map_err(PlotError::drawing)?;
     ctx.draw_series(LineSeries::new(refs, REFERENCE.stroke_width(2)))
-        .map_err(err)?;
+        .map_err(PlotError::drawing)?;
     let dots = eval.aligned.iter().zip(&eval.position_error_m);
     ctx.draw_series(dots.filter_map(|(p, e)| {
         let (p, e) = (p.as_ref()?, (*e)?);
         Some(Circle::new((p.x, p.y), 5, error_color(e, max).filled()))
     }))
-    .map_err(err)?;
+    .map_err(PlotError::drawing)?;
     Ok(())
 }
 
@@ -273,7 +273,7 @@ fn draw_error_distance<DB: DrawingBackend>(
         .x_label_area_size(40)
         .y_label_area_size(70)
         .build_cartesian_2d(d0.max(0.0)..d1, 0.0..(max * 1.15).max(1e-3))
-        .map_err(err)?;
+        .map_err(PlotError::drawing)?;
     ctx.configure_mesh()
         .light_line_style(WHITE)
         .x_desc("distance travelled [m]")
@@ -281,14 +281,14 @@ fn draw_error_distance<DB: DrawingBackend>(
         .label_style(("sans-serif", FONT))
         .axis_desc_style(("sans-serif", FONT + 1))
         .draw()
-        .map_err(err)?;
+        .map_err(PlotError::drawing)?;
     ctx.draw_series(LineSeries::new(pts.clone(), ESTIMATE.stroke_width(2)))
-        .map_err(err)?;
+        .map_err(PlotError::drawing)?;
     ctx.draw_series(
         pts.iter()
             .map(|&(d, e)| Circle::new((d, e), 4, error_color(e, max).filled())),
     )
-    .map_err(err)?;
+    .map_err(PlotError::drawing)?;
     Ok(())
 }
 
@@ -322,12 +322,12 @@ pub fn write_run_figures(
         {
             let area = BitMapBackend::new(&png, SIZE).into_drawing_area();
             draw_figure(k, &area, poses, eval)?;
-            area.present().map_err(err)?;
+            area.present().map_err(PlotError::drawing)?;
         }
         {
             let area = SVGBackend::with_string(&mut svgs[k], SIZE).into_drawing_area();
             draw_figure(k, &area, poses, eval)?;
-            area.present().map_err(err)?;
+            area.present().map_err(PlotError::drawing)?;
         }
         std::fs::write(dir.join(format!("{prefix}{stem}.svg")), &svgs[k])
             .map_err(|e| PlotError(format!("{}: {e}", dir.display())))?;
