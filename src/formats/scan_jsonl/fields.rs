@@ -1,13 +1,28 @@
 //! Deserialisers of one field's value each (a number, a count, a per-ray array, a pose, a
 //! timestamp, ...), whose errors say what was wrong and, in arrays, at which index.
 
-use super::record::in_field;
 use crate::formats::limits;
 use crate::geometry::Pose;
 use crate::scan::{Hit, Timestamp};
 use serde::Deserialize;
 use serde::de::{self, Deserializer, SeqAccess, Visitor};
 use std::fmt;
+
+/// Prefixes an error from inside a field's value with the field's name: `readings[3]: ...`
+/// for element errors (which start with `[i]`), `readings: ...` otherwise.
+pub(super) fn in_field<E: de::Error>(field: &str, e: E) -> E {
+    let text = e.to_string();
+    // serde_json has already placed the inner error; its position is added again outside.
+    let text = match text.rfind(" at line ") {
+        Some(i) => &text[..i],
+        None => &text[..],
+    };
+    if text.starts_with('[') {
+        E::custom(format!("{field}{text}"))
+    } else {
+        E::custom(format!("{field}: {text}"))
+    }
+}
 
 /// Types that are read as a value of one JSON field.
 pub(super) trait Value: Sized {

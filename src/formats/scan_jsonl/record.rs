@@ -2,7 +2,9 @@
 //! visitor that names the field of every error), then the cross-field checks that make it a
 //! [`Scan`].
 
-use super::fields::{Array, Count, Flag, HitCode, HitLen, Num, Offset, Opt, PoseField, Stamp};
+use super::fields::{
+    Array, Count, Flag, HitCode, HitLen, Num, Offset, Opt, PoseField, Stamp, in_field,
+};
 use crate::formats::limits;
 use crate::geometry::Pose;
 use crate::scan::{Hit, Scan, Timestamp, even_bearings};
@@ -144,22 +146,6 @@ impl<'de> Deserialize<'de> for Key {
             }
         }
         d.deserialize_identifier(KeyVisitor)
-    }
-}
-
-/// Prefixes an error from inside a field's value with the field's name: `readings[3]: ...`
-/// for element errors (which start with `[i]`), `readings: ...` otherwise.
-pub(super) fn in_field<E: de::Error>(field: &str, e: E) -> E {
-    let text = e.to_string();
-    // serde_json has already placed the inner error; its position is added again outside.
-    let text = match text.rfind(" at line ") {
-        Some(i) => &text[..i],
-        None => &text[..],
-    };
-    if text.starts_with('[') {
-        E::custom(format!("{field}{text}"))
-    } else {
-        E::custom(format!("{field}: {text}"))
     }
 }
 
