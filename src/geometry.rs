@@ -245,6 +245,30 @@ pub fn minor_axis_2x2(m: &Matrix2<f64>) -> Vector2<f64> {
     Vector2::new(-s, co)
 }
 
+/// The inverse of a symmetric 2x2 matrix on the directions it fixes (eigenvalues above 1e-12
+/// of the largest), zero on the others: eliminating a block of normal equations (a surface's
+/// or a wall's placement, by the Schur complement) where the data leave part of it free, whose
+/// free directions then couple to nothing either. `None` when the matrix is not finite.
+pub(crate) fn pseudo_inverse_2x2(m: &Matrix2<f64>) -> Option<Matrix2<f64>> {
+    if !m.iter().all(|v| v.is_finite()) {
+        return None;
+    }
+    let eig = m.symmetric_eigen();
+    let top = eig.eigenvalues.amax();
+    if !top.is_finite() {
+        return None;
+    }
+    let mut inv = Matrix2::zeros();
+    for k in 0..2 {
+        let l = eig.eigenvalues[k];
+        if l > top * 1e-12 && l > 0.0 {
+            let v = eig.eigenvectors.column(k);
+            inv += v * v.transpose() / l;
+        }
+    }
+    Some(inv)
+}
+
 /// Builds `Ry(ry) · Rx(rx)` as a plain matrix, for hot loops.
 pub fn level_from_robot_matrix(att: &Attitude) -> Matrix3<f64> {
     *att.level_from_robot().matrix()
@@ -256,6 +280,18 @@ mod tests {
     use proptest::prelude::*;
 
     const EPS: f64 = 1e-12;
+
+    #[test]
+    fn pseudo_inverse_2x2_inverts_what_is_fixed_and_leaves_the_free_direction() {
+        let m = Matrix2::new(4.0, 1.0, 1.0, 3.0);
+        let inv = pseudo_inverse_2x2(&m).unwrap();
+        assert!((inv * m - Matrix2::identity()).norm() < EPS);
+        // Rank one: 2 v v^T inverts to v v^T / 2, zero along the perpendicular.
+        let v = Vector2::new(0.6, 0.8);
+        let inv = pseudo_inverse_2x2(&(2.0 * v * v.transpose())).unwrap();
+        assert!((inv - v * v.transpose() / 2.0).norm() < EPS);
+        assert!(pseudo_inverse_2x2(&Matrix2::new(f64::NAN, 0.0, 0.0, 1.0)).is_none());
+    }
 
     #[test]
     fn rot_y_positive_tilts_forward_beam_down() {

@@ -14,7 +14,8 @@
 //! complement's effective Jacobian, [`super::solve`]); on a right model the sandwich equals the
 //! information's inverse on average, so it widens nothing then but its own sampling spread.
 
-use super::evaluate::{Arrow, Ray, Score, pseudo_inverse};
+use super::evaluate::{Arrow, Ray, Score};
+use crate::geometry::pseudo_inverse_2x2;
 use nalgebra::{Matrix2, Vector2};
 
 /// `B`: over clusters of at most `cluster_rays` consecutive rays of one surface (`rays` in
@@ -34,7 +35,7 @@ pub(crate) fn clustered_meat(
     for run in rays.chunk_by(|a, b| a.slot == b.slot) {
         let (h_as, h_ss, _) = &arrow.blocks[run[0].slot];
         // The placement's share of each point's attitude Jacobian: ja - T js.
-        let t = h_as * pseudo_inverse(h_ss)?;
+        let t = h_as * pseudo_inverse_2x2(h_ss)?;
         let run_scores = &scores[start..start + run.len()];
         start += run.len();
         for cluster in run_scores.chunks(cluster_rays.max(1)) {

@@ -23,26 +23,6 @@ pub(crate) struct Arrow {
     pub blocks: Vec<(Matrix2<f64>, Matrix2<f64>, Vector2<f64>)>,
 }
 
-/// The inverse of a symmetric block of [`Arrow`] on the directions it fixes (eigenvalues above
-/// 1e-12 of the largest), zero on the others: a surface's placement eliminated by the Schur
-/// complement where the rays leave part of it free. `None` when the block is not finite.
-pub(crate) fn pseudo_inverse(m: &Matrix2<f64>) -> Option<Matrix2<f64>> {
-    let eig = m.symmetric_eigen();
-    let top = eig.eigenvalues.amax();
-    if !top.is_finite() {
-        return None;
-    }
-    let mut inv = Matrix2::zeros();
-    for k in 0..2 {
-        let l = eig.eigenvalues[k];
-        if l > top * 1e-12 && l > 0.0 {
-            let v = eig.eigenvectors.column(k);
-            inv += v * v.transpose() / l;
-        }
-    }
-    Some(inv)
-}
-
 /// A point the fit uses, as the passes read it.
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct Ray {

@@ -12,10 +12,11 @@
 //! the points are [`super::evaluate`]'s.
 
 use super::cluster::{clustered_meat, widened};
-use super::evaluate::{Arrow, Evaluation, Frame, Ray, Residual, evaluate, pseudo_inverse};
+use super::evaluate::{Arrow, Evaluation, Frame, Ray, Residual, evaluate};
 use super::model::{Placement, Plane, Rotations, initial_placement};
 use super::{LabelledPoint, MlError, MlParams, MlSolution, Surface, SurfaceFit, WallLine};
 use crate::geometry::Attitude;
+use crate::geometry::pseudo_inverse_2x2;
 use nalgebra::{Matrix2, Vector2};
 
 /// The points' grouping by surface and the state being refined.
@@ -481,7 +482,7 @@ fn reduced(arrow: &Arrow) -> Option<(Matrix2<f64>, Vector2<f64>)> {
     let mut s = arrow.h_aa;
     let mut g = arrow.g_a;
     for (h_as, h_ss, g_s) in &arrow.blocks {
-        let inv = pseudo_inverse(h_ss)?;
+        let inv = pseudo_inverse_2x2(h_ss)?;
         s -= h_as * inv * h_as.transpose();
         g -= h_as * inv * g_s;
     }
@@ -513,7 +514,7 @@ fn damped_step(arrow: &Arrow, lambda: f64) -> Option<(Vector2<f64>, Vec<Vector2<
         .blocks
         .iter()
         .map(|(h_as, h_ss, g_s)| {
-            Some(-(pseudo_inverse(h_ss)? * (g_s + h_as.transpose() * d_theta)))
+            Some(-(pseudo_inverse_2x2(h_ss)? * (g_s + h_as.transpose() * d_theta)))
         })
         .collect::<Option<Vec<_>>>()?;
     d_theta
