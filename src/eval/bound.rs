@@ -119,6 +119,11 @@ impl WallPlanes {
             .map(|&(_, plane)| plane)
     }
 
+    /// A plane's line in the world's plan: unit normal and offset (`normal . p = offset`).
+    pub fn line(&self, plane: usize) -> (Vector2<f64>, f64) {
+        self.lines[plane]
+    }
+
     /// Unit normal of a plane in the world frame.
     pub fn normal(&self, plane: usize) -> Vector3<f64> {
         let n = self.lines[plane].0;
