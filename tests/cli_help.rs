@@ -131,6 +131,7 @@ const VOCABULARY: &[(&str, &str)] = &[
         "Scanner's maximum range (m): a reading at or beyond it is no return",
     ),
     ("--output", "Output file"),
+    ("--plan", "A floor plan"),
     ("--out", "Directory for"),
     ("--format", "Output format"),
     ("--estimator", "Up-vector estimator"),

@@ -751,3 +751,83 @@ fn deskew_without_the_rays_timing_or_with_a_bad_one_is_refused_by_name() {
         assert_refused_by_name(&file.0, flag, bad);
     }
 }
+
+#[test]
+fn eval_real_with_the_plan_puts_the_matchers_rpe_beside_the_cramer_rao_bound() {
+    // A flat run simulated in two_rooms, as CSM's tools make them: the matcher's RPE median
+    // lies above the bound's (an efficient matcher's), but within a third of it.
+    let sim = bin()
+        .args(["simulate"])
+        .arg(plan("two_rooms"))
+        .args([
+            "--flat",
+            "--elevations",
+            "0",
+            "--sigma",
+            "0.01",
+            "--seed",
+            "3",
+        ])
+        .output()
+        .unwrap();
+    assert_ran(&sim);
+    let file = TempFile::new("flat.jsonl", &sim.stdout);
+    let dir = std::env::temp_dir().join(format!("levelscan-real-bound-{}", std::process::id()));
+    let out = bin()
+        .args([
+            "eval", "real", "--mode", "pairwise", "--seed", "3", "--plan",
+        ])
+        .arg(plan("two_rooms"))
+        .arg(&file.0)
+        .arg("--out")
+        .arg(&dir)
+        .output()
+        .unwrap();
+    assert_ran(&out);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        stderr.contains("Cramér-Rao bound over 319 consecutive pairs"),
+        "{stderr}"
+    );
+    let json: Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("real.json")).unwrap()).unwrap();
+    let result = &json[0];
+    let bound = &result["bound"];
+    assert_eq!(bound["pairs"], 319);
+    assert_eq!(bound["agreeing"], 1.0);
+    let efficient = bound["median_translation"].as_f64().unwrap();
+    let matched = result["matched"]["median_translation"].as_f64().unwrap();
+    assert!((0.001..0.003).contains(&efficient), "{bound}");
+    let ratio = matched / efficient;
+    assert!(
+        (1.0..1.35).contains(&ratio),
+        "matched {matched}, bound {efficient}"
+    );
+    let table = String::from_utf8(out.stdout).unwrap();
+    assert!(table.contains("| efficient median [mm] |"), "{table}");
+    let _ = std::fs::remove_dir_all(&dir);
+
+    // A log that was not simulated in the plan (the box log of the test above, or another
+    // plan) is refused, naming the log, rather than bounded against walls it never saw.
+    let out = bin()
+        .args(["eval", "real", "--plan"])
+        .arg(plan("office"))
+        .arg(&file.0)
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("flat.jsonl") && err.contains("office.wall") && err.contains("simulated in"),
+        "{err}"
+    );
+    // And the noise must be a length.
+    let out = bin()
+        .args(["eval", "real", "--range-sigma", "0", "--plan"])
+        .arg(plan("two_rooms"))
+        .arg(&file.0)
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--range-sigma"));
+}

@@ -5,13 +5,15 @@ use super::matching::{MatchOptions, ray_timing};
 use super::scan_input::open_scans;
 use super::{open_output, write_file};
 use anyhow::Context;
+use levelscan::eval::bound::WallPlanes;
 use levelscan::eval::drift::{DRIFT_LENGTHS, Drift};
 use levelscan::eval::matching::{ExperimentParams, matching_experiment};
+use levelscan::eval::pair_bound::{RunBound, run_bound};
 use levelscan::eval::real::{RealLog, RealResult, RealSweep, evaluate_real};
 use levelscan::formats::bag::BagOptions;
 use levelscan::formats::{CarmenParams, read_plan};
 use levelscan::matching::{DeskewParams, Mode, deskew_summary, scan_points, timed_scan_points};
-use levelscan::simulate::{AdaptiveParams, ScannerParams, elevations_centred};
+use levelscan::simulate::{AdaptiveParams, ScannerParams, World, elevations_centred};
 use levelscan::viz::plots::{MapPanel, map_panels_png, map_panels_svg, run_map_panel};
 use std::fmt::Write as _;
 use std::io::Write as _;
@@ -196,11 +198,74 @@ pub struct RealArgs {
     /// evo reads); none written when absent.
     #[arg(long)]
     pub out: Option<PathBuf>,
+    /// A floor plan, the one the logs were simulated in (`simulate PLAN --flat`): adds the
+    /// Cramér-Rao bound on each consecutive pair's motion, and the RPE median an efficient
+    /// matcher would show over the pairs beside the run's own.
+    #[arg(long)]
+    pub plan: Option<PathBuf>,
+    /// Range noise the logs were simulated with, for `--plan` (m, a standard deviation).
+    #[arg(long, default_value_t = 0.01, requires = "plan")]
+    pub range_sigma: f64,
     #[command(flatten)]
     pub options: MatchOptions,
     #[command(flatten)]
     pub bag: super::scan_input::BagArgs,
 }
+
+/// The scene of `eval real --plan`: the plan's world and its walls as lines.
+struct BoundScene {
+    name: String,
+    world: World,
+    planes: WallPlanes,
+    sigma: f64,
+}
+
+impl BoundScene {
+    fn read(args: &RealArgs) -> anyhow::Result<Option<Self>> {
+        let Some(path) = &args.plan else {
+            return Ok(None);
+        };
+        let sigma = args.range_sigma;
+        if !(sigma.is_finite() && sigma > 0.0) {
+            anyhow::bail!("--range-sigma must be a positive number of metres (got {sigma})");
+        }
+        let plan = read_plan(path)?;
+        Ok(Some(BoundScene {
+            name: path.display().to_string(),
+            world: World::from_plan(&plan),
+            planes: WallPlanes::new(&plan.segments()),
+            sigma,
+        }))
+    }
+
+    /// The bound over `log`'s consecutive pairs; an error when the log's readings do not
+    /// meet the plan's walls where its poses say (not simulated in this plan, or a real log).
+    fn bound(&self, log: &RealLog) -> anyhow::Result<Option<RunBound>> {
+        let bound = run_bound(
+            &self.world,
+            &self.planes,
+            &log.reference,
+            &log.points,
+            self.sigma,
+        );
+        if let Some(b) = &bound
+            && b.agreeing < MIN_AGREEING
+        {
+            anyhow::bail!(
+                "{}: only {:.1}% of its readings lie where {}'s walls are from the scans' poses: \
+                 --plan wants the plan the log was simulated in",
+                log.name,
+                100.0 * b.agreeing,
+                self.name
+            );
+        }
+        Ok(bound)
+    }
+}
+
+/// The share of a log's readings that must agree with `--plan` (a simulated log in its plan
+/// agrees on all but the rare reading more than five sigmas off).
+const MIN_AGREEING: f64 = 0.9;
 
 /// Reads a log's scans and reference poses.
 fn load_real_log(
@@ -266,6 +331,7 @@ fn load_real_log(
 pub fn run_real(args: RealArgs) -> anyhow::Result<()> {
     let params = args.options.params()?;
     let noise = args.odometry.params()?;
+    let scene = BoundScene::read(&args)?;
     let mut results: Vec<RealResult> = Vec::new();
     if let Some(dir) = &args.out {
         std::fs::create_dir_all(dir)
@@ -280,8 +346,11 @@ pub fn run_real(args: RealArgs) -> anyhow::Result<()> {
             &args.bag.options(false, Some("/scan_level")),
             args.options.deskew(),
         )?;
-        let result = evaluate_real(&log, &params, &noise, args.seed)
+        let mut result = evaluate_real(&log, &params, &noise, args.seed)
             .with_context(|| format!("{}: fewer than two scans", path.display()))?;
+        if let Some(scene) = &scene {
+            result.bound = scene.bound(&log)?;
+        }
         bar.finish_and_clear();
         eprintln!(
             "{}: {} scans, RPE median {:.2} mm (odometry {:.2} mm), drift at 10 m {}",
@@ -295,6 +364,15 @@ pub fn run_real(args: RealArgs) -> anyhow::Result<()> {
                 .find(|d| d.length == 10.0)
                 .map_or("-".into(), |d| format!("{:.2}%", d.translation_percent))
         );
+        if let Some(b) = &result.bound {
+            eprintln!(
+                "{}: Cramér-Rao bound over {} consecutive pairs: an efficient matcher's RPE median {:.2} mm; this run's is {:.2} times it",
+                result.name,
+                b.pairs,
+                b.median_translation * 1e3,
+                result.matched.median_translation / b.median_translation
+            );
+        }
         if let (Some(n), Some(sweep)) = (result.deskewed, &log.sweep) {
             let line = deskew_summary(&result.name, n, result.scans, &sweep.params);
             eprintln!("{line}");
@@ -304,7 +382,10 @@ pub fn run_real(args: RealArgs) -> anyhow::Result<()> {
         }
         results.push(result);
     }
-    let table = real_table(&results);
+    let mut table = real_table(&results);
+    if let Some(scene) = &scene {
+        table.push_str(&bound_table(&results, scene));
+    }
     write_stdout(&table, &args.logs)?;
     if let Some(dir) = &args.out {
         write_tables(dir, "real", &table, &results)?;
@@ -332,6 +413,35 @@ fn write_trajectories(
         write_file(&dir.join(format!("{stem}.{kind}.tum")), &text)?;
     }
     Ok(())
+}
+
+/// The bound's table (`--plan`): each run's RPE median beside an efficient matcher's.
+fn bound_table(results: &[RealResult], scene: &BoundScene) -> String {
+    let mut s = format!(
+        "\nCramér-Rao bound on consecutive pairs ({}, range sigma {} m): what an efficient matcher would show\n\n\
+         | log | pairs | unobservable | RPE median [mm] | efficient median [mm] | ratio | bound RMS [mm] | bound RMS heading [deg] |\n\
+         |---|---:|---:|---:|---:|---:|---:|---:|\n",
+        scene.name, scene.sigma
+    );
+    for r in results {
+        let Some(b) = &r.bound else {
+            let _ = writeln!(s, "| {} | - | - | - | - | - | - | - |", r.name);
+            continue;
+        };
+        let _ = writeln!(
+            s,
+            "| {} | {} | {} | {:.2} | {:.2} | {:.2} | {:.2} | {:.4} |",
+            r.name,
+            b.pairs,
+            b.unobservable,
+            r.matched.median_translation * 1e3,
+            b.median_translation * 1e3,
+            r.matched.median_translation / b.median_translation,
+            b.rms_translation * 1e3,
+            b.rms_rotation.to_degrees()
+        );
+    }
+    s
 }
 
 /// The results as a markdown table.

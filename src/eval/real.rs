@@ -13,6 +13,7 @@
 
 use super::drift::{DRIFT_LENGTHS, Drift, segment_drift};
 use super::metrics::{Rpe, rpe};
+use super::pair_bound::RunBound;
 use crate::geometry::{Pose, Pose2};
 use crate::matching::{
     DeskewParams, MatchReport, MatchStatus, Matcher, MatcherParams, SweepTracker,
@@ -93,6 +94,9 @@ pub struct RealResult {
     pub coarse: usize,
     /// Scans deskewed (`match --deskew`), when the run was; the others had no velocity.
     pub deskewed: Option<usize>,
+    /// The Cramér-Rao bound over the consecutive pairs, for a run simulated in a known plan
+    /// ([`super::pair_bound::run_bound`]; set by the caller, who has the plan).
+    pub bound: Option<RunBound>,
     /// The matched trajectory, one pose per scan (written as a TUM file beside the tables, for
     /// `evo`; not in the JSON).
     #[serde(skip)]
@@ -143,6 +147,7 @@ pub fn evaluate_real(
             .count(),
         coarse: reports.iter().filter(|r| r.coarse).count(),
         deskewed: deskewed.as_ref().map(|d| d.1),
+        bound: None,
         matched_poses: estimate,
         odometry_poses: odo,
     })
