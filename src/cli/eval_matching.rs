@@ -12,8 +12,13 @@ use levelscan::eval::pair_bound::{RunBound, run_bound};
 use levelscan::eval::real::{RealLog, RealResult, RealSweep, evaluate_real};
 use levelscan::formats::bag::BagOptions;
 use levelscan::formats::{CarmenParams, read_plan};
-use levelscan::matching::{DeskewParams, Mode, deskew_summary, scan_points, timed_scan_points};
-use levelscan::simulate::{AdaptiveParams, ScannerParams, World, elevations_centred};
+use levelscan::matching::{
+    DeskewParams, MatcherParams, Mode, OdometryPrior, deskew_summary, scan_points,
+    timed_scan_points,
+};
+use levelscan::simulate::{
+    AdaptiveParams, OdometryParams, ScannerParams, World, elevations_centred,
+};
 use levelscan::viz::plots::{MapPanel, map_panels_png, map_panels_svg, run_map_panel};
 use std::fmt::Write as _;
 use std::io::Write as _;
@@ -70,6 +75,7 @@ pub fn run_matching(args: MatchingArgs) -> anyhow::Result<()> {
         "--sigma must be >= 0"
     );
     let odometry = args.odometry.params()?;
+    let matcher = told_the_odometry_noise(args.options.params()?, &odometry);
     let params = ExperimentParams {
         seed: args.seed,
         odometry,
@@ -79,7 +85,7 @@ pub fn run_matching(args: MatchingArgs) -> anyhow::Result<()> {
         },
         elevations: elevations_centred(args.scans, args.step.to_radians()),
         adaptive: (!args.no_retakes).then(AdaptiveParams::default),
-        matcher: args.options.params()?,
+        matcher,
         ..ExperimentParams::default()
     };
     if let Some(dir) = &args.out {
@@ -212,6 +218,27 @@ pub struct RealArgs {
     pub bag: super::scan_input::BagArgs,
 }
 
+/// The matcher told the odometry noise the experiment adds (`--odo-*`), as a user tells it
+/// their odometry's, unless `--prior-*` say otherwise (any of them off its default): the
+/// degeneracy-aware solve weighs the odometry for what the scans leave unpinned by it.
+fn told_the_odometry_noise(mut params: MatcherParams, noise: &OdometryParams) -> MatcherParams {
+    let (m, d) = (params.odometry, OdometryPrior::default());
+    let defaults = m.trans_per_m == d.trans_per_m
+        && m.trans_const == d.trans_const
+        && m.rot_per_rad == d.rot_per_rad
+        && m.rot_const == d.rot_const;
+    if defaults {
+        params.odometry = OdometryPrior {
+            trans_per_m: noise.trans_per_m,
+            trans_const: noise.trans_const,
+            rot_per_rad: noise.rot_per_rad,
+            rot_const: noise.rot_const,
+            ..m
+        };
+    }
+    params
+}
+
 /// The scene of `eval real --plan`: the plan's world and its walls as lines.
 struct BoundScene {
     name: String,
@@ -329,8 +356,8 @@ fn load_real_log(
 }
 
 pub fn run_real(args: RealArgs) -> anyhow::Result<()> {
-    let params = args.options.params()?;
     let noise = args.odometry.params()?;
+    let params = told_the_odometry_noise(args.options.params()?, &noise);
     let scene = BoundScene::read(&args)?;
     let mut results: Vec<RealResult> = Vec::new();
     if let Some(dir) = &args.out {

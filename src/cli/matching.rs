@@ -130,23 +130,25 @@ pub struct MatchOptions {
     /// against it and takes the midpoint of the two motions).
     #[arg(long)]
     pub one_way: bool,
-    /// Weigh the odometry as a Gaussian prior in ICP (MAP instead of scans alone), with the
-    /// noise model of the --prior-* flags.
+    /// Weigh the odometry as a Gaussian prior in every ICP solve (MAP instead of scans alone),
+    /// with the noise model of the --prior-* flags.
     #[arg(long)]
     pub odometry_prior: bool,
-    /// Odometry prior: translation sigma per metre of the step (x and y each).
+    /// Odometry noise: translation sigma per metre of the step (x and y each): how far the
+    /// odometry is trusted for directions a scan leaves unpinned, what a fallback step is
+    /// worth, and the prior with --odometry-prior.
     #[arg(long, default_value_t = OdometryPrior::default().trans_per_m)]
     pub prior_trans: f64,
-    /// Odometry prior: translation sigma added to every step (m).
+    /// Odometry noise: translation sigma added to every step (m), as --prior-trans.
     #[arg(long, default_value_t = OdometryPrior::default().trans_const)]
     pub prior_trans_min: f64,
-    /// Odometry prior: heading sigma per radian of the step.
+    /// Odometry noise: heading sigma per radian of the step, as --prior-trans.
     #[arg(long, default_value_t = OdometryPrior::default().rot_per_rad)]
     pub prior_rot: f64,
-    /// Odometry prior: heading sigma added to every step (deg).
+    /// Odometry noise: heading sigma added to every step (deg), as --prior-trans.
     #[arg(long, default_value_t = OdometryPrior::default().rot_const.to_degrees())]
     pub prior_rot_min: f64,
-    /// Odometry prior: sigma of one ICP residual, the scale between scans and odometry (m).
+    /// Odometry noise: sigma of one ICP residual, the scale between scans and odometry (m).
     #[arg(long, default_value_t = OdometryPrior::default().residual_sigma)]
     pub prior_residual_sigma: f64,
     /// Covariance: variance factor over the sandwich estimate at low residuals.
@@ -348,13 +350,14 @@ impl MatchOptions {
             },
             symmetric: !self.one_way,
             local_tolerance_factor: MatcherParams::default().local_tolerance_factor,
-            odometry_prior: self.odometry_prior.then_some(OdometryPrior {
+            odometry: OdometryPrior {
                 trans_per_m: self.prior_trans,
                 trans_const: self.prior_trans_min,
                 rot_per_rad: self.prior_rot,
                 rot_const: self.prior_rot_min.to_radians(),
                 residual_sigma: self.prior_residual_sigma,
-            }),
+            },
+            odometry_prior: self.odometry_prior,
             covariance: CovarianceParams {
                 noise_inflation: self.cov_inflation,
                 noise_knee: self.cov_knee,

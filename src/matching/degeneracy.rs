@@ -20,11 +20,11 @@ pub(crate) fn remap_around(
     at: Pose2,
     step: &Pose2,
 ) -> Option<Remap> {
-    if params.odometry_prior.is_some() && has_odometry {
+    if params.odometry_prior && has_odometry {
         return None;
     }
     Some(Remap {
-        anchor: params.odometry_prior.unwrap_or_default().around(at, step),
+        anchor: params.odometry.around(at, step),
         min_ratio: params.checks.min_information_ratio?,
         min_constraint_ratio: params.checks.min_constraint_ratio,
     })

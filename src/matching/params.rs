@@ -53,9 +53,13 @@ pub struct MatcherParams {
     /// 079) fewer instructions than 1, drift at 10 m over seeds 1-10 within the seeds' spread
     /// (docs/RESULTS.md). 1 converges both stages alike.
     pub local_tolerance_factor: f64,
-    /// Weigh the odometry as a prior in every ICP solve; `None` (the default) trusts the scans
-    /// alone and uses the odometry only as the first guess.
-    pub odometry_prior: Option<OdometryPrior>,
+    /// The odometry's noise per step: how far the degeneracy-aware solve trusts the odometry
+    /// for the directions a scan leaves unpinned (`CheckParams::min_information_ratio`), what
+    /// a step that falls back to odometry is worth, and the prior with `odometry_prior`.
+    pub odometry: OdometryPrior,
+    /// Weigh the odometry as a prior in every ICP solve; false (the default) trusts the scans
+    /// alone and uses the odometry as the first guess and for what the scans leave unpinned.
+    pub odometry_prior: bool,
     /// How the match's covariance is widened for errors the residuals do not show.
     pub covariance: CovarianceParams,
 }
@@ -73,14 +77,15 @@ impl Default for MatcherParams {
             ranges: RangeParams::default(),
             symmetric: true,
             local_tolerance_factor: 100.0,
-            odometry_prior: None,
+            odometry: OdometryPrior::default(),
+            odometry_prior: false,
             covariance: CovarianceParams::default(),
         }
     }
 }
 
-/// The odometry's noise per step, for the odometry prior: sigma = per-unit part x the step +
-/// constant part, the model `simulate::odometry` and `eval real` use.
+/// The odometry's noise per step: sigma = per-unit part x the step + constant part, the model
+/// `simulate::odometry` and `eval real` use to perturb it.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct OdometryPrior {
     /// Translation sigma per metre of the step, x and y each [m/m].

@@ -163,9 +163,8 @@ impl Matcher {
         let result = match remap_around(&self.params, self.has_odometry, guess, step) {
             Some(remap) => icp_remapped(points, target, start, remap, icp_params),
             None => {
-                let prior = (self.params.odometry_prior)
-                    .filter(|_| self.has_odometry)
-                    .map(|o| o.around(guess, step));
+                let prior = (self.params.odometry_prior && self.has_odometry)
+                    .then(|| self.params.odometry.around(guess, step));
                 icp_with_prior(points, target, start, prior, icp_params)
             }
         };

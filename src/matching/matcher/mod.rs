@@ -431,7 +431,7 @@ impl Matcher {
             Some(scan) => {
                 let k = inflation(&self.params.covariance, r.residual, self.rays_per_degree);
                 let scan = scan * k + from_odometry;
-                if self.params.odometry_prior.is_some() && self.has_odometry {
+                if self.params.odometry_prior && self.has_odometry {
                     // The odometry's is isotropic in x, y: the same in every frame.
                     fuse(&scan, &odometry).unwrap_or(scan)
                 } else {
@@ -447,10 +447,9 @@ impl Matcher {
         (rotate_into(&relative, reference.theta), own)
     }
 
-    /// The odometry noise model: the prior's when one is set, else the default (the
-    /// perturbation `simulate` and `eval real` apply).
+    /// The odometry's noise model (`MatcherParams::odometry`).
     fn odometry_model(&self) -> OdometryPrior {
-        self.params.odometry_prior.unwrap_or_default()
+        self.params.odometry
     }
 
     fn fallback(
