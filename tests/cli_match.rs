@@ -835,8 +835,9 @@ fn eval_real_with_the_plan_puts_the_matchers_rpe_beside_the_cramer_rao_bound() {
 #[test]
 fn metascan_has_no_bad_pair_on_a_flat_run_with_poor_odometry() {
     // The CSM-style flat run with 10 cm and 5 degrees of odometry noise per step: early on, the
-    // map of a few scans leaves a direction unpinned, which metascan's map stage took from the
-    // odometry guess (8 cm off at step 4 of seed 1) instead of from the scan-to-scan answer.
+    // map of a few scans leaves a direction unpinned, which metascan took from an odometry it
+    // thought good to 5 mm (8 cm off at step 4 of seed 1). eval real tells the matcher the
+    // noise it adds.
     let sim = bin()
         .args(["simulate"])
         .arg(plan("two_rooms"))
