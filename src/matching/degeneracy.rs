@@ -3,7 +3,7 @@
 //! an axis slid where the scan itself lets it.
 
 use super::icp::IcpResult;
-use super::params::MatcherParams;
+use super::params::{MatcherParams, OdometryPrior};
 use super::reference::Line;
 use super::report::FallbackReason;
 use super::solve::{Remap, symmetric_eigenvalues_2x2};
@@ -16,6 +16,7 @@ use nalgebra::{Matrix2, Vector2};
 /// (the MAP estimate already leans on the odometry where the scan is weak).
 pub(crate) fn remap_around(
     params: &MatcherParams,
+    odometry: &OdometryPrior,
     has_odometry: bool,
     at: Pose2,
     step: &Pose2,
@@ -24,7 +25,7 @@ pub(crate) fn remap_around(
         return None;
     }
     Some(Remap {
-        anchor: params.odometry.around(at, step),
+        anchor: odometry.around(at, step),
         min_ratio: params.checks.min_information_ratio?,
         min_constraint_ratio: params.checks.min_constraint_ratio,
     })

@@ -160,11 +160,12 @@ impl Matcher {
         (guess, step): (Pose2, &Pose2),
         icp_params: &IcpParams,
     ) -> Result<IcpResult, FallbackReason> {
-        let result = match remap_around(&self.params, self.has_odometry, guess, step) {
+        let odometry = self.odometry_model();
+        let result = match remap_around(&self.params, &odometry, self.has_odometry, guess, step) {
             Some(remap) => icp_remapped(points, target, start, remap, icp_params),
             None => {
                 let prior = (self.params.odometry_prior && self.has_odometry)
-                    .then(|| self.params.odometry.around(guess, step));
+                    .then(|| odometry.around(guess, step));
                 icp_with_prior(points, target, start, prior, icp_params)
             }
         };

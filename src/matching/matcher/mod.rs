@@ -6,6 +6,7 @@
 //! trustworthy the step falls back to the odometry and the report says why (CSM issue #17).
 
 mod align;
+mod odometry_check;
 mod trigger;
 
 use super::correlative::CorrelativeScratch;
@@ -89,6 +90,8 @@ pub struct Matcher {
     correlative: RefCell<CorrelativeScratch>,
     /// The run's recent inlier shares, which decide when `Coarse::Auto` searches.
     trigger: RefCell<trigger::CoarseTrigger>,
+    /// The run's recent odometry errors against its matches, which judge the odometry model.
+    odometry_check: odometry_check::OdometryCheck,
     /// Pairwise: the current scan as a reference, when the match the other way built it; it
     /// becomes the next keyframe instead of being built again.
     built: Option<ScanReference>,
@@ -109,6 +112,7 @@ impl Matcher {
             rays_per_degree: 0.0,
             correlative: RefCell::new(CorrelativeScratch::default()),
             trigger: RefCell::default(),
+            odometry_check: odometry_check::OdometryCheck::default(),
             built: None,
             lines: Vec::new(),
         }
@@ -379,6 +383,17 @@ impl Matcher {
             Ok(r) => {
                 let estimate = reference.base.compose(&r.pose);
                 let (covariance, own) = self.match_covariance(&r, &reference);
+                // A step the scans pinned whole measures the odometry's error on it.
+                if self.has_odometry && r.remapped.is_none_or(|m| m.free == 0) {
+                    let previous = reference
+                        .odometry_estimate
+                        .compose(&reference.step.inverse());
+                    self.odometry_check.record(
+                        &self.params.odometry,
+                        &reference.step,
+                        &previous.between(&estimate),
+                    );
+                }
                 self.remember(points, estimate, odometry);
                 self.keyframe_covariance = own;
                 MatchReport {
@@ -447,9 +462,10 @@ impl Matcher {
         (rotate_into(&relative, reference.theta), own)
     }
 
-    /// The odometry's noise model (`MatcherParams::odometry`).
+    /// The odometry's noise model (`MatcherParams::odometry`), scaled up where the run's
+    /// matches show the odometry far noisier ([`odometry_check`]).
     fn odometry_model(&self) -> OdometryPrior {
-        self.params.odometry
+        self.odometry_check.judged(&self.params.odometry)
     }
 
     fn fallback(
