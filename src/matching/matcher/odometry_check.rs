@@ -63,7 +63,12 @@ impl OdometryCheck {
             if history.len() < MIN_SEEN {
                 return 1.0;
             }
-            let mut v: Vec<f64> = history.iter().copied().collect();
+            // A copy on the stack: judged for every match, without allocating.
+            let mut v = [0.0; HISTORY];
+            for (slot, &z) in v.iter_mut().zip(history) {
+                *slot = z;
+            }
+            let v = &mut v[..history.len()];
             let mid = v.len() / 2;
             let (_, median, _) = v.select_nth_unstable_by(mid, f64::total_cmp);
             if *median > TRUST_UP_TO { *median } else { 1.0 }
