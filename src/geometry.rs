@@ -255,9 +255,6 @@ pub(crate) fn pseudo_inverse_2x2(m: &Matrix2<f64>) -> Option<Matrix2<f64>> {
     }
     let eig = m.symmetric_eigen();
     let top = eig.eigenvalues.amax();
-    if !top.is_finite() {
-        return None;
-    }
     let mut inv = Matrix2::zeros();
     for k in 0..2 {
         let l = eig.eigenvalues[k];

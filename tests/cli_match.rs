@@ -3,6 +3,7 @@
 mod cli_support;
 mod matching_support;
 use cli_support::*;
+use levelscan::geometry::Pose2;
 
 use serde_json::Value;
 use std::io::Write;
@@ -466,13 +467,7 @@ fn eval_real_scores_a_log_against_its_poses() {
         String::from_utf8_lossy(&out.stderr)
     );
     let table = String::from_utf8(out.stdout).unwrap();
-    let row: Vec<&str> = table
-        .lines()
-        .nth(2)
-        .unwrap()
-        .split('|')
-        .map(str::trim)
-        .collect();
+    let row = first_row(&table);
     // | log | scans | median | p95 | bad | odometry median | odometry bad | closure | ...
     assert_eq!(row[2], "25");
     let matched: f64 = row[3].parse().unwrap();
@@ -558,10 +553,8 @@ fn match_defaults_to_metascan_and_says_so() {
     assert!(help.contains("[default: metascan]"), "{help}");
 }
 
-#[test]
-fn a_step_down_a_hall_keeps_what_the_scan_pins_and_says_what_came_from_odometry() {
-    // simulate | level | match on the long hall: steps between pillars take the hall's
-    // length from odometry; they stay `ok` and list that direction.
+/// `simulate | level` on the long hall (seed 1), checked to have run.
+fn leveled_long_hall() -> Output {
     let sim = bin()
         .args([
             "simulate",
@@ -571,9 +564,17 @@ fn a_step_down_a_hall_keeps_what_the_scan_pins_and_says_what_came_from_odometry(
         ])
         .output()
         .unwrap();
-    assert!(sim.status.success());
+    assert_ran(&sim);
     let level = run_with_stdin(&["level"], &sim.stdout);
-    assert!(level.status.success());
+    assert_ran(&level);
+    level
+}
+
+#[test]
+fn a_step_down_a_hall_keeps_what_the_scan_pins_and_says_what_came_from_odometry() {
+    // simulate | level | match on the long hall: steps between pillars take the hall's
+    // length from odometry; they stay `ok` and list that direction.
+    let level = leveled_long_hall();
     for mode in ["pairwise", "metascan"] {
         let out = run_with_stdin(&["match", "--mode", mode], &level.stdout);
         assert!(out.status.success());
@@ -752,10 +753,9 @@ fn deskew_without_the_rays_timing_or_with_a_bad_one_is_refused_by_name() {
     }
 }
 
-#[test]
-fn eval_real_with_the_plan_puts_the_matchers_rpe_beside_the_cramer_rao_bound() {
-    // A flat run simulated in two_rooms, as CSM's tools make them: the matcher's RPE median
-    // lies above the bound's (an efficient matcher's), but within a third of it.
+/// `simulate` of two_rooms as CSM's tools make a log: flat, 1 cm range noise, with `extra`
+/// flags (checked to have run).
+fn flat_two_rooms(seed: &str, extra: &[&str]) -> Output {
     let sim = bin()
         .args(["simulate"])
         .arg(plan("two_rooms"))
@@ -766,11 +766,32 @@ fn eval_real_with_the_plan_puts_the_matchers_rpe_beside_the_cramer_rao_bound() {
             "--sigma",
             "0.01",
             "--seed",
-            "3",
+            seed,
         ])
+        .args(extra)
         .output()
         .unwrap();
     assert_ran(&sim);
+    sim
+}
+
+/// The cells of the first row of `eval real`'s table (after the log's name, `[1]`: scans,
+/// `[3]`: RPE median, `[5]`: bad pairs, ...).
+fn first_row(table: &str) -> Vec<&str> {
+    table
+        .lines()
+        .nth(2)
+        .unwrap()
+        .split('|')
+        .map(str::trim)
+        .collect()
+}
+
+#[test]
+fn eval_real_with_the_plan_puts_the_matchers_rpe_beside_the_cramer_rao_bound() {
+    // A flat run simulated in two_rooms, as CSM's tools make them: the matcher's RPE median
+    // lies above the bound's (an efficient matcher's), but within a third of it.
+    let sim = flat_two_rooms("3", &[]);
     let file = TempFile::new("flat.jsonl", &sim.stdout);
     let dir = std::env::temp_dir().join(format!("levelscan-real-bound-{}", std::process::id()));
     let out = bin()
@@ -838,21 +859,7 @@ fn metascan_has_no_bad_pair_on_a_flat_run_with_poor_odometry() {
     // map of a few scans leaves a direction unpinned, which metascan took from an odometry it
     // thought good to 5 mm (8 cm off at step 4 of seed 1). eval real tells the matcher the
     // noise it adds.
-    let sim = bin()
-        .args(["simulate"])
-        .arg(plan("two_rooms"))
-        .args([
-            "--flat",
-            "--elevations",
-            "0",
-            "--sigma",
-            "0.01",
-            "--seed",
-            "1",
-        ])
-        .output()
-        .unwrap();
-    assert_ran(&sim);
+    let sim = flat_two_rooms("1", &[]);
     let file = TempFile::new("flat-poor-odometry.jsonl", &sim.stdout);
     let out = bin()
         .args(["eval", "real", "--mode", "metascan", "--seed", "1"])
@@ -862,13 +869,7 @@ fn metascan_has_no_bad_pair_on_a_flat_run_with_poor_odometry() {
         .unwrap();
     assert_ran(&out);
     let table = String::from_utf8(out.stdout).unwrap();
-    let row: Vec<&str> = table
-        .lines()
-        .nth(2)
-        .unwrap()
-        .split('|')
-        .map(str::trim)
-        .collect();
+    let row = first_row(&table);
     // | log | scans | median | p95 | bad pairs | ...
     assert_eq!(row[5], "0", "{table}");
     let median: f64 = row[3].parse().unwrap();
@@ -877,20 +878,16 @@ fn metascan_has_no_bad_pair_on_a_flat_run_with_poor_odometry() {
 
 /// Steps of a `match` output off their true motion by more than 5 cm or 1 degree.
 fn bad_steps(records: &[Value]) -> usize {
-    let rel = |a: [f64; 3], b: [f64; 3]| {
-        let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
-        let (s, c) = a[2].sin_cos();
-        let dt = (b[2] - a[2] + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU)
-            - std::f64::consts::PI;
-        [c * dx + s * dy, -s * dx + c * dy, dt]
+    let pose = |r: &Value, key: &str| {
+        let [x, y, theta] = pose3(&r[key]);
+        Pose2::new(x, y, theta)
     };
     records
         .windows(2)
         .filter(|w| {
-            let e = rel(pose3(&w[0]["estimate"]), pose3(&w[1]["estimate"]));
-            let t = rel(pose3(&w[0]["true_pose"]), pose3(&w[1]["true_pose"]));
-            let dtheta = (e[2] - t[2]).abs();
-            (e[0] - t[0]).hypot(e[1] - t[1]) > 0.05 || dtheta > 1f64.to_radians()
+            let step = |key| pose(&w[0], key).between(&pose(&w[1], key));
+            let error = step("true_pose").between(&step("estimate"));
+            error.translation().norm() > 0.05 || error.theta.abs() > 1f64.to_radians()
         })
         .count()
 }
@@ -901,22 +898,7 @@ fn poor_odometry_is_weighed_as_poor_told_or_found_out() {
     // and 0.5 degree, metascan took what its young map leaves unpinned from that odometry (8 cm
     // off at step 4 of seed 1). Told the noise (--prior-*, without --odometry-prior), or
     // finding it out from its own matches, it has no bad step.
-    let sim = bin()
-        .args(["simulate"])
-        .arg(plan("two_rooms"))
-        .args([
-            "--flat",
-            "--elevations",
-            "0",
-            "--sigma",
-            "0.01",
-            "--seed",
-            "1",
-        ])
-        .args(["--odo-trans-min", "0.1", "--odo-rot-min", "5"])
-        .output()
-        .unwrap();
-    assert_ran(&sim);
+    let sim = flat_two_rooms("1", &["--odo-trans-min", "0.1", "--odo-rot-min", "5"]);
     for flags in [
         &["--prior-trans-min", "0.1", "--prior-rot-min", "5"][..],
         &[],
@@ -934,18 +916,7 @@ fn the_odometry_noise_flags_price_what_the_odometry_fills_in() {
     // Down the long hall, pairwise steps take the hall's length from odometry; their covariance
     // along it is the odometry model's, which --prior-trans-min sets without --odometry-prior
     // (on steps of about 1.5 m, 2% + 5 cm against 2% + 5 mm: about five times the variance).
-    let sim = bin()
-        .args([
-            "simulate",
-            plan("long_hall").to_str().unwrap(),
-            "--seed",
-            "1",
-        ])
-        .output()
-        .unwrap();
-    assert_ran(&sim);
-    let level = run_with_stdin(&["level"], &sim.stdout);
-    assert_ran(&level);
+    let level = leveled_long_hall();
     let along_hall = |flags: &[&str]| -> Vec<f64> {
         let mut args = vec!["--mode", "pairwise"];
         args.extend_from_slice(flags);

@@ -223,11 +223,12 @@ pub struct RealArgs {
 /// degeneracy-aware solve weighs the odometry for what the scans leave unpinned by it.
 fn told_the_odometry_noise(mut params: MatcherParams, noise: &OdometryParams) -> MatcherParams {
     let (m, d) = (params.odometry, OdometryPrior::default());
-    let defaults = m.trans_per_m == d.trans_per_m
-        && m.trans_const == d.trans_const
-        && m.rot_per_rad == d.rot_per_rad
-        && m.rot_const == d.rot_const;
-    if defaults {
+    // The sigmas as given; the residual scale is not the odometry's.
+    if (OdometryPrior {
+        residual_sigma: d.residual_sigma,
+        ..m
+    }) == d
+    {
         params.odometry = OdometryPrior {
             trans_per_m: noise.trans_per_m,
             trans_const: noise.trans_const,

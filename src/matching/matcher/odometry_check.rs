@@ -29,11 +29,41 @@ const RAYLEIGH_MEDIAN: f64 = 1.177_410_022_515_474_7;
 /// Median of `|e| / sigma` for a Gaussian heading error (half-normal).
 const HALF_NORMAL_MEDIAN: f64 = 0.674_489_750_196_081_7;
 
-/// The run's recent odometry errors over the model's sigmas, translation and heading.
-#[derive(Clone, Debug, Default)]
+/// The run's recent odometry errors over the model's sigmas, translation and heading, and
+/// the factors they put on the model's sigmas (judged once per recorded match, read by every
+/// solve).
+#[derive(Clone, Debug)]
 pub(super) struct OdometryCheck {
     translation: VecDeque<f64>,
     heading: VecDeque<f64>,
+    factors: (f64, f64),
+}
+
+impl Default for OdometryCheck {
+    fn default() -> Self {
+        Self {
+            translation: VecDeque::new(),
+            heading: VecDeque::new(),
+            factors: (1.0, 1.0),
+        }
+    }
+}
+
+/// The factor on the model's sigmas that `history` shows: its median where above
+/// [`TRUST_UP_TO`] (from [`MIN_SEEN`] errors on), else 1.
+fn factor(history: &VecDeque<f64>) -> f64 {
+    if history.len() < MIN_SEEN {
+        return 1.0;
+    }
+    // A copy on the stack: no allocation per match.
+    let mut v = [0.0; HISTORY];
+    for (slot, &z) in v.iter_mut().zip(history) {
+        *slot = z;
+    }
+    let v = &mut v[..history.len()];
+    let mid = v.len() / 2;
+    let (_, median, _) = v.select_nth_unstable_by(mid, f64::total_cmp);
+    if *median > TRUST_UP_TO { *median } else { 1.0 }
 }
 
 impl OdometryCheck {
@@ -54,26 +84,13 @@ impl OdometryCheck {
             }
             history.push_back(z);
         }
+        self.factors = (factor(&self.translation), factor(&self.heading));
     }
 
     /// `model` with its sigmas scaled by what the recent matches show, where they show the
     /// odometry more than [`TRUST_UP_TO`] times noisier than modelled.
     pub fn judged(&self, model: &OdometryPrior) -> OdometryPrior {
-        let factor = |history: &VecDeque<f64>| {
-            if history.len() < MIN_SEEN {
-                return 1.0;
-            }
-            // A copy on the stack: judged for every match, without allocating.
-            let mut v = [0.0; HISTORY];
-            for (slot, &z) in v.iter_mut().zip(history) {
-                *slot = z;
-            }
-            let v = &mut v[..history.len()];
-            let mid = v.len() / 2;
-            let (_, median, _) = v.select_nth_unstable_by(mid, f64::total_cmp);
-            if *median > TRUST_UP_TO { *median } else { 1.0 }
-        };
-        let (k_t, k_r) = (factor(&self.translation), factor(&self.heading));
+        let (k_t, k_r) = self.factors;
         OdometryPrior {
             trans_per_m: model.trans_per_m * k_t,
             trans_const: model.trans_const * k_t,
