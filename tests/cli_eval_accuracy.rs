@@ -234,3 +234,44 @@ fn elevations_beyond_a_turn_and_tilts_beyond_90_degrees_are_refused_by_name() {
         assert!(err.contains(flag) && !err.contains("panicked"), "{err}");
     }
 }
+
+/// A plan with no room for a random pose is named by its file, among several; a column built
+/// half into a room's wall leaves the room free, so its plan runs.
+#[test]
+fn a_plan_without_free_space_is_named_and_a_column_in_a_wall_is_no_trap() {
+    let dir = out_dir("free_space");
+    std::fs::create_dir_all(&dir).unwrap();
+    let column = dir.join("column.wall");
+    std::fs::write(
+        &column,
+        r#"{"version": "w0.1", "wallheight": 3.0, "walls": [
+            [[0, 0], [10, 0], [10, 8], [0, 8], [0, 0]],
+            [[4, 8.4], [4, 7.6], [4.6, 7.6], [4.6, 8.4], [4, 8.4]]]}"#,
+    )
+    .unwrap();
+    let cupboard = dir.join("cupboard.wall");
+    std::fs::write(
+        &cupboard,
+        r#"{"version": "w0.1", "wallheight": 3.0, "walls": [[[0, 0], [1, 0], [1, 1], [0, 1], [0, 0]]]}"#,
+    )
+    .unwrap();
+    let run = |plans: &[&Path]| {
+        bin()
+            .args(["eval", "accuracy"])
+            .args(plans)
+            .args(["--poses", "3", "--scans", "3", "--sigma", "0.01"])
+            .output()
+            .unwrap()
+    };
+    let ok = run(&[column.as_path()]);
+    assert!(ok.status.success(), "{}", String::from_utf8_lossy(&ok.stderr));
+    let bad = run(&[column.as_path(), cupboard.as_path()]);
+    let stderr = String::from_utf8_lossy(&bad.stderr);
+    assert_eq!(bad.status.code(), Some(1), "{stderr}");
+    assert!(
+        stderr.contains("cupboard.wall: no free space found"),
+        "{stderr}"
+    );
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    std::fs::remove_dir_all(&dir).ok();
+}

@@ -2,7 +2,9 @@
 
 use super::{LevelArgs, open_output, write_file};
 use anyhow::Context;
-use levelscan::eval::accuracy::{AccuracyParams, CellStats, Efficiency, run_accuracy_with};
+use levelscan::eval::accuracy::{
+    AccuracyError, AccuracyParams, CellStats, Efficiency, run_accuracy_with,
+};
 use levelscan::eval::true_segments::TrueSegmentsFit;
 use levelscan::formats::read_plan;
 use levelscan::level::{Estimator, LevelParams};
@@ -134,7 +136,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         (plans.len() * params.poses_per_plan) as u64,
         "eval accuracy",
     );
-    let stats = run_accuracy_with(&plans, &params, &|| bar.inc(1))?;
+    let stats = run_accuracy_with(&plans, &params, &|| bar.inc(1)).map_err(|e| match e {
+        AccuracyError::Plan { plan, source } => {
+            anyhow::anyhow!("{}: {source}", args.plans[plan].display())
+        }
+        e => e.into(),
+    })?;
     bar.finish_and_clear();
     let inputs: Vec<Option<&Path>> = args.plans.iter().map(|p| Some(p.as_path())).collect();
     let mut out = open_output(None, &inputs)?;

@@ -10,7 +10,7 @@
 //! Pure apart from the clock behind [`DemoData::timings_s`]: what it returns is what the report
 //! (`viz::demo_report`) shows and `report.json` holds. Writing files is the caller's.
 
-use super::accuracy::{AccuracyParams, CellStats, run_accuracy};
+use super::accuracy::{AccuracyError, AccuracyParams, CellStats, run_accuracy};
 use super::matching::{RunKind, RunResult, adaptive_attempt, match_scans, nearest_level_scan};
 use super::metrics::{Ate, Rpe};
 use crate::formats::level_record::level_record;
@@ -90,6 +90,8 @@ pub enum DemoError {
     Plan(#[from] InputError),
     #[error("Table I: cannot place random poses in the office plan: {0}")]
     TableOne(#[from] SimulateError),
+    #[error("Table I: {0}")]
+    Accuracy(#[from] AccuracyError),
 }
 
 /// One matched run's numbers.

@@ -3,8 +3,11 @@
 //!
 //! Plans are sets of polylines, not always closed. A closed polyline (first point == last,
 //! at least 3 points) bounds a region, and a point is inside it when the ray from the point
-//! towards +x crosses it an odd number of times. The plan's outline is closed when every wall
-//! piece lies within (or on) the outermost closed polylines: the plan is a closed building.
+//! towards +x crosses it an odd number of times. A closed polyline bounds either a room (free
+//! space inside) or a solid (a pillar, a box: none inside): it is solid when one of its corners
+//! lies strictly inside a larger closed polyline, as a pillar stands in its room, also when it
+//! is half built into the room's wall. The plan's outline is closed when it has rooms and every
+//! open wall lies within (or on) them: the plan is a closed building.
 //!
 //! Every test goes through the grid index ([`super::grid`]), so that a plan of many segments
 //! (long runs of collinear pieces, thousands of pillars) costs about linear time, not the
@@ -61,8 +64,9 @@ impl Polylines {
     }
 
     /// Whether the ray from `p` towards +x crosses the polylines an odd number of times in
-    /// all: `p` is inside an odd number of them.
-    pub(crate) fn odd_crossings(&self, p: &Point2<f64>) -> bool {
+    /// all: `p` is inside an odd number of them (the index's crossings, tested).
+    #[cfg(test)]
+    fn odd_crossings(&self, p: &Point2<f64>) -> bool {
         let mut odd = false;
         self.grid
             .for_each_crossing(&self.segments, p, |_| odd = !odd);
@@ -94,46 +98,127 @@ impl Polylines {
     }
 }
 
+/// Whether a wall is a closed polyline: at least 3 points, the first the last.
+fn is_closed(wall: &[Point2<f64>]) -> bool {
+    wall.len() >= 3 && wall.first() == wall.last()
+}
+
+/// A wall's pieces, zero-length ones skipped.
+fn pieces(wall: &[Point2<f64>]) -> impl Iterator<Item = Segment> + '_ {
+    wall.windows(2)
+        .map(|p| Segment { a: p[0], b: p[1] })
+        .filter(|s| s.length() > 0.0)
+}
+
 /// The closed polylines of a plan (first point == last point, at least 3 points), as
 /// segments (zero-length pieces skipped); a closed polyline of one point repeated has no
 /// segment and is left out.
 pub(crate) fn closed_polylines(plan: &Plan) -> Vec<Vec<Segment>> {
     plan.walls
         .iter()
-        .filter(|w| w.len() >= 3 && w.first() == w.last())
-        .map(|w| {
-            w.windows(2)
-                .map(|p| Segment { a: p[0], b: p[1] })
-                .filter(|s| s.length() > 0.0)
-                .collect::<Vec<_>>()
-        })
+        .filter(|w| is_closed(w))
+        .map(|w| pieces(w).collect::<Vec<_>>())
         .filter(|segments| !segments.is_empty())
         .collect()
 }
 
-/// True when the plan has closed polylines and every wall piece lies within (or on) the
-/// outermost of them: the plan is a closed building. A closed polyline is outermost when its
-/// first point is not strictly inside another one.
-pub(crate) fn outline_is_closed(plan: &Plan) -> bool {
-    let closed = Polylines::new(closed_polylines(plan));
-    let outer: Vec<Vec<Segment>> = (0..closed.len())
-        .filter(|&i| {
-            let first = closed.polyline(i)[0].a;
-            !closed
-                .odd_polylines(&first)
-                .into_iter()
-                .any(|j| j as usize != i && !closed.on(Some(j), &first))
-        })
-        .map(|i| closed.polyline(i).to_vec())
-        .collect();
-    if outer.is_empty() {
-        return false;
+/// The area a closed polyline encloses \[m²\] (the shoelace formula, unsigned).
+fn area(polyline: &[Segment]) -> f64 {
+    polyline
+        .iter()
+        .map(|s| s.a.x * s.b.y - s.b.x * s.a.y)
+        .sum::<f64>()
+        .abs()
+        / 2.0
+}
+
+/// What a plan's closed polylines bound: rooms, with free space inside, or solids (pillars,
+/// boxes), with none; and whether the rooms outline the whole plan.
+#[derive(Clone, Debug, Default)]
+pub(crate) struct Regions {
+    closed: Polylines,
+    /// Per closed polyline, in [`closed_polylines`]' order: whether it bounds a solid.
+    solid: Vec<bool>,
+    outline_closed: bool,
+}
+
+impl Regions {
+    pub(crate) fn of_plan(plan: &Plan) -> Regions {
+        let closed = Polylines::new(closed_polylines(plan));
+        let solid = solids(&closed);
+        let rooms = Polylines::new(
+            (0..closed.len())
+                .filter(|&k| !solid[k])
+                .map(|k| closed.polyline(k).to_vec()),
+        );
+        // Every open wall within (or on) a room; the closed ones are rooms themselves or
+        // solids, which may stand half outside the room that holds them.
+        let outline_closed = rooms.len() > 0
+            && plan
+                .walls
+                .iter()
+                .filter(|w| !is_closed(w))
+                .flat_map(|w| pieces(w))
+                .all(|s| {
+                    let mid = nalgebra::center(&s.a, &s.b);
+                    rooms.on(None, &mid) || !rooms.odd_polylines(&mid).is_empty()
+                });
+        Regions {
+            closed,
+            solid,
+            outline_closed,
+        }
     }
-    let outer = Polylines::new(outer);
-    plan.segments().iter().all(|s| {
-        let mid = nalgebra::center(&s.a, &s.b);
-        outer.on(None, &mid) || !outer.odd_polylines(&mid).is_empty()
-    })
+
+    /// The closed polylines' segments.
+    pub(crate) fn segments(&self) -> &[Segment] {
+        self.closed.segments()
+    }
+
+    /// Each closed polyline's segments, and whether it bounds a solid.
+    #[cfg(test)]
+    pub(crate) fn polylines(&self) -> impl Iterator<Item = (&[Segment], bool)> {
+        (0..self.closed.len()).map(|k| (self.closed.polyline(k), self.solid[k]))
+    }
+
+    /// True when the plan has rooms and every open wall lies within (or on) them: the plan is
+    /// a closed building.
+    pub(crate) fn outline_closed(&self) -> bool {
+        self.outline_closed
+    }
+
+    /// Whether `p` may be free space, clearance and enclosure aside: inside no solid and, in a
+    /// closed building, inside a room; where the rooms do not outline the plan (open outer
+    /// walls), inside no closed polyline at all.
+    pub(crate) fn open_at(&self, p: &Point2<f64>) -> bool {
+        let holders = self.closed.odd_polylines(p);
+        if self.outline_closed {
+            !holders.is_empty() && holders.iter().all(|&k| !self.solid[k as usize])
+        } else {
+            holders.is_empty()
+        }
+    }
+}
+
+/// Per closed polyline: whether one of its corners lies strictly inside a larger one (a
+/// pillar in its room, or half built into the room's wall). The largest polylines have no
+/// larger one to stand in and are not tested, so a building's long outline costs nothing.
+fn solids(closed: &Polylines) -> Vec<bool> {
+    let areas: Vec<f64> = (0..closed.len())
+        .map(|k| area(closed.polyline(k)))
+        .collect();
+    let largest = areas.iter().copied().fold(0.0, f64::max);
+    (0..closed.len())
+        .map(|i| {
+            areas[i] < largest
+                && closed.polyline(i).iter().any(|s| {
+                    closed.odd_polylines(&s.a).into_iter().any(|j| {
+                        let j = j as usize;
+                        j != i && areas[j] > areas[i] && !closed.on(Some(j as u32), &s.a)
+                    })
+                })
+        })
+        .collect()
 }
 
 #[cfg(test)]
@@ -156,28 +241,60 @@ mod tests {
         segments.iter().any(|s| s.distance_to(p) <= ON_POLYLINE)
     }
 
-    /// [`outline_is_closed`] by testing every segment against every polyline.
-    fn outline_is_closed_brute(plan: &Plan) -> bool {
+    /// [`Regions::of_plan`] by testing every segment against every polyline: which closed
+    /// polylines are solid, and whether the outline is closed.
+    fn regions_brute(plan: &Plan) -> (Vec<bool>, bool) {
         let closed = closed_polylines(plan);
-        let outer: Vec<&Vec<Segment>> = closed
-            .iter()
-            .enumerate()
-            .filter(|(i, c)| {
-                let first = c[0].a;
-                !closed
-                    .iter()
-                    .enumerate()
-                    .any(|(j, o)| j != *i && odd_crossings_brute(o, &first) && !on_brute(o, &first))
+        let areas: Vec<f64> = closed.iter().map(|c| area(c)).collect();
+        let solid: Vec<bool> = (0..closed.len())
+            .map(|i| {
+                closed[i].iter().any(|s| {
+                    (0..closed.len()).any(|j| {
+                        j != i
+                            && areas[j] > areas[i]
+                            && odd_crossings_brute(&closed[j], &s.a)
+                            && !on_brute(&closed[j], &s.a)
+                    })
+                })
             })
-            .map(|(_, c)| c)
             .collect();
-        !outer.is_empty()
-            && plan.segments().iter().all(|s| {
+        let rooms: Vec<&Vec<Segment>> = (0..closed.len())
+            .filter(|&k| !solid[k])
+            .map(|k| &closed[k])
+            .collect();
+        let open: Vec<Segment> = plan
+            .walls
+            .iter()
+            .filter(|w| !(w.len() >= 3 && w.first() == w.last()))
+            .flat_map(|w| w.windows(2).map(|p| Segment { a: p[0], b: p[1] }))
+            .filter(|s| s.length() > 0.0)
+            .collect();
+        let outline_closed = !rooms.is_empty()
+            && open.iter().all(|s| {
                 let mid = nalgebra::center(&s.a, &s.b);
-                outer
+                rooms
                     .iter()
                     .any(|o| on_brute(o, &mid) || odd_crossings_brute(o, &mid))
-            })
+            });
+        (solid, outline_closed)
+    }
+
+    /// [`Regions::open_at`] by testing every segment.
+    fn open_at_brute(plan: &Plan, p: &Point2<f64>) -> bool {
+        let closed = closed_polylines(plan);
+        let (solid, outline_closed) = regions_brute(plan);
+        let holders: Vec<usize> = (0..closed.len())
+            .filter(|&k| odd_crossings_brute(&closed[k], p))
+            .collect();
+        if outline_closed {
+            !holders.is_empty() && holders.iter().all(|&k| !solid[k])
+        } else {
+            holders.is_empty()
+        }
+    }
+
+    fn outline_is_closed(plan: &Plan) -> bool {
+        Regions::of_plan(plan).outline_closed()
     }
 
     fn square(x0: f64, y0: f64, x1: f64, y1: f64) -> Vec<Point2<f64>> {
@@ -203,6 +320,49 @@ mod tests {
         assert!(outline_is_closed(&plan(walls.clone())));
         walls.remove(0);
         assert!(!outline_is_closed(&plan(walls)));
+    }
+
+    #[test]
+    fn a_pillar_built_half_into_a_wall_is_solid_and_the_room_stays_free() {
+        // A 10 x 8 m room; a column across its north wall, drawn from a corner outside the
+        // room (its first point), and two boxes that overlap inside it.
+        let c = |x: f64, y: f64| Point2::new(x, y);
+        let column = vec![
+            c(4.0, 8.4),
+            c(4.0, 7.6),
+            c(4.6, 7.6),
+            c(4.6, 8.4),
+            c(4.0, 8.4),
+        ];
+        let walls = vec![
+            square(0.0, 0.0, 10.0, 8.0),
+            column,
+            square(6.0, 2.0, 8.0, 4.0),
+            square(7.0, 3.0, 9.0, 5.0),
+        ];
+        let regions = Regions::of_plan(&plan(walls));
+        assert_eq!(regions.solid, vec![false, true, true, true]);
+        assert!(regions.outline_closed());
+        assert!(regions.open_at(&c(2.0, 2.0)), "in the room");
+        assert!(
+            !regions.open_at(&c(4.3, 7.8)),
+            "in the column, inside the room"
+        );
+        assert!(
+            !regions.open_at(&c(4.3, 8.2)),
+            "in the column, outside the room"
+        );
+        assert!(!regions.open_at(&c(7.5, 3.5)), "where the boxes overlap");
+        assert!(!regions.open_at(&c(6.5, 2.5)), "in one box");
+        assert!(!regions.open_at(&c(12.0, 4.0)), "outside");
+        // Two rooms side by side, sharing a wall: both rooms.
+        let two = plan(vec![
+            square(0.0, 0.0, 5.0, 4.0),
+            square(5.0, 0.0, 12.0, 4.0),
+        ]);
+        let regions = Regions::of_plan(&two);
+        assert_eq!(regions.solid, vec![false, false]);
+        assert!(regions.open_at(&c(2.0, 2.0)) && regions.open_at(&c(8.0, 2.0)));
     }
 
     #[test]
@@ -246,7 +406,10 @@ mod tests {
             probes in prop::collection::vec((0i32..37, 0i32..37), 8),
         ) {
             let plan = plan(walls);
-            prop_assert_eq!(outline_is_closed(&plan), outline_is_closed_brute(&plan));
+            let regions = Regions::of_plan(&plan);
+            let (solid, outline_closed) = regions_brute(&plan);
+            prop_assert_eq!(regions.outline_closed(), outline_closed);
+            prop_assert_eq!(&regions.solid, &solid);
             let closed = closed_polylines(&plan);
             let flat: Vec<Segment> = closed.iter().flatten().copied().collect();
             let index = Polylines::new(closed);
@@ -255,6 +418,7 @@ mod tests {
                 let p = Point2::new(x as f64 / 4.0, y as f64 / 4.0);
                 prop_assert_eq!(index.odd_crossings(&p), odd_crossings_brute(&flat, &p));
                 prop_assert_eq!(index.on(None, &p), on_brute(&flat, &p));
+                prop_assert_eq!(regions.open_at(&p), open_at_brute(&plan, &p));
             }
         }
     }

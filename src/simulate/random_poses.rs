@@ -2,12 +2,13 @@
 //! per round, sect. 8.1).
 //!
 //! Plans are sets of polylines, not always closed, so "inside the building" takes two tests:
-//! the crossing parity with the CLOSED polylines, and enclosure: level rays in 16 directions
-//! all meet a wall within range. When the closed polylines outline the whole plan (every other
-//! wall lies within the outermost ones), free space is inside an odd number of them (a point
-//! in a closed pillar or box is inside two, hence not free). When they do not (open outer
-//! walls around closed pillars, or no closed polyline at all), free space is inside an even
-//! number: outside every pillar, and enclosure decides the rest.
+//! the CLOSED polylines, and enclosure: level rays in 16 directions all meet a wall within
+//! range. A closed polyline bounds a room, or a solid (a pillar, a box) when one of its
+//! corners lies inside a larger one (`plan::outline`). When the rooms outline the whole plan
+//! (every open wall lies within them), free space is inside a room and outside every solid,
+//! whether the solids stand free, overlap or are built half into a wall. When they do not
+//! (open outer walls around closed pillars, or no closed polyline at all), free space is
+//! outside every closed polyline, and enclosure decides the rest.
 
 use super::raycast::World;
 use super::{SimulateError, Stream, stream_rng};
@@ -49,15 +50,15 @@ impl Default for RandomPoseParams {
     }
 }
 
-/// True when `p` is inside the building (parity with closed polylines, and enclosed) and at
-/// least `clearance` metres from every wall.
+/// True when `p` is inside the building (in a room and no solid, and enclosed) and at least
+/// `clearance` metres from every wall.
 /// Both tests go through the spatial index, so a try costs about the same on a plan of
 /// 100,000 segments as on one of 10.
 pub fn is_free(world: &World, p: &Point2<f64>, clearance: f64, enclosure_range: f64) -> bool {
     if world.wall_within(p, clearance) {
         return false;
     }
-    if world.inside_odd_closed(p) != world.outline_closed() {
+    if !world.open_at(p) {
         return false;
     }
     // Level rays at mid-wall height, so they meet walls rather than the floor or ceiling.
@@ -118,16 +119,26 @@ mod tests {
 
     /// [`is_free`] by testing every segment, as it was before the index: its twin.
     fn is_free_brute(world: &World, p: &Point2<f64>, clearance: f64, range: f64) -> bool {
-        let crossings = world
-            .closed_segments()
+        let holders: Vec<bool> = world
+            .closed_polylines()
+            .filter(|(segments, _)| {
+                let crossings = segments
+                    .iter()
+                    .filter(|s| crate::plan::segment::crossing_x(s, p).is_some())
+                    .count();
+                crossings % 2 == 1
+            })
+            .map(|(_, solid)| solid)
+            .collect();
+        let open = if world.outline_closed() {
+            !holders.is_empty() && holders.iter().all(|solid| !solid)
+        } else {
+            holders.is_empty()
+        };
+        open && world
+            .segments()
             .iter()
-            .filter(|s| crate::plan::segment::crossing_x(s, p).is_some())
-            .count();
-        (crossings % 2 == 1) == world.outline_closed()
-            && world
-                .segments()
-                .iter()
-                .all(|s| s.distance_to(p) >= clearance)
+            .all(|s| s.distance_to(p) >= clearance)
             && (0..ENCLOSURE_RAYS).all(|k| {
                 let a = 2.0 * PI * k as f64 / ENCLOSURE_RAYS as f64;
                 let o = Point3::new(p.x, p.y, world.wall_height() / 2.0);
@@ -271,6 +282,40 @@ mod tests {
             poses
                 .iter()
                 .all(|p| !(4.0..=6.0).contains(&p.x) || !(3.0..=5.0).contains(&p.y))
+        );
+    }
+
+    #[test]
+    fn a_column_built_half_into_a_wall_leaves_the_room_free() {
+        // A column across the north wall, drawn from its corner outside the room: the room
+        // stays free space (before, the plan counted as open and no pose was found).
+        let c = |x: f64, y: f64| Point2::new(x, y);
+        let w = World::from_plan(&Plan {
+            wall_height: 3.0,
+            walls: vec![
+                square(0.0, 0.0, 10.0, 8.0),
+                vec![
+                    c(4.0, 8.4),
+                    c(4.0, 7.6),
+                    c(4.6, 7.6),
+                    c(4.6, 8.4),
+                    c(4.0, 8.4),
+                ],
+            ],
+            ceiling: false,
+            poses: vec![],
+        });
+        assert!(w.outline_closed());
+        assert!(is_free(&w, &c(2.0, 2.0), 0.5, 30.0));
+        assert!(
+            !is_free(&w, &c(4.3, 8.2), 0.0, 30.0),
+            "in the column, outside the room"
+        );
+        let poses = random_poses(&w, 50, &RandomPoseParams::default(), 1).unwrap();
+        assert!(
+            poses
+                .iter()
+                .all(|p| (0.5..=9.5).contains(&p.x) && (0.5..=7.5).contains(&p.y))
         );
     }
 

@@ -17,7 +17,7 @@
 use crate::plan::Plan;
 use crate::plan::Segment;
 use crate::plan::grid::SegmentGrid;
-use crate::plan::outline::{Polylines, closed_polylines, outline_is_closed};
+use crate::plan::outline::Regions;
 use crate::plan::segment::{MIN_RANGE, ray_segment};
 use crate::scan::Hit;
 use nalgebra::{Point2, Point3, Vector2, Vector3};
@@ -35,11 +35,9 @@ pub struct RayHit {
 #[derive(Clone, Debug)]
 pub struct World {
     segments: Vec<Segment>,
-    /// The closed polylines only (first point == last point), for inside tests.
-    closed: Polylines,
-    /// True when the closed polylines outline the whole plan (every other wall lies within
-    /// them): free space is then inside an odd number of them, else an even number.
-    outline_closed: bool,
+    /// The closed polylines (first point == last point) as rooms and solids, for the inside
+    /// tests of free space.
+    regions: Regions,
     wall_height: f64,
     ceiling: bool,
     grid: SegmentGrid,
@@ -49,8 +47,7 @@ impl World {
     /// Builds the scene of a plan (zero-length wall pieces are skipped).
     pub fn from_plan(plan: &Plan) -> World {
         let mut world = World::from_segments(plan.segments(), plan.wall_height, plan.ceiling);
-        world.closed = Polylines::new(closed_polylines(plan));
-        world.outline_closed = outline_is_closed(plan);
+        world.regions = Regions::of_plan(plan);
         world
     }
 
@@ -59,8 +56,7 @@ impl World {
         let grid = SegmentGrid::build(&segments);
         World {
             segments,
-            closed: Polylines::default(),
-            outline_closed: false,
+            regions: Regions::default(),
             wall_height,
             ceiling,
             grid,
@@ -73,12 +69,19 @@ impl World {
 
     /// The segments of the closed polylines.
     pub fn closed_segments(&self) -> &[Segment] {
-        self.closed.segments()
+        self.regions.segments()
     }
 
-    /// Whether `p` is inside an odd number of the closed polylines (crossing parity).
-    pub(crate) fn inside_odd_closed(&self, p: &Point2<f64>) -> bool {
-        self.closed.odd_crossings(p)
+    /// Each closed polyline's segments, and whether it bounds a solid (a pillar, a box)
+    /// rather than a room.
+    #[cfg(test)]
+    pub(crate) fn closed_polylines(&self) -> impl Iterator<Item = (&[Segment], bool)> {
+        self.regions.polylines()
+    }
+
+    /// Whether `p` may be free space, clearance and enclosure aside (see [`super::is_free`]).
+    pub(crate) fn open_at(&self, p: &Point2<f64>) -> bool {
+        self.regions.open_at(p)
     }
 
     /// Whether some wall comes closer to `p` than `clearance`, through the spatial index.
@@ -90,7 +93,7 @@ impl World {
 
     /// Whether the plan's closed polylines outline all of it (see [`super::is_free`]).
     pub fn outline_closed(&self) -> bool {
-        self.outline_closed
+        self.regions.outline_closed()
     }
 
     pub fn wall_height(&self) -> f64 {

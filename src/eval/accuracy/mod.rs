@@ -143,12 +143,28 @@ struct Scene {
     planes: WallPlanes,
 }
 
+/// Why [`run_accuracy`] could not run.
+#[derive(Debug, thiserror::Error, PartialEq)]
+pub enum AccuracyError {
+    /// A parameter of the simulated scanner is invalid.
+    #[error(transparent)]
+    Params(SimulateError),
+    /// No random pose could be placed in plan `plan` (its index in `plans`), so that a caller
+    /// can name the plan's file.
+    #[error("plan {plan} (counting from 0): {source}")]
+    Plan {
+        plan: usize,
+        #[source]
+        source: SimulateError,
+    },
+}
+
 /// Runs the experiment over `plans`. Returns one [`CellStats`] per (scans, noise, estimator),
 /// in that nesting order.
 pub fn run_accuracy(
     plans: &[Plan],
     params: &AccuracyParams,
-) -> Result<Vec<CellStats>, SimulateError> {
+) -> Result<Vec<CellStats>, AccuracyError> {
     run_accuracy_with(plans, params, &|| {})
 }
 
@@ -158,8 +174,10 @@ pub fn run_accuracy_with(
     plans: &[Plan],
     params: &AccuracyParams,
     pose_done: &(dyn Fn() + Sync),
-) -> Result<Vec<CellStats>, SimulateError> {
-    scanner_params(params, 0.0).validate()?;
+) -> Result<Vec<CellStats>, AccuracyError> {
+    scanner_params(params, 0.0)
+        .validate()
+        .map_err(AccuracyError::Params)?;
     let pose_params = RandomPoseParams {
         tilt: params.tilt_deg.to_radians(),
         clearance: params.clearance,
@@ -175,7 +193,8 @@ pub fn run_accuracy_with(
             params.poses_per_plan,
             &pose_params,
             params.seed.wrapping_add(pi as u64),
-        )?;
+        )
+        .map_err(|source| AccuracyError::Plan { plan: pi, source })?;
         tasks.extend(poses.into_iter().enumerate().map(|(k, p)| (pi, k, p)));
         let segments = plan.segments();
         let planes = WallPlanes::new(&segments);
