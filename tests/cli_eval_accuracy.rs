@@ -246,7 +246,7 @@ fn a_plan_without_free_space_is_named_and_a_column_in_a_wall_is_no_trap() {
         &column,
         r#"{"version": "w0.1", "wallheight": 3.0, "walls": [
             [[0, 0], [10, 0], [10, 8], [0, 8], [0, 0]],
-            [[4, 8.4], [4, 7.6], [4.6, 7.6], [4.6, 8.4], [4, 8.4]]]}"#,
+            [[4, 7.6], [4.6, 7.6], [4.6, 8.4], [4, 8.4], [4, 7.6]]]}"#,
     )
     .unwrap();
     let cupboard = dir.join("cupboard.wall");
@@ -264,7 +264,11 @@ fn a_plan_without_free_space_is_named_and_a_column_in_a_wall_is_no_trap() {
             .unwrap()
     };
     let ok = run(&[column.as_path()]);
-    assert!(ok.status.success(), "{}", String::from_utf8_lossy(&ok.stderr));
+    assert!(
+        ok.status.success(),
+        "{}",
+        String::from_utf8_lossy(&ok.stderr)
+    );
     let bad = run(&[column.as_path(), cupboard.as_path()]);
     let stderr = String::from_utf8_lossy(&bad.stderr);
     assert_eq!(bad.status.code(), Some(1), "{stderr}");

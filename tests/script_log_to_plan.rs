@@ -18,28 +18,6 @@ const ROOM: &str = r#"{"version": "w0.1", "wallheight": 3.0, "walls": [
   "poses": [[1.0, 1.0, 0.3, 20, 0, 0], [1.6, 1.3, 0.3, 35, 0, 0], [2.1, 2.9, 0.3, -60, 0, 0],
             [4.8, 3.1, 0.3, -150, 0, 0], [5.0, 0.9, 0.3, 120, 0, 0]]}"#;
 
-struct TempDir(PathBuf);
-
-impl Drop for TempDir {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_dir_all(&self.0);
-    }
-}
-
-fn python_or_skip() -> Option<String> {
-    let python = std::env::var("LEVELSCAN_PYTHON").unwrap_or_else(|_| "python3".into());
-    match Command::new(&python).arg("--version").output() {
-        Ok(o) if o.status.success() => Some(python),
-        _ if std::env::var("LEVELSCAN_REQUIRE_INTEROP").as_deref() == Ok("1") => {
-            panic!("{python} does not run and LEVELSCAN_REQUIRE_INTEROP=1")
-        }
-        _ => {
-            eprintln!("script_log_to_plan: SKIPPED: no {python}");
-            None
-        }
-    }
-}
-
 /// Noise-free flat scans of `plan` at its poses, 181 rays over 180 degrees.
 fn scans_of(plan: &Path) -> Vec<Value> {
     let out = bin()
@@ -99,11 +77,10 @@ fn carmen_log(scans: &[Value], robotlaser: bool) -> String {
 
 #[test]
 fn a_log_becomes_a_plan_that_scans_back_into_its_own_ranges() {
-    let Some(python) = python_or_skip() else {
+    let Some(python) = python_or_skip("script_log_to_plan") else {
         return;
     };
-    let dir = TempDir(std::env::temp_dir().join(format!("levelscan-l2p-{}", std::process::id())));
-    std::fs::create_dir_all(&dir.0).unwrap();
+    let dir = TempDir::new("l2p");
     let room = dir.0.join("room.wall");
     std::fs::write(&room, ROOM).unwrap();
     let original = scans_of(&room);

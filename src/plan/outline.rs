@@ -324,24 +324,30 @@ mod tests {
 
     #[test]
     fn a_pillar_built_half_into_a_wall_is_solid_and_the_room_stays_free() {
-        // A 10 x 8 m room; a column across its north wall, drawn from a corner outside the
-        // room (its first point), and two boxes that overlap inside it.
+        // A 10 x 8 m room; two columns across its north wall, one drawn from a corner inside
+        // the room, one from a corner outside it; two boxes that overlap inside the room.
         let c = |x: f64, y: f64| Point2::new(x, y);
-        let column = vec![
-            c(4.0, 8.4),
-            c(4.0, 7.6),
-            c(4.6, 7.6),
-            c(4.6, 8.4),
-            c(4.0, 8.4),
-        ];
         let walls = vec![
             square(0.0, 0.0, 10.0, 8.0),
-            column,
+            vec![
+                c(4.0, 7.6),
+                c(4.6, 7.6),
+                c(4.6, 8.4),
+                c(4.0, 8.4),
+                c(4.0, 7.6),
+            ],
+            vec![
+                c(1.0, 8.4),
+                c(1.0, 7.6),
+                c(1.6, 7.6),
+                c(1.6, 8.4),
+                c(1.0, 8.4),
+            ],
             square(6.0, 2.0, 8.0, 4.0),
             square(7.0, 3.0, 9.0, 5.0),
         ];
         let regions = Regions::of_plan(&plan(walls));
-        assert_eq!(regions.solid, vec![false, true, true, true]);
+        assert_eq!(regions.solid, vec![false, true, true, true, true]);
         assert!(regions.outline_closed());
         assert!(regions.open_at(&c(2.0, 2.0)), "in the room");
         assert!(

@@ -287,19 +287,19 @@ mod tests {
 
     #[test]
     fn a_column_built_half_into_a_wall_leaves_the_room_free() {
-        // A column across the north wall, drawn from its corner outside the room: the room
-        // stays free space (before, the plan counted as open and no pose was found).
+        // A column across the north wall, drawn from a corner inside the room: the room stays
+        // free space (before, the plan counted as open and no pose was found).
         let c = |x: f64, y: f64| Point2::new(x, y);
         let w = World::from_plan(&Plan {
             wall_height: 3.0,
             walls: vec![
                 square(0.0, 0.0, 10.0, 8.0),
                 vec![
-                    c(4.0, 8.4),
                     c(4.0, 7.6),
                     c(4.6, 7.6),
                     c(4.6, 8.4),
                     c(4.0, 8.4),
+                    c(4.0, 7.6),
                 ],
             ],
             ceiling: false,

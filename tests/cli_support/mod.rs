@@ -46,3 +46,39 @@ pub fn records(out: &Output) -> Vec<Value> {
         .map(|l| serde_json::from_str(l).unwrap())
         .collect()
 }
+
+/// A directory removed when the test ends.
+pub struct TempDir(pub std::path::PathBuf);
+
+impl TempDir {
+    /// A fresh directory under the system's temporary one, named after `name` and the process.
+    pub fn new(name: &str) -> TempDir {
+        let dir = std::env::temp_dir().join(format!("levelscan_{name}_{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        TempDir(dir)
+    }
+}
+
+impl Drop for TempDir {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}
+
+/// A Python 3 for the scripts under `scripts/` (standard library only): `LEVELSCAN_PYTHON`,
+/// else `python3`. `None` after saying `test` is skipped, unless `LEVELSCAN_REQUIRE_INTEROP=1`
+/// (CI), when a missing interpreter fails the test.
+pub fn python_or_skip(test: &str) -> Option<String> {
+    let python = std::env::var("LEVELSCAN_PYTHON").unwrap_or_else(|_| "python3".into());
+    match Command::new(&python).arg("--version").output() {
+        Ok(o) if o.status.success() => Some(python),
+        _ if std::env::var("LEVELSCAN_REQUIRE_INTEROP").as_deref() == Ok("1") => {
+            panic!("{test}: {python} does not run and LEVELSCAN_REQUIRE_INTEROP=1")
+        }
+        _ => {
+            eprintln!("{test}: SKIPPED: no {python}");
+            None
+        }
+    }
+}
