@@ -8,7 +8,7 @@ use cli_support::*;
 
 use serde_json::Value;
 use std::fmt::Write as _;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::Command;
 
 /// A room of 6 x 4 m with a pillar, and a path through it (x, y, heading in degrees).
