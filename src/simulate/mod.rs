@@ -40,7 +40,8 @@ pub enum SimulateError {
     NoWalls,
     #[error(
         "no free space found: {tries} random positions were tried for one pose, none inside the \
-         building and at least {clearance} m from every wall (lower the clearance?)"
+         building and at least {clearance} m from every wall (are the rooms enclosed by walls, \
+         and --clearance small enough for them?)"
     )]
     NoFreeSpace { tries: usize, clearance: f64 },
 }
