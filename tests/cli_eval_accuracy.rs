@@ -239,9 +239,8 @@ fn elevations_beyond_a_turn_and_tilts_beyond_90_degrees_are_refused_by_name() {
 /// half into a room's wall leaves the room free, so its plan runs.
 #[test]
 fn a_plan_without_free_space_is_named_and_a_column_in_a_wall_is_no_trap() {
-    let dir = out_dir("free_space");
-    std::fs::create_dir_all(&dir).unwrap();
-    let column = dir.join("column.wall");
+    let dir = TempDir::new("eval_free_space");
+    let column = dir.0.join("column.wall");
     std::fs::write(
         &column,
         r#"{"version": "w0.1", "wallheight": 3.0, "walls": [
@@ -249,7 +248,7 @@ fn a_plan_without_free_space_is_named_and_a_column_in_a_wall_is_no_trap() {
             [[4, 7.6], [4.6, 7.6], [4.6, 8.4], [4, 8.4], [4, 7.6]]]}"#,
     )
     .unwrap();
-    let cupboard = dir.join("cupboard.wall");
+    let cupboard = dir.0.join("cupboard.wall");
     std::fs::write(
         &cupboard,
         r#"{"version": "w0.1", "wallheight": 3.0, "walls": [[[0, 0], [1, 0], [1, 1], [0, 1], [0, 0]]]}"#,
@@ -263,12 +262,7 @@ fn a_plan_without_free_space_is_named_and_a_column_in_a_wall_is_no_trap() {
             .output()
             .unwrap()
     };
-    let ok = run(&[column.as_path()]);
-    assert!(
-        ok.status.success(),
-        "{}",
-        String::from_utf8_lossy(&ok.stderr)
-    );
+    assert_ran(&run(&[column.as_path()]));
     let bad = run(&[column.as_path(), cupboard.as_path()]);
     let stderr = String::from_utf8_lossy(&bad.stderr);
     assert_eq!(bad.status.code(), Some(1), "{stderr}");
@@ -277,5 +271,4 @@ fn a_plan_without_free_space_is_named_and_a_column_in_a_wall_is_no_trap() {
         "{stderr}"
     );
     assert!(!stderr.contains("panicked"), "{stderr}");
-    std::fs::remove_dir_all(&dir).ok();
 }

@@ -58,7 +58,7 @@ pub fn run_bound(
 ) -> Option<RunBound> {
     let tolerance = (AGREE_SIGMAS * sigma).max(0.05);
     // Every valid reading met something within the scanner's range: cast far.
-    let rays: Vec<(Vec<PairRay>, usize)> = poses
+    let (rays, agreeing): (Vec<Vec<PairRay>>, Vec<usize>) = poses
         .par_iter()
         .zip(points)
         .map(|(pose, pts)| {
@@ -75,10 +75,9 @@ pub fn run_bound(
                 .collect();
             (rays, agree)
         })
-        .collect();
+        .unzip();
     let readings: usize = points.iter().map(Vec::len).sum();
-    let agreeing = rays.iter().map(|r| r.1).sum::<usize>();
-    let rays: Vec<Vec<PairRay>> = rays.into_iter().map(|r| r.0).collect();
+    let agreeing: usize = agreeing.iter().sum();
     let covs: Vec<Option<Matrix3<f64>>> = (1..poses.len())
         .into_par_iter()
         .map(|i| {

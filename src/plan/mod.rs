@@ -131,11 +131,7 @@ impl Plan {
 
     /// Every wall segment of every polyline (zero-length pieces skipped).
     pub fn segments(&self) -> Vec<Segment> {
-        self.walls
-            .iter()
-            .flat_map(|w| w.windows(2).map(|p| Segment { a: p[0], b: p[1] }))
-            .filter(|s| s.length() > 0.0)
-            .collect()
+        self.walls.iter().flat_map(|w| wall_pieces(w)).collect()
     }
 
     /// Distance from `p` to the nearest wall, infinite for a plan with no walls.
@@ -153,6 +149,13 @@ impl Plan {
 }
 
 /// A rectangular room `w` x `h` with its corner at the origin: the scene of many unit tests.
+/// One wall polyline's segments, zero-length pieces skipped.
+pub(crate) fn wall_pieces(wall: &[Point2<f64>]) -> impl Iterator<Item = Segment> + '_ {
+    wall.windows(2)
+        .map(|p| Segment { a: p[0], b: p[1] })
+        .filter(|s| s.length() > 0.0)
+}
+
 #[cfg(test)]
 pub(crate) fn box_plan(w: f64, h: f64, height: f64, ceiling: bool) -> Plan {
     Plan {

@@ -13,9 +13,9 @@
 //! (long runs of collinear pieces, thousands of pillars) costs about linear time, not the
 //! square of its size; the brute-force twins in the tests must agree exactly.
 
-use super::Plan;
 use super::grid::SegmentGrid;
 use super::segment::Segment;
+use super::{Plan, wall_pieces};
 use nalgebra::Point2;
 
 /// Distance within which a point lies on a polyline \[m\].
@@ -103,13 +103,6 @@ fn is_closed(wall: &[Point2<f64>]) -> bool {
     wall.len() >= 3 && wall.first() == wall.last()
 }
 
-/// A wall's pieces, zero-length ones skipped.
-fn pieces(wall: &[Point2<f64>]) -> impl Iterator<Item = Segment> + '_ {
-    wall.windows(2)
-        .map(|p| Segment { a: p[0], b: p[1] })
-        .filter(|s| s.length() > 0.0)
-}
-
 /// The closed polylines of a plan (first point == last point, at least 3 points), as
 /// segments (zero-length pieces skipped); a closed polyline of one point repeated has no
 /// segment and is left out.
@@ -117,7 +110,7 @@ pub(crate) fn closed_polylines(plan: &Plan) -> Vec<Vec<Segment>> {
     plan.walls
         .iter()
         .filter(|w| is_closed(w))
-        .map(|w| pieces(w).collect::<Vec<_>>())
+        .map(|w| wall_pieces(w).collect::<Vec<_>>())
         .filter(|segments| !segments.is_empty())
         .collect()
 }
@@ -158,7 +151,7 @@ impl Regions {
                 .walls
                 .iter()
                 .filter(|w| !is_closed(w))
-                .flat_map(|w| pieces(w))
+                .flat_map(|w| wall_pieces(w))
                 .all(|s| {
                     let mid = nalgebra::center(&s.a, &s.b);
                     rooms.on(None, &mid) || !rooms.odd_polylines(&mid).is_empty()
@@ -265,9 +258,8 @@ mod tests {
         let open: Vec<Segment> = plan
             .walls
             .iter()
-            .filter(|w| !(w.len() >= 3 && w.first() == w.last()))
-            .flat_map(|w| w.windows(2).map(|p| Segment { a: p[0], b: p[1] }))
-            .filter(|s| s.length() > 0.0)
+            .filter(|w| !is_closed(w))
+            .flat_map(|w| wall_pieces(w))
             .collect();
         let outline_closed = !rooms.is_empty()
             && open.iter().all(|s| {

@@ -117,6 +117,16 @@ mod tests {
     use crate::plan::{Plan, Segment};
     use proptest::prelude::*;
 
+    /// The scene of a plan of `walls`, 3 m high, without a ceiling.
+    fn world(walls: Vec<Vec<Point2<f64>>>) -> World {
+        World::from_plan(&Plan {
+            wall_height: 3.0,
+            walls,
+            ceiling: false,
+            poses: vec![],
+        })
+    }
+
     /// [`is_free`] by testing every segment, as it was before the index: its twin.
     fn is_free_brute(world: &World, p: &Point2<f64>, clearance: f64, range: f64) -> bool {
         let holders: Vec<bool> = world
@@ -170,12 +180,12 @@ mod tests {
                 })
                 .collect();
             walls.extend(fences.iter().map(|&((ax, ay), (bx, by))| vec![c(ax, ay), c(bx, by)]));
-            let world = World::from_plan(&Plan { wall_height: 3.0, walls, ceiling: false, poses: vec![] });
+            let scene = world(walls);
             for (x, y) in probes {
                 let p = Point2::new(x as f64 / 4.0, y as f64 / 4.0);
                 prop_assert_eq!(
-                    is_free(&world, &p, clearance, 30.0),
-                    is_free_brute(&world, &p, clearance, 30.0),
+                    is_free(&scene, &p, clearance, 30.0),
+                    is_free_brute(&scene, &p, clearance, 30.0),
                     "at {:?}", p
                 );
             }
@@ -185,12 +195,7 @@ mod tests {
     #[test]
     fn walls_of_coincident_points_do_not_break_the_inside_tests() {
         let p = Point2::new(5.0, 5.0);
-        let w = World::from_plan(&Plan {
-            wall_height: 3.0,
-            walls: vec![square(0.0, 0.0, 10.0, 8.0), vec![p, p, p], vec![p, p]],
-            ceiling: false,
-            poses: vec![],
-        });
+        let w = world(vec![square(0.0, 0.0, 10.0, 8.0), vec![p, p, p], vec![p, p]]);
         assert!(w.outline_closed());
         assert!(is_free(&w, &Point2::new(2.0, 2.0), 0.5, 30.0));
         let poses = random_poses(&w, 20, &RandomPoseParams::default(), 1).unwrap();
@@ -209,12 +214,10 @@ mod tests {
     }
 
     fn room_with_pillar() -> World {
-        World::from_plan(&Plan {
-            wall_height: 3.0,
-            walls: vec![square(0.0, 0.0, 10.0, 8.0), square(4.0, 3.0, 6.0, 5.0)],
-            ceiling: false,
-            poses: vec![],
-        })
+        world(vec![
+            square(0.0, 0.0, 10.0, 8.0),
+            square(4.0, 3.0, 6.0, 5.0),
+        ])
     }
 
     #[test]
@@ -233,25 +236,20 @@ mod tests {
     #[test]
     fn open_polyline_plans_use_enclosure() {
         // Two open "U" shapes that together close a room: no closed polyline.
-        let w = World::from_plan(&Plan {
-            wall_height: 3.0,
-            walls: vec![
-                vec![
-                    Point2::new(5.0, 0.0),
-                    Point2::new(0.0, 0.0),
-                    Point2::new(0.0, 4.0),
-                    Point2::new(5.0, 4.0),
-                ],
-                vec![
-                    Point2::new(5.0, 0.0),
-                    Point2::new(8.0, 0.0),
-                    Point2::new(8.0, 4.0),
-                    Point2::new(5.0, 4.0),
-                ],
+        let w = world(vec![
+            vec![
+                Point2::new(5.0, 0.0),
+                Point2::new(0.0, 0.0),
+                Point2::new(0.0, 4.0),
+                Point2::new(5.0, 4.0),
             ],
-            ceiling: false,
-            poses: vec![],
-        });
+            vec![
+                Point2::new(5.0, 0.0),
+                Point2::new(8.0, 0.0),
+                Point2::new(8.0, 4.0),
+                Point2::new(5.0, 4.0),
+            ],
+        ]);
         assert!(w.closed_segments().is_empty());
         assert!(is_free(&w, &Point2::new(4.0, 2.0), 0.5, 30.0));
         assert!(!is_free(&w, &Point2::new(4.0, 6.0), 0.5, 30.0));
@@ -261,18 +259,13 @@ mod tests {
     fn closed_pillar_inside_open_outer_walls_is_not_free_space() {
         // Outer walls as four open pieces, a closed box inside: the box is solid.
         let c = |x: f64, y: f64| Point2::new(x, y);
-        let w = World::from_plan(&Plan {
-            wall_height: 3.0,
-            walls: vec![
-                vec![c(0.0, 0.0), c(10.0, 0.0)],
-                vec![c(10.0, 0.0), c(10.0, 8.0)],
-                vec![c(10.0, 8.0), c(0.0, 8.0)],
-                vec![c(0.0, 8.0), c(0.0, 0.0)],
-                square(4.0, 3.0, 6.0, 5.0),
-            ],
-            ceiling: false,
-            poses: vec![],
-        });
+        let w = world(vec![
+            vec![c(0.0, 0.0), c(10.0, 0.0)],
+            vec![c(10.0, 0.0), c(10.0, 8.0)],
+            vec![c(10.0, 8.0), c(0.0, 8.0)],
+            vec![c(0.0, 8.0), c(0.0, 0.0)],
+            square(4.0, 3.0, 6.0, 5.0),
+        ]);
         assert!(!w.outline_closed());
         assert!(is_free(&w, &c(2.0, 2.0), 0.5, 30.0));
         assert!(!is_free(&w, &c(5.0, 4.0), 0.5, 30.0), "in the box");
@@ -290,21 +283,16 @@ mod tests {
         // A column across the north wall, drawn from a corner inside the room: the room stays
         // free space (before, the plan counted as open and no pose was found).
         let c = |x: f64, y: f64| Point2::new(x, y);
-        let w = World::from_plan(&Plan {
-            wall_height: 3.0,
-            walls: vec![
-                square(0.0, 0.0, 10.0, 8.0),
-                vec![
-                    c(4.0, 7.6),
-                    c(4.6, 7.6),
-                    c(4.6, 8.4),
-                    c(4.0, 8.4),
-                    c(4.0, 7.6),
-                ],
+        let w = world(vec![
+            square(0.0, 0.0, 10.0, 8.0),
+            vec![
+                c(4.0, 7.6),
+                c(4.6, 7.6),
+                c(4.6, 8.4),
+                c(4.0, 8.4),
+                c(4.0, 7.6),
             ],
-            ceiling: false,
-            poses: vec![],
-        });
+        ]);
         assert!(w.outline_closed());
         assert!(is_free(&w, &c(2.0, 2.0), 0.5, 30.0));
         assert!(
@@ -324,24 +312,17 @@ mod tests {
         // A closed building with partitions touching its walls and a pillar: closed.
         assert!(room_with_pillar().outline_closed());
         let c = |x: f64, y: f64| Point2::new(x, y);
-        let w = World::from_plan(&Plan {
-            wall_height: 3.0,
-            walls: vec![
-                square(0.0, 0.0, 10.0, 8.0),
-                vec![c(3.0, 0.0), c(3.0, 3.0)],
-                vec![c(0.0, 5.0), c(10.0, 5.0)],
-            ],
-            ceiling: false,
-            poses: vec![],
-        });
+        let w = world(vec![
+            square(0.0, 0.0, 10.0, 8.0),
+            vec![c(3.0, 0.0), c(3.0, 3.0)],
+            vec![c(0.0, 5.0), c(10.0, 5.0)],
+        ]);
         assert!(w.outline_closed());
         // A closed box with a fence outside it: not an outline of everything.
-        let w = World::from_plan(&Plan {
-            wall_height: 3.0,
-            walls: vec![square(0.0, 0.0, 4.0, 4.0), vec![c(6.0, 0.0), c(6.0, 4.0)]],
-            ceiling: false,
-            poses: vec![],
-        });
+        let w = world(vec![
+            square(0.0, 0.0, 4.0, 4.0),
+            vec![c(6.0, 0.0), c(6.0, 4.0)],
+        ]);
         assert!(!w.outline_closed());
     }
 
