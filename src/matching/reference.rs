@@ -103,6 +103,13 @@ pub struct NormalParams {
     pub window: usize,
     /// A larger step between consecutive points ends the neighbourhood \[m\]. Default 0.3.
     pub max_gap: f64,
+    /// Far away, the step may be up to this many times the rays' spacing at the nearer
+    /// point's range instead [-]. Default 4: a surface seen at up to 75 degrees' incidence
+    /// (1 / cos 75° ≈ 4). Rays 1 degree apart meet a wall 20 m away 35 cm apart head-on; with
+    /// a fixed gap alone, the end walls and pillar faces that pin a hall's length would be
+    /// lone points, matched point to point, and the pairs' information would see only the
+    /// long walls (docs/RESULTS.md, ninth session).
+    pub gap_spacings: f64,
     /// Largest accepted thickness of the fit, sqrt(λ_min / λ_max) of the scatter [-].
     /// Default 0.15.
     pub max_thickness: f64,
@@ -113,6 +120,7 @@ impl Default for NormalParams {
         Self {
             window: 4,
             max_gap: 0.3,
+            gap_spacings: 4.0,
             max_thickness: 0.15,
         }
     }
@@ -127,7 +135,7 @@ pub fn estimate_lines(
     let n = points.len();
     // Chain break before index i when the step from i-1 is too long.
     let gap_before: Vec<bool> = (0..n)
-        .map(|i| i > 0 && (points[i] - points[i - 1]).norm() > params.max_gap)
+        .map(|i| i > 0 && is_gap(points[i - 1] - sensor, points[i] - sensor, params))
         .collect();
     (0..n)
         .map(|i| {
@@ -157,6 +165,15 @@ pub fn estimate_lines(
             Some(Line { normal, anchor })
         })
         .collect()
+}
+
+/// Whether consecutive points `u`, `v` (relative to the sensor) are too far apart to lie on
+/// one surface: farther than `max_gap` and than `gap_spacings` times the rays' spacing at
+/// the nearer range (`|u × v| / max(|u|, |v|)` = min(|u|, |v|) sin of the angle between them:
+/// the rays' spacing where no ray between them was dropped).
+fn is_gap(u: Vector2<f64>, v: Vector2<f64>, params: &NormalParams) -> bool {
+    let spacing = u.perp(&v).abs() / u.norm().max(v.norm()).max(f64::MIN_POSITIVE);
+    (u - v).norm() > params.max_gap.max(params.gap_spacings * spacing)
 }
 
 /// Total-least-squares line through `pts`: (scatter, whose minor axis is the unit normal;
@@ -283,6 +300,47 @@ mod tests {
             };
             assert!((n - expect).norm() < 1e-9, "point {i}: {n:?}");
         }
+    }
+
+    #[test]
+    fn a_far_wall_keeps_its_lines_and_a_step_between_surfaces_still_ends_a_chain() {
+        // Rays 1 degree apart meet a wall 20 m ahead about 35 cm apart: one surface.
+        let on_wall = |deg: f64| {
+            let a = deg.to_radians();
+            Point2::new(20.0, 20.0 * a.tan())
+        };
+        let wall: Vec<Point2<f64>> = (-10..=10).map(|d| on_wall(d as f64)).collect();
+        let lines = estimate_lines(&wall, &Point2::origin(), &NormalParams::default());
+        for (i, l) in lines.iter().enumerate() {
+            let l = l.unwrap_or_else(|| panic!("point {i} has no line"));
+            assert!(
+                (l.normal - Vector2::new(-1.0, 0.0)).norm() < 1e-9,
+                "{i}: {l:?}"
+            );
+        }
+        // With the fixed gap alone, every step is a gap and no point has a line.
+        let fixed = NormalParams {
+            gap_spacings: 0.0,
+            ..NormalParams::default()
+        };
+        let lines = estimate_lines(&wall, &Point2::origin(), &fixed);
+        assert!(lines.iter().all(Option::is_none));
+        // Far, consecutive points 2 m apart in depth are another surface (4 spacings at
+        // 20 m are 1.4 m); near, 0.3 m is the limit.
+        let p = NormalParams::default();
+        let o = Point2::origin();
+        let gap = |u: Point2<f64>, v: Point2<f64>| is_gap(u - o, v - o, &p);
+        assert!(!gap(on_wall(0.0), on_wall(1.0)));
+        assert!(gap(
+            on_wall(0.0),
+            Point2::new(22.0, 22.0 * 1f64.to_radians().tan())
+        ));
+        let at = |r: f64, deg: f64| {
+            let (s, c) = deg.to_radians().sin_cos();
+            Point2::new(r * c, r * s)
+        };
+        assert!(!gap(at(2.0, 0.0), at(2.25, 1.0)));
+        assert!(gap(at(2.0, 0.0), at(2.31, 1.0)));
     }
 
     #[test]

@@ -152,6 +152,16 @@ impl Matcher {
     /// ICP from `start` with the odometry's answer `odometry = (guess, step)` as a prior
     /// (`odometry_prior`; only a real odometry step makes one: identity means "no odometry")
     /// or as the anchor of the directions the scan leaves free.
+    ///
+    /// Trimming keeps the pairs that fit best, and where the odometry errs along a hall by
+    /// more than the kernel scale, the few pairs on an end wall or a pillar that pin its
+    /// length fit worst: trimmed, they leave the length free, the solve takes it from the
+    /// odometry, and the pairs stay misfit from every start. When the scan's own lines then
+    /// refuse that slide, the solve runs once more with every associated pair kept
+    /// (`min_overlap` 1; the robust kernel still bounds an outlier's pull), and that answer
+    /// faces the same tests. Only then: a slide the scan allows is kept as it is, since in a
+    /// leveled scan the trimmed pairs may as well be misfit points whose pull lies all along
+    /// the free direction (docs/RESULTS.md, tenth session).
     pub(super) fn icp_anchored<T: Target + ?Sized>(
         &self,
         points: &[Point2<f64>],
@@ -161,17 +171,27 @@ impl Matcher {
         icp_params: &IcpParams,
     ) -> Result<IcpResult, FallbackReason> {
         let odometry = self.odometry_model();
-        let result = match remap_around(&self.params, &odometry, self.has_odometry, guess, step) {
-            Some(remap) => icp_remapped(points, target, start, remap, icp_params),
-            None => {
-                let prior = (self.params.odometry_prior && self.has_odometry)
-                    .then(|| odometry.around(guess, step));
-                icp_with_prior(points, target, start, prior, icp_params)
+        let remap = remap_around(&self.params, &odometry, self.has_odometry, guess, step);
+        let solve = |icp_params: &IcpParams| {
+            match remap {
+                Some(remap) => icp_remapped(points, target, start, remap, icp_params),
+                None => {
+                    let prior = (self.params.odometry_prior && self.has_odometry)
+                        .then(|| odometry.around(guess, step));
+                    icp_with_prior(points, target, start, prior, icp_params)
+                }
             }
-        };
-        result
             .ok_or(FallbackReason::TooFewCorrespondences)
             .and_then(|r| slides_as_the_scan_does(&self.params, &self.lines, r))
+        };
+        match solve(icp_params) {
+            // The slide test refused the direction the kept pairs left free.
+            Err(FallbackReason::Degenerate) if icp_params.min_overlap < 1.0 => solve(&IcpParams {
+                min_overlap: 1.0,
+                ..*icp_params
+            }),
+            result => result,
+        }
     }
 
     pub(super) fn check(&self, r: IcpResult) -> Result<IcpResult, FallbackReason> {
