@@ -1,17 +1,17 @@
 //! End-to-end runs of `levelscan demo`: what it writes, that leveling beats raw scans on its run,
 //! and that the same seed gives the same numbers.
 
+mod cli_support;
+use cli_support::TempDir;
 use serde_json::Value;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::Command;
 
 const BIN: &str = env!("CARGO_BIN_EXE_levelscan");
 
-fn temp_dir(tag: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("levelscan-cli-demo-{tag}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
+/// A fresh directory for one test's demo, removed when the test ends.
+fn temp_dir(tag: &str) -> TempDir {
+    TempDir::new(&format!("cli-demo-{tag}"))
 }
 
 /// Runs the demo into `out` and returns its standard output and report.json.
@@ -51,8 +51,9 @@ fn ate(report: &Value, run: &str, mode: &str) -> f64 {
 
 #[test]
 fn demo_writes_a_self_contained_report_where_leveling_beats_raw_scans() {
-    let dir = temp_dir("report");
-    let (stdout, report) = demo(&dir);
+    let tmp = temp_dir("report");
+    let dir = &tmp.0;
+    let (stdout, report) = demo(dir);
     assert!(
         stdout.contains(&format!("report: {}", dir.join("report.html").display())),
         "{stdout}"
@@ -111,8 +112,9 @@ fn demo_writes_a_self_contained_report_where_leveling_beats_raw_scans() {
 
 #[test]
 fn eval_run_plots_the_demos_run_as_a_user_would() {
-    let dir = temp_dir("eval-run");
-    demo(&dir);
+    let tmp = temp_dir("eval-run");
+    let dir = &tmp.0;
+    demo(dir);
     let out = Command::new(BIN)
         .args(["eval", "run"])
         .arg(dir.join("scans_tilted.jsonl"))
@@ -165,9 +167,10 @@ fn eval_run_plots_the_demos_run_as_a_user_would() {
 
 #[test]
 fn demo_with_the_same_seed_gives_the_same_numbers_and_scans() {
-    let (a, b) = (temp_dir("seed-a"), temp_dir("seed-b"));
-    let (_, mut ra) = demo(&a);
-    let (_, mut rb) = demo(&b);
+    let (ta, tb) = (temp_dir("seed-a"), temp_dir("seed-b"));
+    let (a, b) = (&ta.0, &tb.0);
+    let (_, mut ra) = demo(a);
+    let (_, mut rb) = demo(b);
     ra.as_object_mut().unwrap().remove("timings_s");
     rb.as_object_mut().unwrap().remove("timings_s");
     assert_eq!(ra, rb);
@@ -182,7 +185,8 @@ fn demo_with_the_same_seed_gives_the_same_numbers_and_scans() {
 
 #[test]
 fn demo_rejects_too_few_scans_per_pose() {
-    let dir = temp_dir("bad");
+    let tmp = temp_dir("bad");
+    let dir = &tmp.0;
     let o = Command::new(BIN)
         .args(["demo", "--out", dir.to_str().unwrap(), "--scans", "2"])
         .output()
