@@ -60,7 +60,7 @@ impl Matcher {
         coarse_search: impl Fn(Pose2) -> Option<Pose2>,
     ) -> (Result<IcpResult, FallbackReason>, bool) {
         let p = &self.params;
-        let run = |g: Pose2| self.icp_anchored(points, target, g, (guess, &guess), icp);
+        let run = |g: Pose2| self.icp_anchored(points, target, g, (guess, &guess), icp, false);
         match p.coarse {
             Coarse::Never => (run(guess).and_then(|r| self.check(r)), false),
             Coarse::Always => {
@@ -156,12 +156,16 @@ impl Matcher {
     /// Trimming keeps the pairs that fit best, and where the odometry errs along a hall by
     /// more than the kernel scale, the few pairs on an end wall or a pillar that pin its
     /// length fit worst: trimmed, they leave the length free, the solve takes it from the
-    /// odometry, and the pairs stay misfit from every start. When the scan's own lines then
-    /// refuse that slide, the solve runs once more with every associated pair kept
-    /// (`min_overlap` 1; the robust kernel still bounds an outlier's pull), and that answer
-    /// faces the same tests. Only then: a slide the scan allows is kept as it is, since in a
-    /// leveled scan the trimmed pairs may as well be misfit points whose pull lies all along
-    /// the free direction (docs/RESULTS.md, tenth session).
+    /// odometry, and the pairs stay misfit from every start. So a solve that left a direction
+    /// free runs once more with every associated pair kept (`min_overlap` 1; the robust kernel
+    /// still bounds an outlier's pull), and that answer is taken when it pins more directions
+    /// and more pairs fit it (`quality`); it faces the same tests. When the scan's own lines
+    /// refuse the slide this is always tried. Otherwise only against the map
+    /// (`any_slide`): against one scan, a point the other scan did not see still finds a
+    /// partner on another surface, and such pairs, trimmed for their misfit, pull all along
+    /// the free direction, 13-18 cm on the one-side hall's leveled scans; against the map of
+    /// all earlier scans, a point's partner lies where its surface is (docs/RESULTS.md, tenth
+    /// session).
     pub(super) fn icp_anchored<T: Target + ?Sized>(
         &self,
         points: &[Point2<f64>],
@@ -169,6 +173,7 @@ impl Matcher {
         start: Pose2,
         (guess, step): (Pose2, &Pose2),
         icp_params: &IcpParams,
+        any_slide: bool,
     ) -> Result<IcpResult, FallbackReason> {
         let odometry = self.odometry_model();
         let remap = remap_around(&self.params, &odometry, self.has_odometry, guess, step);
@@ -184,13 +189,27 @@ impl Matcher {
             .ok_or(FallbackReason::TooFewCorrespondences)
             .and_then(|r| slides_as_the_scan_does(&self.params, &self.lines, r))
         };
-        match solve(icp_params) {
+        let trimmed = solve(icp_params);
+        let retry = match &trimmed {
+            Ok(r) => any_slide && free_directions(r) > 0,
             // The slide test refused the direction the kept pairs left free.
-            Err(FallbackReason::Degenerate) if icp_params.min_overlap < 1.0 => solve(&IcpParams {
-                min_overlap: 1.0,
-                ..*icp_params
-            }),
-            result => result,
+            Err(reason) => *reason == FallbackReason::Degenerate,
+        };
+        if !retry || icp_params.min_overlap >= 1.0 {
+            return trimmed;
+        }
+        let untrimmed = solve(&IcpParams {
+            min_overlap: 1.0,
+            ..*icp_params
+        });
+        match (trimmed, untrimmed) {
+            (Ok(t), Ok(u))
+                if free_directions(&u) < free_directions(&t) && quality(&u) > quality(&t) =>
+            {
+                Ok(u)
+            }
+            (Ok(t), _) => Ok(t),
+            (Err(_), untrimmed) => untrimmed,
         }
     }
 
@@ -222,6 +241,11 @@ fn same_pose(a: &Pose2, b: &Pose2) -> bool {
     a.x.to_bits() == b.x.to_bits()
         && a.y.to_bits() == b.y.to_bits()
         && a.theta.to_bits() == b.theta.to_bits()
+}
+
+/// How many directions a solve took from the odometry.
+fn free_directions(r: &IcpResult) -> usize {
+    r.remapped.map_or(0, |m| m.free)
 }
 
 /// Which of two ICP results to trust: more inliers, then the smaller residual.

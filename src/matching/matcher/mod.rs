@@ -341,6 +341,7 @@ impl Matcher {
                 start,
                 (guess, &step),
                 &self.refine_params(),
+                true,
             )
             .and_then(|r| self.check(r))
             .and_then(|r| self.gate(r, &guess));
