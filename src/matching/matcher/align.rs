@@ -60,7 +60,16 @@ impl Matcher {
         coarse_search: impl Fn(Pose2) -> Option<Pose2>,
     ) -> (Result<IcpResult, FallbackReason>, bool) {
         let p = &self.params;
-        let run = |g: Pose2| self.icp_anchored(points, target, g, (guess, &guess), icp, false);
+        let run = |g: Pose2| {
+            self.icp_anchored(
+                points,
+                target,
+                g,
+                (guess, &guess),
+                icp,
+                Untrimmed::WhenRefused,
+            )
+        };
         match p.coarse {
             Coarse::Never => (run(guess).and_then(|r| self.check(r)), false),
             Coarse::Always => {
@@ -159,13 +168,12 @@ impl Matcher {
     /// odometry, and the pairs stay misfit from every start. So a solve that left a direction
     /// free runs once more with every associated pair kept (`min_overlap` 1; the robust kernel
     /// still bounds an outlier's pull), and that answer is taken when it pins more directions
-    /// and more pairs fit it (`quality`); it faces the same tests. When the scan's own lines
-    /// refuse the slide this is always tried. Otherwise only against the map
-    /// (`any_slide`): against one scan, a point the other scan did not see still finds a
-    /// partner on another surface, and such pairs, trimmed for their misfit, pull all along
-    /// the free direction, 13-18 cm on the one-side hall's leveled scans; against the map of
-    /// all earlier scans, a point's partner lies where its surface is (docs/RESULTS.md, tenth
-    /// session).
+    /// and more pairs fit it (`quality`); it faces the same tests. `when` says which slides:
+    /// against one scan only those the scan's own lines refuse, since a point the other scan
+    /// did not see still finds a partner on another surface, and such pairs, trimmed for
+    /// their misfit, pull all along the free direction (13-18 cm on the one-side hall's
+    /// leveled scans); against the map of all earlier scans any, since a point's partner lies
+    /// where its surface is (docs/RESULTS.md, tenth session).
     pub(super) fn icp_anchored<T: Target + ?Sized>(
         &self,
         points: &[Point2<f64>],
@@ -173,7 +181,7 @@ impl Matcher {
         start: Pose2,
         (guess, step): (Pose2, &Pose2),
         icp_params: &IcpParams,
-        any_slide: bool,
+        when: Untrimmed,
     ) -> Result<IcpResult, FallbackReason> {
         let odometry = self.odometry_model();
         let remap = remap_around(&self.params, &odometry, self.has_odometry, guess, step);
@@ -191,7 +199,7 @@ impl Matcher {
         };
         let trimmed = solve(icp_params);
         let retry = match &trimmed {
-            Ok(r) => any_slide && free_directions(r) > 0,
+            Ok(r) => when == Untrimmed::WhenFree && free_directions(r) > 0,
             // The slide test refused the direction the kept pairs left free.
             Err(reason) => *reason == FallbackReason::Degenerate,
         };
@@ -241,6 +249,15 @@ fn same_pose(a: &Pose2, b: &Pose2) -> bool {
     a.x.to_bits() == b.x.to_bits()
         && a.y.to_bits() == b.y.to_bits()
         && a.theta.to_bits() == b.theta.to_bits()
+}
+
+/// When [`Matcher::icp_anchored`] solves once more with every associated pair kept.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) enum Untrimmed {
+    /// When the slide test refused the direction the kept pairs left free (against one scan).
+    WhenRefused,
+    /// When the kept pairs left any direction free (against the map).
+    WhenFree,
 }
 
 /// How many directions a solve took from the odometry.

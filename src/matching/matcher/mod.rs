@@ -6,6 +6,7 @@
 //! trustworthy the step falls back to the odometry and the report says why (CSM issue #17).
 
 mod align;
+use align::Untrimmed;
 mod odometry_check;
 mod trigger;
 
@@ -341,7 +342,7 @@ impl Matcher {
                 start,
                 (guess, &step),
                 &self.refine_params(),
-                true,
+                Untrimmed::WhenFree,
             )
             .and_then(|r| self.check(r))
             .and_then(|r| self.gate(r, &guess));
