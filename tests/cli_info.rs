@@ -46,12 +46,7 @@ fn simulated_run_is_summarised() {
     assert_eq!(j["returning_sequences"], 0);
     assert_eq!(j["rays"]["total"], 35 * 181);
     assert_eq!(j["rays"]["per_scan"], json!({"min": 181, "max": 181}));
-    let deg: Vec<f64> = j["elevations"]["deg"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|v| v.as_f64().unwrap())
-        .collect();
+    let deg = floats(&j["elevations"]["deg"]);
     assert_eq!(deg.len(), 5);
     for (d, want) in deg.iter().zip([-8.0, -4.0, 0.0, 4.0, 8.0]) {
         assert!((d - want).abs() < 1e-9, "{deg:?}");

@@ -110,12 +110,7 @@ fn simulated_run_is_matched_close_to_the_truth_in_both_modes() {
                 );
                 // match.covariance: 9 numbers, symmetric, positive on the diagonal; its x, y sigmas
                 // are millimetres, below the step tolerance.
-                let c: Vec<f64> = w[1]["match"]["covariance"]
-                    .as_array()
-                    .unwrap()
-                    .iter()
-                    .map(|v| v.as_f64().unwrap())
-                    .collect();
+                let c = floats(&w[1]["match"]["covariance"]);
                 assert_eq!(c.len(), 9);
                 assert!(c[1] == c[3] && c[2] == c[6] && c[5] == c[7], "{c:?}");
                 assert!(c[0] > 0.0 && c[4] > 0.0 && c[8] > 0.0, "{c:?}");
@@ -587,12 +582,7 @@ fn a_step_down_a_hall_keeps_what_the_scan_pins_and_says_what_came_from_odometry(
                 "ok" if !free.is_empty() => {
                     partial += 1;
                     // The hall runs along x: the free direction is (nearly) its length.
-                    let d: Vec<f64> = free[0]
-                        .as_array()
-                        .unwrap()
-                        .iter()
-                        .map(|v| v.as_f64().unwrap())
-                        .collect();
+                    let d = floats(&free[0]);
                     assert!((d.iter().map(|v| v * v).sum::<f64>() - 1.0).abs() < 1e-9);
                     assert!(d[0].abs() > 0.9, "{mode}: {d:?}");
                 }
@@ -930,20 +920,8 @@ fn the_odometry_noise_flags_price_what_the_odometry_fills_in() {
             .filter(|w| w[0]["match"]["status"] == "ok" && w[1]["match"]["status"] == "ok")
             .filter_map(|w| {
                 let r = &w[1];
-                let d: Vec<f64> = r["match"]["degenerate_directions"]
-                    .as_array()?
-                    .first()?
-                    .as_array()
-                    .unwrap()
-                    .iter()
-                    .map(|v| v.as_f64().unwrap())
-                    .collect();
-                let c: Vec<f64> = r["match"]["covariance"]
-                    .as_array()
-                    .unwrap()
-                    .iter()
-                    .map(|v| v.as_f64().unwrap())
-                    .collect();
+                let d = floats(r["match"]["degenerate_directions"].as_array()?.first()?);
+                let c = floats(&r["match"]["covariance"]);
                 Some(
                     (0..3)
                         .flat_map(|i| (0..3).map(move |j| (i, j)))

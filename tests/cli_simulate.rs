@@ -109,12 +109,7 @@ fn plan_poses_give_ordered_sequences_and_ground_truth_fields() {
     }
     // The first pose's odometry is its true planar pose.
     let p0 = plan_poses[0];
-    let odo0: Vec<f64> = recs[0]["odometry"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|v| v.as_f64().unwrap())
-        .collect();
+    let odo0 = floats(&recs[0]["odometry"]);
     assert!((odo0[0] - p0.x).abs() < 1e-12 && (odo0[2] - p0.rz).abs() < 1e-12);
 }
 

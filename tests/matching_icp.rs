@@ -438,6 +438,31 @@ fn the_correction_gate_applies_only_to_a_guess_from_odometry() {
     }
 }
 
+/// A plan under examples/plans, e.g. "long_hall" or "halls/pilaster_hall".
+fn example_plan(name: &str) -> levelscan::plan::Plan {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("examples/plans")
+        .join(format!("{name}.wall"));
+    levelscan::formats::read_plan(&path).unwrap()
+}
+
+/// Asserts that no step of `run` fell back whole for one of `reasons`.
+fn assert_none_thrown_away(
+    run: &levelscan::eval::matching::RunResult,
+    reasons: &[FallbackReason],
+    what: &str,
+) {
+    for (i, r) in run.reports.iter().enumerate() {
+        assert!(
+            !matches!(r.status, MatchStatus::Fallback(f) if reasons.contains(&f)),
+            "{what} {:?} {:?} step {i}: {:?}",
+            run.kind,
+            run.mode,
+            r.status
+        );
+    }
+}
+
 /// The halls of examples/plans (tilted 30-pose runs, 1.5 m steps, long parallel walls and a
 /// few pillars), leveled and matched as `eval matching` does: where a pose leveled, its scan
 /// pins some direction (the hall's width and the heading at least), so no step may be thrown
@@ -446,12 +471,9 @@ fn the_correction_gate_applies_only_to_a_guess_from_odometry() {
 fn tilted_runs_through_large_halls_keep_what_the_scans_pin() {
     use levelscan::eval::matching::{ExperimentParams, RunKind, matching_experiment};
     // All-or-nothing matching throws many of these steps away whole.
-    let path =
-        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/plans/long_hall.wall");
-    let plan = levelscan::formats::read_plan(&path).unwrap();
     let mut whole = ExperimentParams::default();
     whole.matcher.checks.min_information_ratio = None;
-    let (_, runs) = matching_experiment(&plan, &whole);
+    let (_, runs) = matching_experiment(&example_plan("long_hall"), &whole);
     let thrown = runs
         .iter()
         .filter(|r| r.kind == RunKind::Leveled && r.mode == Mode::Pairwise)
@@ -464,11 +486,8 @@ fn tilted_runs_through_large_halls_keep_what_the_scans_pin() {
     // reaches 7.1 cm; fixing one step may undo a lucky cancellation), so the limits hold for
     // the mean over the three draws, or the leveled runs stay within 10% of the control:
     // the same path on a level floor, matched the same way.
-    for plan in ["long_hall", "wide_hall"] {
-        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("examples/plans")
-            .join(format!("{plan}.wall"));
-        let plan = levelscan::formats::read_plan(&path).unwrap();
+    for name in ["long_hall", "wide_hall"] {
+        let plan = example_plan(name);
         // Per mode: the leveled runs' and the controls' ATE summed over the seeds.
         let mut sums = [(0.0, 0.0); 2];
         for seed in 1..=3 {
@@ -487,19 +506,14 @@ fn tilted_runs_through_large_halls_keep_what_the_scans_pin() {
                 let sum = &mut sums[(run.mode == Mode::Metascan) as usize];
                 sum.0 += run.ate.as_ref().unwrap().rmse;
                 sum.1 += control;
-                for (i, r) in run.reports.iter().enumerate() {
-                    assert!(
-                        !matches!(
-                            r.status,
-                            MatchStatus::Fallback(
-                                FallbackReason::Degenerate | FallbackReason::TooFewCorrespondences
-                            )
-                        ),
-                        "{path:?} seed {seed} {:?} step {i}: {:?}",
-                        run.mode,
-                        r.status
-                    );
-                }
+                assert_none_thrown_away(
+                    run,
+                    &[
+                        FallbackReason::Degenerate,
+                        FallbackReason::TooFewCorrespondences,
+                    ],
+                    &format!("{name} seed {seed}"),
+                );
             }
         }
         for (mode, limit, (ate, control)) in [
@@ -509,7 +523,7 @@ fn tilted_runs_through_large_halls_keep_what_the_scans_pin() {
             let (ate, control) = (ate / 3.0, control / 3.0);
             assert!(
                 ate <= limit || ate <= 1.1 * control,
-                "{path:?} {mode:?}: mean ATE {ate} (level floor {control})"
+                "{name} {mode:?}: mean ATE {ate} (level floor {control})"
             );
         }
     }
@@ -521,11 +535,8 @@ fn halls_nobody_tuned_for_throw_no_step_away_whole() {
     // The halls written after the matcher was tuned (examples/plans/halls/): in every run,
     // leveled or on a level floor, no step falls back whole for want of pinned directions.
     // (Their ATE is in docs/RESULTS.md: the pilaster hall's metascan misses 5 cm.)
-    for plan in ["pilaster_hall", "one_pillar_hall", "one_side_hall"] {
-        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("examples/plans/halls")
-            .join(format!("{plan}.wall"));
-        let plan = levelscan::formats::read_plan(&path).unwrap();
+    for name in ["pilaster_hall", "one_pillar_hall", "one_side_hall"] {
+        let plan = example_plan(&format!("halls/{name}"));
         for seed in 1..=3 {
             let params = ExperimentParams {
                 seed,
@@ -533,22 +544,15 @@ fn halls_nobody_tuned_for_throw_no_step_away_whole() {
             };
             let (_, runs) = matching_experiment(&plan, &params);
             for run in runs.iter().filter(|r| r.kind != RunKind::Raw) {
-                for (i, r) in run.reports.iter().enumerate() {
-                    assert!(
-                        !matches!(
-                            r.status,
-                            MatchStatus::Fallback(
-                                FallbackReason::Degenerate
-                                    | FallbackReason::TooFewCorrespondences
-                                    | FallbackReason::HighResidual
-                            )
-                        ),
-                        "{path:?} seed {seed} {:?} {:?} step {i}: {:?}",
-                        run.kind,
-                        run.mode,
-                        r.status
-                    );
-                }
+                assert_none_thrown_away(
+                    run,
+                    &[
+                        FallbackReason::Degenerate,
+                        FallbackReason::TooFewCorrespondences,
+                        FallbackReason::HighResidual,
+                    ],
+                    &format!("{name} seed {seed}"),
+                );
             }
         }
     }

@@ -47,6 +47,15 @@ pub fn records(out: &Output) -> Vec<Value> {
         .collect()
 }
 
+/// A JSON array of numbers as `f64`s (panics on anything else: a test's input).
+pub fn floats(v: &Value) -> Vec<f64> {
+    v.as_array()
+        .unwrap_or_else(|| panic!("not an array: {v}"))
+        .iter()
+        .map(|x| x.as_f64().unwrap_or_else(|| panic!("not a number: {x}")))
+        .collect()
+}
+
 /// A directory removed when the test ends.
 pub struct TempDir(pub std::path::PathBuf);
 

@@ -6,7 +6,6 @@
 //! trustworthy the step falls back to the odometry and the report says why (CSM issue #17).
 
 mod align;
-use align::Untrimmed;
 mod odometry_check;
 mod trigger;
 
@@ -21,6 +20,7 @@ use super::reference::{Line, ScanReference, estimate_lines};
 pub use super::report::{FallbackReason, MatchReport, MatchStatus};
 use crate::geometry::Pose2;
 use crate::scan::Scan;
+use align::Untrimmed;
 use nalgebra::{Matrix3, Point2, Vector2};
 use std::cell::RefCell;
 
