@@ -401,8 +401,13 @@ fn eval_matching_writes_a_table_and_maps() {
         String::from_utf8_lossy(&out.stderr)
     );
     let table = String::from_utf8(out.stdout).unwrap();
-    // Header, rule, and level floor / raw / leveled, each pairwise and metascan.
-    assert_eq!(table.lines().count(), 8, "{table}");
+    // Header, rule, and level floor / raw / leveled, each pairwise and metascan; a blank line,
+    // then the bound's header, rule and row.
+    assert_eq!(table.lines().count(), 12, "{table}");
+    assert!(
+        table.lines().nth(11).unwrap().starts_with("| office | 0.0"),
+        "{table}"
+    );
     for name in [
         "matching.md",
         "matching.json",
@@ -422,6 +427,12 @@ fn eval_matching_writes_a_table_and_maps() {
         .find(|r| r["kind"] == "level_floor" && r["mode"] == "metascan")
         .unwrap();
     assert!(level_floor_metascan["ate"]["rmse"].as_f64().unwrap() < 0.02);
+    // The bound on the path: millimetres in a furnished office seen at 1 cm noise.
+    let bound = &json[0]["bound"];
+    for key in ["ate", "causal_rms"] {
+        let b = bound[key].as_f64().unwrap();
+        assert!(b > 1e-4 && b < 0.01, "{key} {b}");
+    }
     let _ = std::fs::remove_dir_all(&dir);
 }
 

@@ -8,7 +8,8 @@ use anyhow::Context;
 use levelscan::eval::bound::WallPlanes;
 use levelscan::eval::drift::{DRIFT_LENGTHS, Drift};
 use levelscan::eval::matching::{ExperimentParams, matching_experiment};
-use levelscan::eval::pair_bound::{RunBound, run_bound};
+use levelscan::eval::pair_bound::{RunBound, run_bound, scan_rays};
+use levelscan::eval::path_bound::{PathBound, path_bound};
 use levelscan::eval::real::{RealLog, RealResult, RealSweep, evaluate_real};
 use levelscan::formats::bag::BagOptions;
 use levelscan::formats::{CarmenParams, read_plan};
@@ -96,6 +97,7 @@ pub fn run_matching(args: MatchingArgs) -> anyhow::Result<()> {
         "| plan | scans | mode | ATE [m] | RPE median [mm] | RPE p95 [mm] | bad pairs | fallbacks |\n\
          |---|---|---|---:|---:|---:|---:|---:|\n",
     );
+    let mut bounds = String::from("| plan | ATE bound [m] | causal sigma [m] |\n|---|---:|---:|\n");
     let mut all = Vec::new();
     for path in &args.plans {
         let plan = read_plan(path)?;
@@ -125,16 +127,50 @@ pub fn run_matching(args: MatchingArgs) -> anyhow::Result<()> {
                 r.fallbacks
             );
         }
+        let bound = run_path_bound(&plan, &truth, &params);
+        let _ = writeln!(
+            bounds,
+            "| {stem} | {} | {} |",
+            bound.map_or("-".into(), |b| format!("{:.4}", b.ate)),
+            bound.map_or("-".into(), |b| format!("{:.4}", b.causal_rms)),
+        );
         if let Some(dir) = &args.out {
             write_maps(dir, &stem, &plan, &runs, &truth)?;
         }
-        all.push(serde_json::json!({"plan": stem, "poses": truth.len(), "runs": runs}));
+        all.push(
+            serde_json::json!({"plan": stem, "poses": truth.len(), "runs": runs, "bound": bound}),
+        );
     }
+    let table = format!("{table}\n{bounds}");
     write_stdout(&table, &args.plans)?;
     match &args.out {
         Some(dir) => write_tables(dir, "matching", &table, &all),
         None => Ok(()),
     }
+}
+
+/// The bound on the level-floor run's path ([`path_bound`]): its scans' rays at the true
+/// poses, the simulated range noise and odometry.
+fn run_path_bound(
+    plan: &levelscan::plan::Plan,
+    truth: &[levelscan::geometry::Pose2],
+    params: &ExperimentParams,
+) -> Option<PathBound> {
+    let world = World::from_plan(plan);
+    let planes = WallPlanes::new(&plan.segments());
+    let scanner = &params.scanner;
+    let rays: Vec<_> = truth
+        .iter()
+        .map(|pose| scan_rays(&world, &planes, pose, scanner.bearings(), scanner.max_range))
+        .collect();
+    path_bound(
+        &planes,
+        truth,
+        &rays,
+        scanner.range_sigma(),
+        &params.odometry,
+        params.seed,
+    )
 }
 
 /// The maps of one plan's runs, pairwise and metascan, as PNG and SVG in `dir`.

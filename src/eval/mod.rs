@@ -7,6 +7,7 @@ pub mod drift;
 pub mod matching;
 pub mod metrics;
 pub mod pair_bound;
+pub mod path_bound;
 pub mod real;
 pub mod run;
 pub mod true_segments;
