@@ -433,6 +433,11 @@ fn eval_matching_writes_a_table_and_maps() {
         let b = bound[key].as_f64().unwrap();
         assert!(b > 1e-4 && b < 0.01, "{key} {b}");
     }
+    let lines = json[0]["bound_walls_of_3_rays"]["ate"].as_f64().unwrap();
+    assert!(
+        lines >= bound["ate"].as_f64().unwrap() && lines < 0.01,
+        "{lines}"
+    );
     let _ = std::fs::remove_dir_all(&dir);
 }
 

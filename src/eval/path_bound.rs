@@ -214,6 +214,22 @@ impl Information {
     }
 }
 
+/// Each scan's `rays` on walls it meets with at least `m` rays (the others dropped).
+pub fn seen_by_at_least(rays: &[Vec<PairRay>], m: usize) -> Vec<Vec<PairRay>> {
+    rays.iter()
+        .map(|scan| {
+            let mut count: BTreeMap<usize, usize> = BTreeMap::new();
+            for ray in scan {
+                *count.entry(ray.wall).or_default() += 1;
+            }
+            scan.iter()
+                .filter(|r| count[&r.wall] >= m)
+                .copied()
+                .collect()
+        })
+        .collect()
+}
+
 /// Appends the unknowns `new` to `active` (in order) unless already there.
 fn activate(active: &mut Vec<usize>, seen: &mut [bool], new: std::ops::Range<usize>) {
     for i in new {
@@ -470,5 +486,46 @@ mod tests {
         let bound = path_bound(&planes, &poses, &rays, SIGMA, &odo, 1).expect("bound");
         assert!(bound.causal_rms < 0.2 * s_t, "{}", bound.causal_rms);
         assert!(bound.ate < bound.causal_rms, "{bound:?}");
+        // The room's end walls are 2 m wide: from the middle of the room the far one is met by
+        // fewer rays than the near one. Asking for more rays per wall than the end walls get
+        // drops them, and the length is the odometry's again.
+        let few = seen_by_at_least(&rays, 60);
+        assert!(
+            few.iter()
+                .flatten()
+                .all(|r| planes.line(r.wall).0.x.abs() < 1e-9)
+        );
+        let bound = path_bound(&planes, &poses, &few, SIGMA, &odo, 1).expect("bound");
+        assert!(bound.causal_rms >= along, "{}", bound.causal_rms);
+    }
+
+    /// Dropping rays only drops information: the bound never tightens as `m` grows.
+    #[test]
+    fn fewer_rays_never_tighten_the_bound() {
+        let room = [
+            segment((0.0, 0.0), (12.0, 0.0)),
+            segment((12.0, 0.0), (12.0, 3.0)),
+            segment((12.0, 3.0), (0.0, 3.0)),
+            segment((0.0, 3.0), (0.0, 0.0)),
+            segment((5.0, 0.0), (5.0, 0.2)),
+            segment((5.0, 0.2), (5.3, 0.2)),
+            segment((5.3, 0.2), (5.3, 0.0)),
+        ];
+        let poses: Vec<Pose2> = (0..6)
+            .map(|k| Pose2::new(1.0 + 0.8 * k as f64, 1.5, 0.05 * k as f64))
+            .collect();
+        let (planes, rays) = scene(&room, &poses);
+        let odo = odometry();
+        let mut last = 0.0;
+        for m in [0, 2, 3, 5, 10] {
+            let kept = seen_by_at_least(&rays, m);
+            let b = path_bound(&planes, &poses, &kept, SIGMA, &odo, 1).expect("bound");
+            assert!(
+                b.causal_rms >= last * (1.0 - 1e-9),
+                "m {m}: {} < {last}",
+                b.causal_rms
+            );
+            last = b.causal_rms;
+        }
     }
 }
