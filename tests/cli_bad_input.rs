@@ -333,6 +333,28 @@ fn simulated_scans() -> Vec<u8> {
     out.stdout
 }
 
+/// 2D scans of ROOM at hinge elevation 0 (one per random pose), the input of `match` in the
+/// output tests: `match` refuses raw scans at other elevations.
+fn flat_scans() -> Vec<u8> {
+    let d = TempDir::new("flat");
+    let plan = d.file("room.wall", ROOM.as_bytes());
+    let out = bin()
+        .args([
+            "simulate",
+            &plan,
+            "--rays",
+            "61",
+            "--elevations",
+            "0",
+            "--random",
+            "6",
+        ])
+        .output()
+        .unwrap();
+    assert!(out.status.success());
+    out.stdout
+}
+
 #[test]
 fn an_output_that_is_an_input_is_refused_and_the_input_kept() {
     let d = TempDir::new("same");
@@ -458,12 +480,17 @@ fn a_failed_run_leaves_the_output_as_it_was() {
     assert!(err.starts_with(&format!("{bad}:4: ")), "{err}");
     assert_eq!(std::fs::read_to_string(&out_path).unwrap(), "old\n");
     // A new output is not created at all; no temporary file is left.
+    let text = String::from_utf8(flat_scans()).unwrap();
+    let mut lines: Vec<&str> = text.lines().collect();
+    lines.insert(3, r#"{"garbage"#);
+    let bad = d.file("bad2d.jsonl", (lines.join("\n") + "\n").as_bytes());
     let out = bin()
         .args(["match", &bad, "-o", &d.path("new.jsonl")])
         .output()
         .unwrap();
-    one_line_failure(&out, "match");
-    assert_eq!(d.names(), ["bad.jsonl", "out.jsonl"]);
+    let err = one_line_failure(&out, "match");
+    assert!(err.starts_with(&format!("{bad}:4: ")), "{err}");
+    assert_eq!(d.names(), ["bad.jsonl", "bad2d.jsonl", "out.jsonl"]);
     // To standard output, the records before the bad line are written (the contract).
     let out = bin().args(["match", &bad]).output().unwrap();
     assert!(!out.status.success());
@@ -524,6 +551,7 @@ fn a_full_disk_is_an_error_naming_the_output_never_a_panic() {
     }
     let d = TempDir::new("full");
     let input = d.file("scans.jsonl", &simulated_scans());
+    let flat = d.file("flat.jsonl", &flat_scans());
     let plan = d.file("room.wall", ROOM.as_bytes());
     let log = d.file(
         "real.log",
@@ -543,7 +571,7 @@ fn a_full_disk_is_an_error_naming_the_output_never_a_panic() {
             vec!["demo", "--out", &demo_dir, "--accuracy-poses", "2"],
         ),
         ("level", vec!["level", &input]),
-        ("match", vec!["match", &input]),
+        ("match", vec!["match", &flat]),
         ("info", vec!["info", &input]),
         (
             "eval accuracy",
@@ -589,7 +617,7 @@ fn a_full_disk_is_an_error_naming_the_output_never_a_panic() {
             "match --trajectory",
             vec![
                 "match",
-                &input,
+                &flat,
                 "--trajectory",
                 "/dev/full",
                 "-o",

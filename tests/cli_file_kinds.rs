@@ -114,12 +114,17 @@ fn a_byte_order_mark_is_skipped_by_every_command() {
     cli_support::assert_ran(&out);
     std::fs::write(&scans, with_bom(&out.stdout)).unwrap();
     let scans = scans.to_str().unwrap();
+    let leveled = cli_support::run_with_stdin(&["level"], &out.stdout);
+    cli_support::assert_ran(&leveled);
+    let level = dir.0.join("level.jsonl");
+    std::fs::write(&level, with_bom(&leveled.stdout)).unwrap();
+    let level = level.to_str().unwrap();
     let html = dir.0.join("view.html");
     let html = html.to_str().unwrap();
     for args in [
         vec!["level", scans],
         vec!["info", scans],
-        vec!["match", scans],
+        vec!["match", level],
         vec!["view", plan, "-o", html],
         vec!["view", scans, "-o", html],
         vec![

@@ -285,6 +285,35 @@ fn a_bad_line_is_reported_with_file_and_line() {
 }
 
 #[test]
+fn raw_multi_elevation_scans_are_refused_until_leveled() {
+    // The user forgot `level`: scans of each pose at -5, 0 and 5 degrees.
+    let raw = bin()
+        .args(["simulate", plan("office").to_str().unwrap(), "--scans", "3"])
+        .output()
+        .unwrap();
+    assert_ran(&raw);
+    let out = run_with_stdin(&["match"], &raw.stdout);
+    assert_eq!(out.status.code(), Some(1));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(err.lines().count(), 1, "{err}");
+    assert!(
+        err.starts_with(
+            "<stdin>:1: a raw scan at hinge elevation -5.0 deg; match takes 2D scans (level them \
+             first"
+        ),
+        "{err}"
+    );
+    // Level's output of the same scans, and scans taken level (elevation 0), are matched.
+    let leveled = run_with_stdin(&["level"], &raw.stdout);
+    assert_ran(&leveled);
+    assert!(!records(&run_with_stdin(&["match"], &leveled.stdout)).is_empty());
+    assert_eq!(
+        records(&run_with_stdin(&["match"], &simulated_level_scans(3))).len(),
+        3
+    );
+}
+
+#[test]
 fn a_missing_file_is_an_error_not_a_panic() {
     let out = bin()
         .args(["match", "/nonexistent/scans.jsonl"])
