@@ -111,6 +111,25 @@ fn unrelated_random_poses_warn_that_matching_failed() {
 }
 
 #[test]
+fn matching_poses_level_failed_blames_the_leveling_not_the_input() {
+    // At 20 cm of noise level fails most poses; their records have no valid ray.
+    let level = run_with_stdin(&["level"], &simulate(&["--sigma", "0.2", "--scans", "5"]));
+    let failed = records(&level)
+        .iter()
+        .filter(|p| p["level"]["status"] == "failed")
+        .count();
+    assert!(failed * 2 > 30, "{failed} of 30 failed");
+    let lines = stderr_lines(&run_with_stdin(&["match"], &level.stdout));
+    assert!(
+        lines[1].contains(&format!(
+            "most often no_valid_rays: {failed} are poses level could not level"
+        )),
+        "{lines:?}"
+    );
+    assert!(!lines[1].contains("are the scans leveled"), "{lines:?}");
+}
+
+#[test]
 fn an_empty_input_says_it_held_nothing() {
     let dir = std::env::temp_dir().join(format!("levelscan-summary-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();

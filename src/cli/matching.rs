@@ -5,7 +5,7 @@ use super::bag_output::{BagOutput, Kind as BagKind, OutputFormat, output_format}
 use super::open_output;
 use super::reference_tum::ReferenceTum;
 use super::scan_input::{BagArgs, open_scans, refuse_raw_scan};
-use super::summary::{Kind, Outcome, Tally};
+use super::summary::{Kind, Tally};
 use clap::ValueEnum;
 use levelscan::formats::bag::convert::ros_number;
 use levelscan::formats::{CarmenParams, write_tum};
@@ -453,7 +453,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         let odometry = scan.odometry.map(|p| p.to_pose2());
         let report = matcher.push(&points, odometry);
         annotate(&mut scan, &report);
-        tally.add(Outcome::of(&scan, "match"));
+        tally.add_matched(&scan);
         reference.push(&scan, index)?;
         match (&mut out, &mut bag_out) {
             (Some(out), _) => levelscan::formats::write_scan(out, &scan)?,
