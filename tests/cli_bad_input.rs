@@ -180,6 +180,23 @@ fn bad_carmen_line_fails_with_file_and_line() {
 }
 
 #[test]
+fn a_carmen_log_of_unread_laser_kinds_says_so() {
+    let raw = "RAWLASER1 0 -1.5708 3.1416 0.0175 81.9 0.01 0 3 2 2 2 0 5.0 host 5.0\n";
+    let log = TempFile::new("raw.log", format!("# log\n{raw}{raw}{raw}").as_bytes());
+    for command in ["info", "match"] {
+        let out = bin().args([command, log.path()]).output().unwrap();
+        assert_eq!(
+            one_line_failure(&out, command),
+            format!(
+                "{}:2: no scans: 3 RAWLASER1 lines skipped (the first here); levelscan reads \
+                 FLASER and ROBOTLASER1 laser lines",
+                log.path()
+            )
+        );
+    }
+}
+
+#[test]
 fn missing_scan_file_fails_naming_it() {
     let out = bin()
         .args(["info", "/nonexistent/levelscan/scans.jsonl"])
