@@ -239,6 +239,15 @@ fn missing_file_no_poses_and_bad_flags_fail_cleanly() {
 }
 
 #[test]
+fn zero_random_poses_are_refused_not_written_as_nothing() {
+    let out = simulate(&[plan("office").to_str().unwrap(), "--random", "0"]);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(out.stdout.is_empty());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("--random 0: no poses to simulate"), "{err}");
+}
+
+#[test]
 fn old_flag_spellings_and_the_seed_default_still_hold() {
     let office = plan("office");
     let office = office.to_str().unwrap();

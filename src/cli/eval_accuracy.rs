@@ -83,6 +83,11 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
+    // Zero poses would print tables of 0/0.
+    anyhow::ensure!(
+        args.poses >= 1,
+        "--poses 0: no poses to level; give the number of random poses per plan (1 or more)"
+    );
     anyhow::ensure!(
         !args.scans.is_empty() && args.scans.iter().all(|&s| s >= 1),
         "--scans must list scan counts of at least 1"

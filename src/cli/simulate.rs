@@ -316,6 +316,12 @@ fn check_limits(args: &Args, elevations: &[f64]) -> anyhow::Result<()> {
         "--height and --hinge-offset must lie within +-{MAX_POSITION:e} m"
     );
     if let Some(n) = args.random {
+        // Zero poses would write nothing and exit 0: surely not what was asked for.
+        anyhow::ensure!(
+            n >= 1,
+            "--random 0: no poses to simulate; give the number of random poses (1 or more), or \
+             leave --random out to use the plan's poses"
+        );
         anyhow::ensure!(
             n <= MAX_RANDOM_POSES,
             "--random {n} is more than {MAX_RANDOM_POSES} poses per run; run several seeds"
