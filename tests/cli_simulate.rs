@@ -248,6 +248,33 @@ fn zero_random_poses_are_refused_not_written_as_nothing() {
 }
 
 #[test]
+fn scans_of_a_pose_at_one_elevation_are_refused() {
+    let office = plan("office");
+    let office = office.to_str().unwrap();
+    for (args, want) in [
+        (
+            &["--step", "0"][..],
+            "--step 0 puts all 3 scans of a pose at one elevation",
+        ),
+        (
+            &["--elevations", "5,5,5"],
+            "--elevations lists 5 degrees 3 times; the scans of a pose must lie at distinct",
+        ),
+        (&["--elevations", "-5,0,-5"], "lists -5 degrees 2 times"),
+    ] {
+        let out = simulate(&[&[office][..], args].concat());
+        assert_eq!(out.status.code(), Some(1), "{args:?}");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(err.contains(want), "{args:?}: {err}");
+    }
+    // One scan per pose is one elevation, as a 2D log's.
+    assert_eq!(
+        records(&simulate(&[office, "--step", "0", "--scans", "1"])).len(),
+        30
+    );
+}
+
+#[test]
 fn old_flag_spellings_and_the_seed_default_still_hold() {
     let office = plan("office");
     let office = office.to_str().unwrap();

@@ -44,7 +44,8 @@ fn two_scans_per_pose_fail_every_pose_and_level_says_so() {
         [
             "levelscan level: 30 poses: 30 failed (too_few_scans 30)",
             "levelscan level: warning: 30 of 30 poses failed, most often too_few_scans: a pose \
-             needs scans at three or more distinct elevations (simulate --scans 3 or more)"
+             needs scans at three or more distinct elevations; check the scans' elevation values \
+             (simulate: --scans 3 or more, a --step other than 0)"
         ]
     );
 }

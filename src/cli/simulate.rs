@@ -296,6 +296,26 @@ fn check_limits(args: &Args, elevations: &[f64]) -> anyhow::Result<()> {
     if elevations.iter().any(|e| !e.is_finite()) {
         bail!("elevations must be finite numbers of degrees");
     }
+    // Scans of one pose at one elevation give `level` nothing to level from (too_few_scans,
+    // whatever --scans said).
+    if args.elevations.is_none() && args.step == 0.0 && elevations.len() > 1 {
+        bail!(
+            "--step 0 puts all {} scans of a pose at one elevation; give a step other than 0 \
+             (level needs scans at three or more distinct elevations)",
+            elevations.len()
+        );
+    }
+    if let Some(list) = &args.elevations
+        && let Some(e) = list
+            .iter()
+            .find(|e| list.iter().filter(|f| f == e).count() > 1)
+    {
+        bail!(
+            "--elevations lists {e} degrees {} times; the scans of a pose must lie at distinct \
+             elevations (level needs three or more)",
+            list.iter().filter(|f| *f == e).count()
+        );
+    }
     if let Some(h) = args.height
         && !h.is_finite()
     {

@@ -274,7 +274,8 @@ impl Group {
 fn hint(kind: Kind, reason: &str) -> Option<&'static str> {
     Some(match (kind, reason) {
         (Kind::Level, "too_few_scans") => {
-            "a pose needs scans at three or more distinct elevations (simulate --scans 3 or more)"
+            "a pose needs scans at three or more distinct elevations; check the scans' \
+             elevation values (simulate: --scans 3 or more, a --step other than 0)"
         }
         (Kind::Level, "inconsistent_scans") => "the scans of a pose must have the same nrays",
         (Kind::Level, "too_few_polygons") => {
@@ -364,8 +365,8 @@ mod tests {
             [
                 "levelscan level: 2 poses: 2 failed (too_few_scans 2)",
                 "levelscan level: warning: 2 of 2 poses failed, most often too_few_scans: a \
-                 pose needs scans at three or more distinct elevations (simulate --scans 3 or \
-                 more)"
+                 pose needs scans at three or more distinct elevations; check the scans' \
+                 elevation values (simulate: --scans 3 or more, a --step other than 0)"
             ]
         );
     }
