@@ -275,6 +275,29 @@ fn scans_of_a_pose_at_one_elevation_are_refused() {
 }
 
 #[test]
+fn a_negative_step_is_a_value_not_a_flag() {
+    let office = plan("office");
+    let office = office.to_str().unwrap();
+    // From +5 down to -5 degrees.
+    let elevations: Vec<f64> = records(&simulate(&[office, "--random", "2", "--step", "-5"]))
+        .iter()
+        .map(|r| r["elevation"].as_f64().unwrap().to_degrees())
+        .collect();
+    assert_eq!(elevations.len(), 6);
+    for (got, want) in elevations.iter().zip([5.0, 0.0, -5.0].iter().cycle()) {
+        assert!((got - want).abs() < 1e-9, "{elevations:?}");
+    }
+    // eval accuracy wants a positive step and says so itself, not clap's advice.
+    let out = bin()
+        .args(["eval", "accuracy", office, "--poses", "1", "--step", "-5"])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(err.contains("the step be positive"), "{err}");
+}
+
+#[test]
 fn old_flag_spellings_and_the_seed_default_still_hold() {
     let office = plan("office");
     let office = office.to_str().unwrap();

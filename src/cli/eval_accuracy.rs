@@ -58,7 +58,7 @@ pub struct Args {
     #[arg(long, default_value_t = super::DEFAULT_SEED)]
     pub seed: u64,
     /// Elevation step between scans (deg); positive elevations tilt the beams down.
-    #[arg(long, default_value_t = 5.0)]
+    #[arg(long, allow_negative_numbers = true, default_value_t = 5.0)]
     pub step: f64,
     /// Random poses: roll and pitch uniform in +-TILT (deg).
     #[arg(long, default_value_t = 20.0)]

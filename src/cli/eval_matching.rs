@@ -48,7 +48,7 @@ pub struct MatchingArgs {
     pub scans: usize,
     /// Elevation step between scans (deg), in the tilted run; positive elevations tilt the
     /// beams down.
-    #[arg(long, default_value_t = 5.0)]
+    #[arg(long, allow_negative_numbers = true, default_value_t = 5.0)]
     pub step: f64,
     /// Take one set of scans per pose; by default cleverRobot takes the tilted run, retaking a
     /// pose's scans at other elevations when it cannot level them (as the paper's experiment).

@@ -55,7 +55,7 @@ pub struct Args {
     #[arg(long, default_value_t = 3)]
     pub scans: usize,
     /// Elevation step between scans (deg); positive elevations tilt the beams down.
-    #[arg(long, default_value_t = 5.0)]
+    #[arg(long, allow_negative_numbers = true, default_value_t = 5.0)]
     pub step: f64,
     /// Explicit elevations instead of --scans/--step [deg, comma separated], e.g. -5,0,5.
     #[arg(long, value_delimiter = ',', allow_hyphen_values = true, conflicts_with_all = ["scans", "step"])]
