@@ -416,6 +416,30 @@ fn help_shows_every_default() {
 }
 
 #[test]
+fn eval_matching_on_a_plan_without_a_path_says_how_to_add_one() {
+    let text = std::fs::read_to_string(plan("office")).unwrap();
+    let mut room: Value = serde_json::from_str(&text).unwrap();
+    room.as_object_mut().unwrap().remove("poses");
+    let file = TempFile::new("no_path.wall", room.to_string().as_bytes());
+    let out = bin()
+        .args(["eval", "matching"])
+        .arg(&file.0)
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(1));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(err.lines().count(), 1, "{err}");
+    assert!(
+        err.starts_with(&format!(
+            "{}:poses: the experiment needs a path of at least 2 poses, the plan has 0; add a \
+             `poses` list",
+            file.0.display()
+        )),
+        "{err}"
+    );
+}
+
+#[test]
 fn eval_matching_writes_a_table_and_maps() {
     let dir = std::env::temp_dir().join(format!("levelscan-evalm-{}", std::process::id()));
     let out = bin()

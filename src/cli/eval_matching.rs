@@ -103,8 +103,11 @@ pub fn run_matching(args: MatchingArgs) -> anyhow::Result<()> {
         let plan = read_plan(path)?;
         anyhow::ensure!(
             plan.poses.len() >= 2,
-            "{}: the experiment needs a path of at least 2 poses",
-            path.display()
+            "{}:poses: the experiment needs a path of at least 2 poses, the plan has {}; add a \
+             `poses` list to it, [[x, y, z, rz, ry, rx], ...] in metres and degrees, along the \
+             robot's path (e.g. examples/plans/two_rooms.wall)",
+            path.display(),
+            plan.poses.len()
         );
         let stem = path
             .file_stem()
