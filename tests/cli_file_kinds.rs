@@ -94,6 +94,22 @@ fn a_2d_carmen_log_given_to_level_is_named() {
     std::fs::remove_dir_all(&dir).ok();
 }
 
+#[test]
+fn an_image_given_for_scans_is_named_alike_by_every_command() {
+    let dir = cli_support::TempDir::new("png");
+    let png = dir.0.join("photo.png");
+    // A PNG's signature and the start of its header chunk.
+    std::fs::write(
+        &png,
+        b"\x89PNG\r\n\x1a\n\0\0\0\rIHDR\0\0\x01\0\0\0\x01\0\x08\x06\0\0\0",
+    )
+    .unwrap();
+    let png = png.to_str().unwrap();
+    for cmd in ["level", "info", "match", "map"] {
+        fails_with(&[cmd, png], &["photo.png", "unknown kind"]);
+    }
+}
+
 /// `bytes` with a UTF-8 byte order mark in front, as Windows editors save text.
 fn with_bom(bytes: &[u8]) -> Vec<u8> {
     [b"\xEF\xBB\xBF".as_slice(), bytes].concat()
