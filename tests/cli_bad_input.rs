@@ -68,12 +68,12 @@ const BAD_SCAN_LINES: [(&str, &str, &str); 13] = [
     (
         "zero_nrays",
         r#"{"sequence": 1, "nrays": 0, "theta": [], "readings": []}"#,
-        "nrays must be > 0",
+        "nrays must be a positive integer, not 0",
     ),
     (
         "negative_nrays",
         r#"{"sequence": 1, "nrays": -181, "theta": [], "readings": []}"#,
-        "nrays: must be an integer >= 0, not -181",
+        "nrays: must be a positive integer, not -181",
     ),
     (
         "valid_not_01",
@@ -151,7 +151,10 @@ fn bad_line_in_a_gzipped_file_keeps_its_line_number() {
     let f = TempFile::new("bad.jsonl.gz", &gz.finish().unwrap());
     let out = bin().args(["info", f.path()]).output().unwrap();
     let err = one_line_failure(&out, "gzip");
-    assert_eq!(err, format!("{}:5: nrays must be > 0", f.path()));
+    assert_eq!(
+        err,
+        format!("{}:5: nrays must be a positive integer, not 0", f.path())
+    );
 }
 
 #[test]

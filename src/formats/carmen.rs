@@ -622,7 +622,10 @@ mod tests {
              scan"
         );
         let e = parse_carmen_line("FLASER 0 0 0 0 0 0 0 1.5", 50.0).unwrap_err();
-        assert_eq!(e, "FLASER: the number of readings must be > 0");
+        assert_eq!(
+            e,
+            "FLASER: the number of readings must be a positive integer, not 0"
+        );
         let e = parse_carmen_line("FLASER 1 1 0 0 0 0 0 0 1e300", 50.0).unwrap_err();
         assert!(
             e.starts_with("FLASER: timestamp is 1e300 s, beyond the limit"),
