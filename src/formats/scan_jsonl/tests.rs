@@ -194,6 +194,22 @@ fn non_positive_or_fractional_nrays_is_rejected() {
 }
 
 #[test]
+fn nan_and_infinity_literals_get_a_hint() {
+    for bad in ["NaN", "Infinity", "-Infinity", "nan"] {
+        let e = err(&format!(
+            r#"{{"nrays": 3, "theta": [0, 1, 2], "readings": [1, {bad}, 2]}}"#
+        ));
+        assert!(
+            e.ends_with("; JSON has no NaN or Infinity: write null for no return"),
+            "{bad}: {e}"
+        );
+    }
+    // Other syntax errors get no such hint.
+    let e = err(r#"{"nrays": 3, "theta": [0, 1, 2], "readings": [1, ?, 2]}"#);
+    assert!(!e.contains("NaN"), "{e}");
+}
+
+#[test]
 fn wrong_types_name_the_field_and_index() {
     let e = err(r#"{"nrays": 3, "theta": [0, 1, 2], "readings": [1, "far", 2]}"#);
     assert!(
