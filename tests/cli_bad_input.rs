@@ -68,12 +68,12 @@ const BAD_SCAN_LINES: [(&str, &str, &str); 13] = [
     (
         "zero_nrays",
         r#"{"sequence": 1, "nrays": 0, "theta": [], "readings": []}"#,
-        "nrays must be > 0",
+        "nrays must be a positive integer, not 0",
     ),
     (
         "negative_nrays",
         r#"{"sequence": 1, "nrays": -181, "theta": [], "readings": []}"#,
-        "nrays: must be an integer >= 0, not -181",
+        "nrays: must be a positive integer, not -181",
     ),
     (
         "valid_not_01",
@@ -151,7 +151,10 @@ fn bad_line_in_a_gzipped_file_keeps_its_line_number() {
     let f = TempFile::new("bad.jsonl.gz", &gz.finish().unwrap());
     let out = bin().args(["info", f.path()]).output().unwrap();
     let err = one_line_failure(&out, "gzip");
-    assert_eq!(err, format!("{}:5: nrays must be > 0", f.path()));
+    assert_eq!(
+        err,
+        format!("{}:5: nrays must be a positive integer, not 0", f.path())
+    );
 }
 
 #[test]
@@ -177,6 +180,23 @@ fn bad_carmen_line_fails_with_file_and_line() {
             f.path()
         )
     );
+}
+
+#[test]
+fn a_carmen_log_of_unread_laser_kinds_says_so() {
+    let raw = "RAWLASER1 0 -1.5708 3.1416 0.0175 81.9 0.01 0 3 2 2 2 0 5.0 host 5.0\n";
+    let log = TempFile::new("raw.log", format!("# log\n{raw}{raw}{raw}").as_bytes());
+    for command in ["info", "match"] {
+        let out = bin().args([command, log.path()]).output().unwrap();
+        assert_eq!(
+            one_line_failure(&out, command),
+            format!(
+                "{}:2: no scans: 3 RAWLASER1 lines skipped (the first here); levelscan reads \
+                 FLASER and ROBOTLASER1 laser lines",
+                log.path()
+            )
+        );
+    }
 }
 
 #[test]
@@ -333,6 +353,28 @@ fn simulated_scans() -> Vec<u8> {
     out.stdout
 }
 
+/// 2D scans of ROOM at hinge elevation 0 (one per random pose), the input of `match` in the
+/// output tests: `match` refuses raw scans at other elevations.
+fn flat_scans() -> Vec<u8> {
+    let d = TempDir::new("flat");
+    let plan = d.file("room.wall", ROOM.as_bytes());
+    let out = bin()
+        .args([
+            "simulate",
+            &plan,
+            "--rays",
+            "61",
+            "--elevations",
+            "0",
+            "--random",
+            "6",
+        ])
+        .output()
+        .unwrap();
+    assert!(out.status.success());
+    out.stdout
+}
+
 #[test]
 fn an_output_that_is_an_input_is_refused_and_the_input_kept() {
     let d = TempDir::new("same");
@@ -458,12 +500,17 @@ fn a_failed_run_leaves_the_output_as_it_was() {
     assert!(err.starts_with(&format!("{bad}:4: ")), "{err}");
     assert_eq!(std::fs::read_to_string(&out_path).unwrap(), "old\n");
     // A new output is not created at all; no temporary file is left.
+    let text = String::from_utf8(flat_scans()).unwrap();
+    let mut lines: Vec<&str> = text.lines().collect();
+    lines.insert(3, r#"{"garbage"#);
+    let bad = d.file("bad2d.jsonl", (lines.join("\n") + "\n").as_bytes());
     let out = bin()
         .args(["match", &bad, "-o", &d.path("new.jsonl")])
         .output()
         .unwrap();
-    one_line_failure(&out, "match");
-    assert_eq!(d.names(), ["bad.jsonl", "out.jsonl"]);
+    let err = one_line_failure(&out, "match");
+    assert!(err.starts_with(&format!("{bad}:4: ")), "{err}");
+    assert_eq!(d.names(), ["bad.jsonl", "bad2d.jsonl", "out.jsonl"]);
     // To standard output, the records before the bad line are written (the contract).
     let out = bin().args(["match", &bad]).output().unwrap();
     assert!(!out.status.success());
@@ -524,6 +571,7 @@ fn a_full_disk_is_an_error_naming_the_output_never_a_panic() {
     }
     let d = TempDir::new("full");
     let input = d.file("scans.jsonl", &simulated_scans());
+    let flat = d.file("flat.jsonl", &flat_scans());
     let plan = d.file("room.wall", ROOM.as_bytes());
     let log = d.file(
         "real.log",
@@ -543,7 +591,7 @@ fn a_full_disk_is_an_error_naming_the_output_never_a_panic() {
             vec!["demo", "--out", &demo_dir, "--accuracy-poses", "2"],
         ),
         ("level", vec!["level", &input]),
-        ("match", vec!["match", &input]),
+        ("match", vec!["match", &flat]),
         ("info", vec!["info", &input]),
         (
             "eval accuracy",
@@ -589,7 +637,7 @@ fn a_full_disk_is_an_error_naming_the_output_never_a_panic() {
             "match --trajectory",
             vec![
                 "match",
-                &input,
+                &flat,
                 "--trajectory",
                 "/dev/full",
                 "-o",

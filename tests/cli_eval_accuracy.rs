@@ -272,3 +272,16 @@ fn a_plan_without_free_space_is_named_and_a_column_in_a_wall_is_no_trap() {
     );
     assert!(!stderr.contains("panicked"), "{stderr}");
 }
+
+#[test]
+fn zero_poses_are_refused_not_tabled() {
+    let out = bin()
+        .args(["eval", "accuracy", plan("office").to_str().unwrap()])
+        .args(["--poses", "0"])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(1));
+    assert!(out.stdout.is_empty(), "no tables of 0/0");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("--poses 0: no poses to level"), "{err}");
+}

@@ -93,3 +93,68 @@ fn a_2d_carmen_log_given_to_level_is_named() {
     );
     std::fs::remove_dir_all(&dir).ok();
 }
+
+#[test]
+fn an_image_given_for_scans_is_named_alike_by_every_command() {
+    let dir = cli_support::TempDir::new("png");
+    let png = dir.0.join("photo.png");
+    // A PNG's signature and the start of its header chunk.
+    std::fs::write(
+        &png,
+        b"\x89PNG\r\n\x1a\n\0\0\0\rIHDR\0\0\x01\0\0\0\x01\0\x08\x06\0\0\0",
+    )
+    .unwrap();
+    let png = png.to_str().unwrap();
+    for cmd in ["level", "info", "match", "map"] {
+        fails_with(&[cmd, png], &["photo.png", "unknown kind"]);
+    }
+}
+
+/// `bytes` with a UTF-8 byte order mark in front, as Windows editors save text.
+fn with_bom(bytes: &[u8]) -> Vec<u8> {
+    [b"\xEF\xBB\xBF".as_slice(), bytes].concat()
+}
+
+#[test]
+fn a_byte_order_mark_is_skipped_by_every_command() {
+    let dir = cli_support::TempDir::new("bom");
+    let plan_bytes = std::fs::read(plan()).unwrap();
+    let plan = dir.0.join("office.wall");
+    std::fs::write(&plan, with_bom(&plan_bytes)).unwrap();
+    let plan = plan.to_str().unwrap();
+    let scans = dir.0.join("scans.jsonl");
+    let out = bin()
+        .args(["simulate", plan, "--random", "2", "--scans", "3"])
+        .output()
+        .unwrap();
+    cli_support::assert_ran(&out);
+    std::fs::write(&scans, with_bom(&out.stdout)).unwrap();
+    let scans = scans.to_str().unwrap();
+    let leveled = cli_support::run_with_stdin(&["level"], &out.stdout);
+    cli_support::assert_ran(&leveled);
+    let level = dir.0.join("level.jsonl");
+    std::fs::write(&level, with_bom(&leveled.stdout)).unwrap();
+    let level = level.to_str().unwrap();
+    let html = dir.0.join("view.html");
+    let html = html.to_str().unwrap();
+    for args in [
+        vec!["level", scans],
+        vec!["info", scans],
+        vec!["match", level],
+        vec!["view", plan, "-o", html],
+        vec!["view", scans, "-o", html],
+        vec![
+            "eval", "accuracy", plan, "--poses", "2", "--scans", "3", "--sigma", "0.01",
+        ],
+    ] {
+        let out = bin().args(&args).output().unwrap();
+        assert!(
+            out.status.success(),
+            "{args:?}: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+    }
+    // On standard input too (level reads it by its own parallel reader).
+    let leveled = cli_support::run_with_stdin(&["level"], &with_bom(&out.stdout));
+    assert_eq!(cli_support::records(&leveled).len(), 2);
+}

@@ -336,3 +336,42 @@ fn adaptive_simulation_levels_and_records_its_attempts() {
     std::fs::remove_file(path).ok();
     std::fs::remove_file(plan).ok();
 }
+
+/// `bytes` gunzipped (panics when they are not gzip).
+fn gunzip(bytes: &[u8]) -> Vec<u8> {
+    use std::io::Read;
+    assert!(bytes.starts_with(&[0x1f, 0x8b]), "not gzip");
+    let mut out = Vec::new();
+    flate2::read::MultiGzDecoder::new(bytes)
+        .read_to_end(&mut out)
+        .unwrap();
+    out
+}
+
+#[test]
+fn an_output_named_gz_is_gzipped_and_reads_back() {
+    let dir = TempDir::new("gz_out");
+    let plan = concat!(env!("CARGO_MANIFEST_DIR"), "/examples/plans/office.wall");
+    let path = |name: &str| dir.0.join(name).to_str().unwrap().to_string();
+    let run = |args: &[&str]| {
+        let out = Command::new(env!("CARGO_BIN_EXE_levelscan"))
+            .args(args)
+            .output()
+            .unwrap();
+        assert_ran(&out);
+        out.stdout
+    };
+    let (scans, level, matched) = (path("s.jsonl.gz"), path("l.jsonl.gz"), path("m.jsonl.gz"));
+    run(&["simulate", plan, "-o", &scans]);
+    run(&["level", &scans, "-o", &level]);
+    run(&["match", &level, "-o", &matched]);
+    // Each is the plain output, compressed.
+    let plain_scans = run(&["simulate", plan]);
+    assert_eq!(gunzip(&std::fs::read(&scans).unwrap()), plain_scans);
+    let plain_level = run(&["level", &scans]);
+    assert_eq!(gunzip(&std::fs::read(&level).unwrap()), plain_level);
+    assert_eq!(
+        gunzip(&std::fs::read(&matched).unwrap()),
+        run(&["match", &level])
+    );
+}

@@ -285,6 +285,35 @@ fn a_bad_line_is_reported_with_file_and_line() {
 }
 
 #[test]
+fn raw_multi_elevation_scans_are_refused_until_leveled() {
+    // The user forgot `level`: scans of each pose at -5, 0 and 5 degrees.
+    let raw = bin()
+        .args(["simulate", plan("office").to_str().unwrap(), "--scans", "3"])
+        .output()
+        .unwrap();
+    assert_ran(&raw);
+    let out = run_with_stdin(&["match"], &raw.stdout);
+    assert_eq!(out.status.code(), Some(1));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(err.lines().count(), 1, "{err}");
+    assert!(
+        err.starts_with(
+            "<stdin>:1: a raw scan at hinge elevation -5.0 deg; match takes 2D scans (level them \
+             first"
+        ),
+        "{err}"
+    );
+    // Level's output of the same scans, and scans taken level (elevation 0), are matched.
+    let leveled = run_with_stdin(&["level"], &raw.stdout);
+    assert_ran(&leveled);
+    assert!(!records(&run_with_stdin(&["match"], &leveled.stdout)).is_empty());
+    assert_eq!(
+        records(&run_with_stdin(&["match"], &simulated_level_scans(3))).len(),
+        3
+    );
+}
+
+#[test]
 fn a_missing_file_is_an_error_not_a_panic() {
     let out = bin()
         .args(["match", "/nonexistent/scans.jsonl"])
@@ -384,6 +413,30 @@ fn help_shows_every_default() {
         checked += 1;
     }
     assert!(checked >= 15, "only {checked} options found");
+}
+
+#[test]
+fn eval_matching_on_a_plan_without_a_path_says_how_to_add_one() {
+    let text = std::fs::read_to_string(plan("office")).unwrap();
+    let mut room: Value = serde_json::from_str(&text).unwrap();
+    room.as_object_mut().unwrap().remove("poses");
+    let file = TempFile::new("no_path.wall", room.to_string().as_bytes());
+    let out = bin()
+        .args(["eval", "matching"])
+        .arg(&file.0)
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(1));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(err.lines().count(), 1, "{err}");
+    assert!(
+        err.starts_with(&format!(
+            "{}:poses: the experiment needs a path of at least 2 poses, the plan has 0; add a \
+             `poses` list",
+            file.0.display()
+        )),
+        "{err}"
+    );
 }
 
 #[test]

@@ -239,6 +239,65 @@ fn missing_file_no_poses_and_bad_flags_fail_cleanly() {
 }
 
 #[test]
+fn zero_random_poses_are_refused_not_written_as_nothing() {
+    let out = simulate(&[plan("office").to_str().unwrap(), "--random", "0"]);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(out.stdout.is_empty());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("--random 0: no poses to simulate"), "{err}");
+}
+
+#[test]
+fn scans_of_a_pose_at_one_elevation_are_refused() {
+    let office = plan("office");
+    let office = office.to_str().unwrap();
+    for (args, want) in [
+        (
+            &["--step", "0"][..],
+            "--step 0 puts all 3 scans of a pose at one elevation",
+        ),
+        (
+            &["--elevations", "5,5,5"],
+            "--elevations lists 5 degrees 3 times; the scans of a pose must lie at distinct",
+        ),
+        (&["--elevations", "-5,0,-5"], "lists -5 degrees 2 times"),
+    ] {
+        let out = simulate(&[&[office][..], args].concat());
+        assert_eq!(out.status.code(), Some(1), "{args:?}");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(err.contains(want), "{args:?}: {err}");
+    }
+    // One scan per pose is one elevation, as a 2D log's.
+    assert_eq!(
+        records(&simulate(&[office, "--step", "0", "--scans", "1"])).len(),
+        30
+    );
+}
+
+#[test]
+fn a_negative_step_is_a_value_not_a_flag() {
+    let office = plan("office");
+    let office = office.to_str().unwrap();
+    // From +5 down to -5 degrees.
+    let elevations: Vec<f64> = records(&simulate(&[office, "--random", "2", "--step", "-5"]))
+        .iter()
+        .map(|r| r["elevation"].as_f64().unwrap().to_degrees())
+        .collect();
+    assert_eq!(elevations.len(), 6);
+    for (got, want) in elevations.iter().zip([5.0, 0.0, -5.0].iter().cycle()) {
+        assert!((got - want).abs() < 1e-9, "{elevations:?}");
+    }
+    // eval accuracy wants a positive step and says so itself, not clap's advice.
+    let out = bin()
+        .args(["eval", "accuracy", office, "--poses", "1", "--step", "-5"])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(err.contains("the step be positive"), "{err}");
+}
+
+#[test]
 fn old_flag_spellings_and_the_seed_default_still_hold() {
     let office = plan("office");
     let office = office.to_str().unwrap();

@@ -44,7 +44,8 @@ fn two_scans_per_pose_fail_every_pose_and_level_says_so() {
         [
             "levelscan level: 30 poses: 30 failed (too_few_scans 30)",
             "levelscan level: warning: 30 of 30 poses failed, most often too_few_scans: a pose \
-             needs scans at three or more distinct elevations (simulate --scans 3 or more)"
+             needs scans at three or more distinct elevations; check the scans' elevation values \
+             (simulate: --scans 3 or more, a --step other than 0)"
         ]
     );
 }
@@ -108,6 +109,25 @@ fn unrelated_random_poses_warn_that_matching_failed() {
         lines[1]
     );
     assert!(lines[1].contains("consecutive scans must overlap"));
+}
+
+#[test]
+fn matching_poses_level_failed_blames_the_leveling_not_the_input() {
+    // At 20 cm of noise level fails most poses; their records have no valid ray.
+    let level = run_with_stdin(&["level"], &simulate(&["--sigma", "0.2", "--scans", "5"]));
+    let failed = records(&level)
+        .iter()
+        .filter(|p| p["level"]["status"] == "failed")
+        .count();
+    assert!(failed * 2 > 30, "{failed} of 30 failed");
+    let lines = stderr_lines(&run_with_stdin(&["match"], &level.stdout));
+    assert!(
+        lines[1].contains(&format!(
+            "most often no_valid_rays: {failed} are poses level could not level"
+        )),
+        "{lines:?}"
+    );
+    assert!(!lines[1].contains("are the scans leveled"), "{lines:?}");
 }
 
 #[test]

@@ -3,7 +3,8 @@
 //! structured mutations (tokens replaced by edge numbers, dropped or repeated, counts moved,
 //! message names swapped, host fields cut, lines repeated).
 //!
-//! The oracle: no panic, no hang; `read_any` reads a log as the CARMEN reader does; the
+//! The oracle: no panic, no hang; `read_any` reads a log as the CARMEN reader does (or
+//! refuses binary bytes up front, as a wrong kind of file); the
 //! reader stops at its first error, one line naming the file and an existing line; and "no
 //! garbage accepted": every scan keeps the invariants of `formats::limits` and writes back
 //! as JSON Lines to the same scan (`fuzz_support::check_scan`), its line has exactly the
@@ -13,6 +14,7 @@
 mod fuzz_support;
 use fuzz_support::*;
 
+use levelscan::formats::kind::looks_binary;
 use levelscan::formats::{CarmenParams, CarmenReader, read_any};
 use levelscan::scan::Scan;
 use proptest::prelude::*;
@@ -150,11 +152,15 @@ fn oracle(input: &[u8]) -> Result<Outcome, String> {
         CarmenReader::new(Cursor::new(input), FILE, CarmenParams::default()).collect();
     let first = input.iter().find(|b| !b.is_ascii_whitespace());
     if !matches!(first, None | Some(b'{')) && !input.starts_with(b"\xEF\xBB\xBF") {
-        let any: Vec<_> = read_any(Cursor::new(input), FILE, CarmenParams::default())
-            .map_err(|e| e.to_string())?
-            .collect();
-        if any != items {
-            return Err(format!("read_any {any:?}\nCARMEN reader {items:?}"));
+        match read_any(Cursor::new(input), FILE, CarmenParams::default()) {
+            // Binary bytes are refused up front, as a file of the wrong kind.
+            Err(e) if looks_binary(input) => check_message(&e.to_string(), FILE, 0)?,
+            any => {
+                let any: Vec<_> = any.map_err(|e| e.to_string())?.collect();
+                if any != items {
+                    return Err(format!("read_any {any:?}\nCARMEN reader {items:?}"));
+                }
+            }
         }
     }
     check_records(&items, input, FILE, |scan, line| {

@@ -36,7 +36,7 @@ pub struct Args {
     #[arg(long, default_value_t = DemoParams::default().scans)]
     pub scans: usize,
     /// Elevation step between scans (deg); positive elevations tilt the beams down.
-    #[arg(long, default_value_t = DemoParams::default().step_deg)]
+    #[arg(long, allow_negative_numbers = true, default_value_t = DemoParams::default().step_deg)]
     pub step: f64,
     /// Random poses per cell of Table I (the paper's 100).
     #[arg(long, default_value_t = DemoParams::default().accuracy_poses)]

@@ -58,7 +58,7 @@ pub struct Args {
     #[arg(long, default_value_t = super::DEFAULT_SEED)]
     pub seed: u64,
     /// Elevation step between scans (deg); positive elevations tilt the beams down.
-    #[arg(long, default_value_t = 5.0)]
+    #[arg(long, allow_negative_numbers = true, default_value_t = 5.0)]
     pub step: f64,
     /// Random poses: roll and pitch uniform in +-TILT (deg).
     #[arg(long, default_value_t = 20.0)]
@@ -83,6 +83,11 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
+    // Zero poses would print tables of 0/0.
+    anyhow::ensure!(
+        args.poses >= 1,
+        "--poses 0: no poses to level; give the number of random poses per plan (1 or more)"
+    );
     anyhow::ensure!(
         !args.scans.is_empty() && args.scans.iter().all(|&s| s >= 1),
         "--scans must list scan counts of at least 1"

@@ -48,7 +48,7 @@ pub struct MatchingArgs {
     pub scans: usize,
     /// Elevation step between scans (deg), in the tilted run; positive elevations tilt the
     /// beams down.
-    #[arg(long, default_value_t = 5.0)]
+    #[arg(long, allow_negative_numbers = true, default_value_t = 5.0)]
     pub step: f64,
     /// Take one set of scans per pose; by default cleverRobot takes the tilted run, retaking a
     /// pose's scans at other elevations when it cannot level them (as the paper's experiment).
@@ -106,8 +106,11 @@ pub fn run_matching(args: MatchingArgs) -> anyhow::Result<()> {
         let plan = read_plan(path)?;
         anyhow::ensure!(
             plan.poses.len() >= 2,
-            "{}: the experiment needs a path of at least 2 poses",
-            path.display()
+            "{}:poses: the experiment needs a path of at least 2 poses, the plan has {}; add a \
+             `poses` list to it, [[x, y, z, rz, ry, rx], ...] in metres and degrees, along the \
+             robot's path (e.g. examples/plans/two_rooms.wall)",
+            path.display(),
+            plan.poses.len()
         );
         let stem = path
             .file_stem()

@@ -2,6 +2,7 @@
 //! matched 2D scans (`match` output), each placed at its `estimate` (or `--pose`).
 
 use super::open_input;
+use super::scan_input::refuse_raw_scan;
 use anyhow::{Context, bail};
 use levelscan::formats::carmen::CarmenParams;
 use levelscan::formats::pgm_map::{Classes, pgm_bytes, yaml_text};
@@ -100,15 +101,13 @@ fn read_placed(path: Option<&Path>, pose: PoseField) -> anyhow::Result<Vec<Place
     let mut out = Vec::new();
     for item in read_any(input.reader, name.clone(), CarmenParams::default())? {
         let (line, scan) = item?;
-        if let Some(e) = scan.elevation.filter(|&e| e != 0.0)
-            && !scan.extra.contains_key("level")
-        {
-            bail!(
-                "{name}:{line}: a raw scan at hinge elevation {:.1} deg; map takes 2D scans \
-                 (level then match them first: levelscan level | levelscan match)",
-                e.to_degrees()
-            );
-        }
+        refuse_raw_scan(
+            &name,
+            line,
+            &scan,
+            "map",
+            "level then match them first: levelscan level | levelscan match",
+        )?;
         let Some(p) = pose.of(&scan) else {
             bail!(
                 "{name}:{line}: no {} to place the scan at (run levelscan match first, or \

@@ -4,8 +4,8 @@
 use super::bag_output::{BagOutput, Kind as BagKind, OutputFormat, output_format};
 use super::open_output;
 use super::reference_tum::ReferenceTum;
-use super::scan_input::{BagArgs, open_scans};
-use super::summary::{Kind, Outcome, Tally};
+use super::scan_input::{BagArgs, open_scans, refuse_raw_scan};
+use super::summary::{Kind, Tally};
 use clap::ValueEnum;
 use levelscan::formats::bag::convert::ros_number;
 use levelscan::formats::{CarmenParams, write_tum};
@@ -434,6 +434,18 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let mut sweep = args.options.deskew().map(Sweep::new);
     for (index, item) in input.source.enumerate() {
         let (line, mut scan) = item?;
+        // A raw bag (no /scan_level) is still matched as it is: its /odom_matched per /scan
+        // message is a documented output (tests/bag_interop_output.rs), so only text input,
+        // where forgetting `level` is the usual slip, is refused.
+        if input.survey.is_none() {
+            refuse_raw_scan(
+                &input.name,
+                line,
+                &scan,
+                "match",
+                "level them first: levelscan level SCANS | levelscan match",
+            )?;
+        }
         let points = match sweep.as_mut() {
             Some(sweep) => sweep.points(&scan, &params.ranges, &input.name, line)?,
             None => scan_points(&scan, &params.ranges),
@@ -441,7 +453,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         let odometry = scan.odometry.map(|p| p.to_pose2());
         let report = matcher.push(&points, odometry);
         annotate(&mut scan, &report);
-        tally.add(Outcome::of(&scan, "match"));
+        tally.add_matched(&scan);
         reference.push(&scan, index)?;
         match (&mut out, &mut bag_out) {
             (Some(out), _) => levelscan::formats::write_scan(out, &scan)?,

@@ -183,8 +183,12 @@ pub struct Input {
     pub reader: Box<dyn BufRead + Send>,
 }
 
+/// A UTF-8 byte order mark.
+const UTF8_BOM: &[u8] = b"\xEF\xBB\xBF";
+
 /// Opens a file argument, or standard input for `None` or `-`. Gzip files (by their magic
-/// bytes) are decompressed on the fly, so CARMEN `.log.gz` files can be read as they are.
+/// bytes) are decompressed on the fly, so CARMEN `.log.gz` files can be read as they are; a
+/// leading UTF-8 byte order mark is skipped.
 pub fn open_input(path: Option<&Path>) -> anyhow::Result<Input> {
     let (name, raw): (String, Box<dyn Read + Send>) = match path {
         None => ("<stdin>".to_string(), Box::new(io::stdin())),
@@ -199,7 +203,7 @@ pub fn open_input(path: Option<&Path>) -> anyhow::Result<Input> {
         .fill_buf()
         .with_context(|| format!("{name}: cannot read"))?
         .starts_with(&[0x1f, 0x8b]);
-    let reader: Box<dyn BufRead + Send> = if is_gzip {
+    let mut reader: Box<dyn BufRead + Send> = if is_gzip {
         Box::new(BufReader::with_capacity(
             1 << 16,
             flate2::read::MultiGzDecoder::new(buffered),
@@ -207,6 +211,15 @@ pub fn open_input(path: Option<&Path>) -> anyhow::Result<Input> {
     } else {
         Box::new(buffered)
     };
+    // A UTF-8 byte order mark (Windows editors write one) is not part of the first line:
+    // skipped here, every command's text input (scans, plans, trajectories) reads as without.
+    if reader
+        .fill_buf()
+        .with_context(|| format!("{name}: cannot read"))?
+        .starts_with(UTF8_BOM)
+    {
+        reader.consume(UTF8_BOM.len());
+    }
     Ok(Input { name, reader })
 }
 

@@ -6,8 +6,10 @@
 //! (`/dev/null`, `/dev/stdout`, a FIFO) are written directly. An output that is one of the
 //! run's inputs, or standard output redirected into one, is refused before anything is
 //! written. Every write error names the output (`FILE: cannot write: ...`, `<stdout>: ...`).
+//! A file name ending in `.gz` is written gzip-compressed, as the readers read such files.
 
 use anyhow::{Context, bail};
+use flate2::write::GzEncoder;
 use std::fs::{self, File, Metadata};
 use std::io::{self, BufWriter, StdoutLock, Write};
 use std::path::{Path, PathBuf};
@@ -21,7 +23,14 @@ pub const STDOUT: &str = "<stdout>";
 pub struct Output {
     name: String,
     sink: Sink,
+    /// For a `.gz` name: the compressor, whose output collects in its `Vec` and is moved to
+    /// `sink` a block at a time (so that the sink keeps its own error handling and staging).
+    /// Boxed: the compressor's state is large, and most outputs have none.
+    gzip: Option<Box<GzEncoder<Vec<u8>>>>,
 }
+
+/// Compressed bytes collected before they are passed to the sink.
+const GZIP_BLOCK: usize = 1 << 16;
 
 enum Sink {
     Stdout(BufWriter<StdoutLock<'static>>),
@@ -46,6 +55,7 @@ pub fn open_output(path: Option<&Path>, inputs: &[Option<&Path>]) -> anyhow::Res
         return Ok(Output {
             name: STDOUT.to_string(),
             sink: Sink::Stdout(BufWriter::with_capacity(1 << 16, io::stdout().lock())),
+            gzip: None,
         });
     };
     let name = path.display().to_string();
@@ -71,7 +81,13 @@ pub fn open_output(path: Option<&Path>, inputs: &[Option<&Path>]) -> anyhow::Res
             stage(path, existing.ok().as_ref()).with_context(|| format!("{name}: cannot create"))?
         }
     };
-    Ok(Output { name, sink })
+    let gzip = path.extension().is_some_and(|e| e == "gz").then(|| {
+        Box::new(GzEncoder::new(
+            Vec::with_capacity(GZIP_BLOCK),
+            flate2::Compression::default(),
+        ))
+    });
+    Ok(Output { name, sink, gzip })
 }
 
 /// A temporary file next to `path` (next to its target when `path` is a symbolic link), with
@@ -114,6 +130,13 @@ impl Output {
     /// Flushes everything; a file is synced to disk and renamed over its target. Errors name
     /// the output.
     pub fn finish(mut self) -> anyhow::Result<()> {
+        if let Some(mut gz) = self.gzip.take() {
+            gz.try_finish().map_err(|e| named(&self.name, "write", e))?;
+            let rest = std::mem::take(gz.get_mut());
+            self.writer()
+                .write_all(&rest)
+                .map_err(|e| named(&self.name, "write", e))?;
+        }
         match std::mem::replace(&mut self.sink, Sink::Finished) {
             Sink::Stdout(mut w) => w.flush().map_err(|e| named(&self.name, "write", e))?,
             Sink::Direct(mut w) => w.flush().map_err(|e| named(&self.name, "write", e))?,
@@ -150,19 +173,46 @@ impl Output {
     }
 }
 
+impl Output {
+    /// Moves the compressed bytes collected so far to the sink (all of them with `all`, else
+    /// only once a block has gathered).
+    fn pass_compressed(&mut self, all: bool) -> io::Result<()> {
+        let Some(gz) = self.gzip.as_mut() else {
+            return Ok(());
+        };
+        if !all && gz.get_ref().len() < GZIP_BLOCK {
+            return Ok(());
+        }
+        let bytes = std::mem::take(gz.get_mut());
+        self.writer().write_all(&bytes)
+    }
+}
+
 impl Write for Output {
     fn write(&mut self, buf: &[u8]) -> io::Result<usize> {
-        let r = self.writer().write(buf);
+        let r = match self.gzip.as_mut() {
+            Some(gz) => gz
+                .write(buf)
+                .and_then(|n| self.pass_compressed(false).map(|()| n)),
+            None => self.writer().write(buf),
+        };
         r.map_err(|e| named(&self.name, "write", e))
     }
 
     fn write_all(&mut self, buf: &[u8]) -> io::Result<()> {
-        let r = self.writer().write_all(buf);
+        let r = match self.gzip.as_mut() {
+            Some(gz) => gz.write_all(buf).and_then(|()| self.pass_compressed(false)),
+            None => self.writer().write_all(buf),
+        };
         r.map_err(|e| named(&self.name, "write", e))
     }
 
     fn flush(&mut self) -> io::Result<()> {
-        let r = self.writer().flush();
+        let r = match self.gzip.as_mut() {
+            Some(gz) => gz.flush().and_then(|()| self.pass_compressed(true)),
+            None => Ok(()),
+        }
+        .and_then(|()| self.writer().flush());
         r.map_err(|e| named(&self.name, "write", e))
     }
 }

@@ -4,6 +4,7 @@
 use super::open_input;
 use levelscan::formats::bag::{Bag, BagOptions, BagScans, Survey};
 use levelscan::formats::{CarmenParams, ScanSource, read_any};
+use levelscan::scan::Scan;
 use std::io::BufRead;
 use std::path::Path;
 
@@ -90,4 +91,29 @@ pub fn open_scans(
         survey: None,
         bag: None,
     })
+}
+
+/// Refuses a raw scan of a tilting scanner (a hinge elevation other than 0, and no `level`
+/// object) where 2D scans are wanted: matched or mapped as they are, scans of one pose at
+/// several elevations see the walls at different ranges and give a wrong path without a word.
+/// Level output (pseudo-level scans keep their base scan's elevation), CSM and CARMEN logs (no
+/// elevation) and scans taken level (elevation 0) pass. `command` names the command in the
+/// message, `next` what to run first.
+pub fn refuse_raw_scan(
+    name: &str,
+    line: usize,
+    scan: &Scan,
+    command: &str,
+    next: &str,
+) -> anyhow::Result<()> {
+    if let Some(e) = scan.elevation.filter(|&e| e != 0.0)
+        && !scan.extra.contains_key("level")
+    {
+        anyhow::bail!(
+            "{name}:{line}: a raw scan at hinge elevation {:.1} deg; {command} takes 2D scans \
+             ({next})",
+            e.to_degrees()
+        );
+    }
+    Ok(())
 }

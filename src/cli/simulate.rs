@@ -55,7 +55,7 @@ pub struct Args {
     #[arg(long, default_value_t = 3)]
     pub scans: usize,
     /// Elevation step between scans (deg); positive elevations tilt the beams down.
-    #[arg(long, default_value_t = 5.0)]
+    #[arg(long, allow_negative_numbers = true, default_value_t = 5.0)]
     pub step: f64,
     /// Explicit elevations instead of --scans/--step [deg, comma separated], e.g. -5,0,5.
     #[arg(long, value_delimiter = ',', allow_hyphen_values = true, conflicts_with_all = ["scans", "step"])]
@@ -296,6 +296,26 @@ fn check_limits(args: &Args, elevations: &[f64]) -> anyhow::Result<()> {
     if elevations.iter().any(|e| !e.is_finite()) {
         bail!("elevations must be finite numbers of degrees");
     }
+    // Scans of one pose at one elevation give `level` nothing to level from (too_few_scans,
+    // whatever --scans said).
+    if args.elevations.is_none() && args.step == 0.0 && elevations.len() > 1 {
+        bail!(
+            "--step 0 puts all {} scans of a pose at one elevation; give a step other than 0 \
+             (level needs scans at three or more distinct elevations)",
+            elevations.len()
+        );
+    }
+    if let Some(list) = &args.elevations
+        && let Some(e) = list
+            .iter()
+            .find(|e| list.iter().filter(|f| f == e).count() > 1)
+    {
+        bail!(
+            "--elevations lists {e} degrees {} times; the scans of a pose must lie at distinct \
+             elevations (level needs three or more)",
+            list.iter().filter(|f| *f == e).count()
+        );
+    }
     if let Some(h) = args.height
         && !h.is_finite()
     {
@@ -316,6 +336,12 @@ fn check_limits(args: &Args, elevations: &[f64]) -> anyhow::Result<()> {
         "--height and --hinge-offset must lie within +-{MAX_POSITION:e} m"
     );
     if let Some(n) = args.random {
+        // Zero poses would write nothing and exit 0: surely not what was asked for.
+        anyhow::ensure!(
+            n >= 1,
+            "--random 0: no poses to simulate; give the number of random poses (1 or more), or \
+             leave --random out to use the plan's poses"
+        );
         anyhow::ensure!(
             n <= MAX_RANDOM_POSES,
             "--random {n} is more than {MAX_RANDOM_POSES} poses per run; run several seeds"

@@ -48,6 +48,10 @@ pub(crate) struct Tally {
     kind: Kind,
     counts: BTreeMap<Outcome, usize>,
     total: usize,
+    /// `match`: records that fell back as `no_valid_rays` because they are poses `level` could
+    /// not level (their `level.status` is failed, so no ray was kept): the warning then blames
+    /// the leveling, not the input's kind or units.
+    unleveled: usize,
     /// Records counted so far, on a terminal's standard error (hidden elsewhere).
     bar: ProgressBar,
 }
@@ -62,6 +66,7 @@ impl Tally {
             kind,
             counts: BTreeMap::new(),
             total: 0,
+            unleveled: 0,
             bar,
         }
     }
@@ -70,6 +75,17 @@ impl Tally {
         *self.counts.entry(outcome).or_default() += 1;
         self.total += 1;
         self.bar.inc(1);
+    }
+
+    /// Counts a `match` output record, noting one that had no ray because `level` failed it.
+    pub fn add_matched(&mut self, record: &Scan) {
+        let outcome = Outcome::of(record, "match");
+        if outcome.reason.as_deref() == Some("no_valid_rays")
+            && Outcome::of(record, "level").status == "failed"
+        {
+            self.unleveled += 1;
+        }
+        self.add(outcome);
     }
 
     /// Clears the progress counter and prints [`Tally::lines`] on standard error.
@@ -196,12 +212,27 @@ impl Tally {
             Kind::Level => "failed",
             Kind::Match => "fell back to odometry",
         };
-        let (top, _) = &failures[0];
+        let (top, top_count) = &failures[0];
         let mut line = format!(
             "levelscan {}: warning: {failed} of {attempted} {many} {verb}, most often {top}",
             self.command()
         );
-        if let Some(hint) = hint(self.kind, top) {
+        if self.kind == Kind::Match && top == "no_valid_rays" && self.unleveled > 0 {
+            line.push_str(&format!(
+                ": {} {} poses level could not level (level.status failed: no ray kept); see \
+                 level's summary for why: more scans per pose, or simulate --adaptive, level \
+                 more of them",
+                self.unleveled,
+                if self.unleveled == 1 { "is" } else { "are" }
+            ));
+            let others = top_count - self.unleveled;
+            if others > 0 {
+                line.push_str(&format!(
+                    "; the other {others}: {}",
+                    hint(self.kind, top).unwrap_or_default()
+                ));
+            }
+        } else if let Some(hint) = hint(self.kind, top) {
             line.push_str(": ");
             line.push_str(hint);
         }
@@ -243,7 +274,8 @@ impl Group {
 fn hint(kind: Kind, reason: &str) -> Option<&'static str> {
     Some(match (kind, reason) {
         (Kind::Level, "too_few_scans") => {
-            "a pose needs scans at three or more distinct elevations (simulate --scans 3 or more)"
+            "a pose needs scans at three or more distinct elevations; check the scans' \
+             elevation values (simulate: --scans 3 or more, a --step other than 0)"
         }
         (Kind::Level, "inconsistent_scans") => "the scans of a pose must have the same nrays",
         (Kind::Level, "too_few_polygons") => {
@@ -333,8 +365,8 @@ mod tests {
             [
                 "levelscan level: 2 poses: 2 failed (too_few_scans 2)",
                 "levelscan level: warning: 2 of 2 poses failed, most often too_few_scans: a \
-                 pose needs scans at three or more distinct elevations (simulate --scans 3 or \
-                 more)"
+                 pose needs scans at three or more distinct elevations; check the scans' \
+                 elevation values (simulate: --scans 3 or more, a --step other than 0)"
             ]
         );
     }
@@ -395,6 +427,43 @@ mod tests {
         // A single scan has nothing to match against: no warning.
         let t = tally(Kind::Match, &[("ok", Some("first_scan"), 1)]);
         assert_eq!(t.lines("log"), ["levelscan match: 1 scan: 1 first scan"]);
+    }
+
+    /// A `match` record with a `level` object of `level_status` that fell back as `reason`.
+    fn matched_record(level_status: &str, status: &str, reason: Option<&str>) -> Scan {
+        let mut scan = Scan::default();
+        scan.extra
+            .insert("level".into(), json!({"status": level_status}));
+        scan.extra
+            .insert("match".into(), json!({"status": status, "reason": reason}));
+        scan
+    }
+
+    #[test]
+    fn no_valid_rays_of_poses_level_failed_blames_the_leveling() {
+        let mut t = Tally::new(Kind::Match);
+        t.add_matched(&matched_record("ok", "ok", Some("first_scan")));
+        t.add_matched(&matched_record("ok", "ok", None));
+        for _ in 0..3 {
+            t.add_matched(&matched_record("failed", "fallback", Some("no_valid_rays")));
+        }
+        assert_eq!(
+            t.lines("level.jsonl")[1],
+            "levelscan match: warning: 3 of 4 scans fell back to odometry, most often \
+             no_valid_rays: 3 are poses level could not level (level.status failed: no ray \
+             kept); see level's summary for why: more scans per pose, or simulate --adaptive, \
+             level more of them"
+        );
+        // A leveled record without rays is still the input's fault.
+        t.add_matched(&matched_record("ok", "fallback", Some("no_valid_rays")));
+        assert!(
+            t.lines("level.jsonl")[1].ends_with(
+                "; the other 1: no reading within --min-range and --max-range; are the scans \
+                 leveled (level's output) and the ranges in metres?"
+            ),
+            "{:?}",
+            t.lines("level.jsonl")
+        );
     }
 
     #[test]

@@ -1,6 +1,7 @@
 //! CARMEN logs (the text format of the CARMEN robot toolkit, used by the Radish datasets):
 //! `FLASER` and `ROBOTLASER1` lines become [`Scan`]s; every other line (`ODOM`, `PARAM`,
-//! `NEFF`, `RLASER`, `#` comments, ...) is skipped.
+//! `NEFF`, `RLASER`, `#` comments, ...) is skipped. A log that gives no scans but skipped laser
+//! lines of other kinds (`RAWLASER1`, `ROBOTLASER2`, ...) ends with an error saying so.
 //!
 //! - `FLASER n r1 .. rn x y theta odom_x odom_y odom_theta timestamp [host logger_timestamp]`:
 //!   the beams spread evenly over 180 degrees from -90 degrees, one degree apart for 180 or 181
@@ -314,6 +315,13 @@ pub struct CarmenReader<R> {
     /// From `PARAM robot_front_laser_max`, when the log has it.
     logged_max_range: Option<f64>,
     done: bool,
+    /// Scans yielded so far.
+    scans: usize,
+    /// Laser messages of kinds this reader does not read (`RAWLASER1`, `ROBOTLASER2`, ...):
+    /// each kind with its count, in order of first appearance, and the first one's line. A
+    /// log of nothing else would otherwise read as empty without a word.
+    skipped: Vec<(String, usize)>,
+    first_skipped_line: usize,
 }
 
 impl<R: BufRead> CarmenReader<R> {
@@ -327,7 +335,50 @@ impl<R: BufRead> CarmenReader<R> {
             params,
             logged_max_range: None,
             done: false,
+            scans: 0,
+            skipped: Vec::new(),
+            first_skipped_line: 0,
         }
+    }
+
+    /// Counts the current line when it is a laser message of a kind not read.
+    fn note_skipped(&mut self) {
+        let Some(kind) = self.buf.split_ascii_whitespace().next() else {
+            return;
+        };
+        if !is_message_name(kind) || !kind.contains("LASER") {
+            return;
+        }
+        match self.skipped.iter_mut().find(|(k, _)| k == kind) {
+            Some((_, n)) => *n += 1,
+            None => {
+                if self.skipped.is_empty() {
+                    self.first_skipped_line = self.line;
+                }
+                self.skipped.push((kind.to_string(), 1));
+            }
+        }
+    }
+
+    /// At the end of a log that gave no scans: the laser lines it skipped, as an error.
+    fn unread_lasers(&self) -> Option<InputError> {
+        if self.scans > 0 || self.skipped.is_empty() {
+            return None;
+        }
+        let kinds: Vec<String> = self
+            .skipped
+            .iter()
+            .map(|(kind, n)| format!("{n} {kind} line{}", if *n == 1 { "" } else { "s" }))
+            .collect();
+        Some(InputError::at_line(
+            &self.name,
+            self.first_skipped_line,
+            format!(
+                "no scans: {} skipped (the first here); levelscan reads FLASER and ROBOTLASER1 \
+                 laser lines",
+                kinds.join(", ")
+            ),
+        ))
     }
 
     fn flaser_max_range(&self) -> f64 {
@@ -345,7 +396,10 @@ impl<R: BufRead> Iterator for CarmenReader<R> {
         while !self.done {
             self.buf.clear();
             match super::limits::read_line_capped(&mut self.reader, &mut self.buf) {
-                Ok(0) => self.done = true,
+                Ok(0) => {
+                    self.done = true;
+                    return self.unread_lasers().map(Err);
+                }
                 Ok(_) => {
                     self.line += 1;
                     let mut words = self.buf.split_ascii_whitespace();
@@ -359,8 +413,11 @@ impl<R: BufRead> Iterator for CarmenReader<R> {
                         continue;
                     }
                     match parse_carmen_line(&self.buf, self.flaser_max_range()) {
-                        Ok(None) => continue,
-                        Ok(Some(scan)) => return Some(Ok((self.line, scan))),
+                        Ok(None) => self.note_skipped(),
+                        Ok(Some(scan)) => {
+                            self.scans += 1;
+                            return Some(Ok((self.line, scan)));
+                        }
                         Err(m) => {
                             self.done = true;
                             return Some(Err(InputError::at_line(&self.name, self.line, m)));
@@ -462,6 +519,32 @@ mod tests {
     }
 
     #[test]
+    fn a_log_of_laser_lines_of_other_kinds_says_what_it_skipped() {
+        let raw = "RAWLASER1 0 -1.5708 3.1416 0.0175 81.9 0.01 0 3 2 2 2 0 5.0 host 5.0\n";
+        let log = format!("# log\nODOM 0 0 0 0 0 0 1 h 1\n{raw}{raw}ROBOTLASER2 1 2 3\n");
+        let items: Vec<_> =
+            CarmenReader::new(Cursor::new(log), "raw.log", CarmenParams::default()).collect();
+        assert_eq!(items.len(), 1);
+        assert_eq!(
+            items[0].as_ref().unwrap_err().to_string(),
+            "raw.log:3: no scans: 2 RAWLASER1 lines, 1 ROBOTLASER2 line skipped (the first \
+             here); levelscan reads FLASER and ROBOTLASER1 laser lines"
+        );
+        // Beside scans it reads, other lasers (a rear RLASER) are skipped without a word.
+        let log = format!("{raw}FLASER 2 1.0 3.0 0 0 0 0 0 0 1.0 h 1\n");
+        let items: Vec<_> =
+            CarmenReader::new(Cursor::new(log), "mixed.log", CarmenParams::default()).collect();
+        assert_eq!(items.len(), 1);
+        assert!(items[0].is_ok());
+        // A log of no laser lines at all is just empty.
+        let log = "# log\nODOM 0 0 0 0 0 0 1 h 1\n";
+        assert_eq!(
+            CarmenReader::new(Cursor::new(log), "odom.log", CarmenParams::default()).count(),
+            0
+        );
+    }
+
+    #[test]
     fn truncated_flaser_is_an_error() {
         let e = parse_carmen_line("FLASER 3 1 2 3 0 0", 50.0).unwrap_err();
         assert_eq!(e, "FLASER: the line ends before theta (field 7)");
@@ -539,7 +622,10 @@ mod tests {
              scan"
         );
         let e = parse_carmen_line("FLASER 0 0 0 0 0 0 0 1.5", 50.0).unwrap_err();
-        assert_eq!(e, "FLASER: the number of readings must be > 0");
+        assert_eq!(
+            e,
+            "FLASER: the number of readings must be a positive integer, not 0"
+        );
         let e = parse_carmen_line("FLASER 1 1 0 0 0 0 0 0 1e300", 50.0).unwrap_err();
         assert!(
             e.starts_with("FLASER: timestamp is 1e300 s, beyond the limit"),

@@ -99,10 +99,7 @@ pub fn sniff(head: &[u8]) -> FileKind {
         }
         return FileKind::ScanJsonLines;
     }
-    let binary = head
-        .iter()
-        .take(512)
-        .any(|&b| b == 0 || (b < 0x09) || (0x0e..0x20).contains(&b));
+    let binary = looks_binary(head);
     let word = first.split_whitespace().next().unwrap_or("");
     if !binary
         && (word.starts_with('#')
@@ -113,6 +110,14 @@ pub fn sniff(head: &[u8]) -> FileKind {
         return FileKind::Carmen;
     }
     FileKind::Unknown
+}
+
+/// Whether the first bytes hold control characters no text file has (an image, an archive,
+/// an executable): such a file is of no kind levelscan reads, whatever follows.
+pub fn looks_binary(head: &[u8]) -> bool {
+    head.iter()
+        .take(512)
+        .any(|&b| b == 0 || (b < 0x09) || (0x0e..0x20).contains(&b))
 }
 
 #[cfg(test)]

@@ -36,7 +36,7 @@ pub const MAX_SECONDS: f64 = 9e15;
 /// `n` rays: at least one and at most [`MAX_RAYS`].
 pub(crate) fn check_rays(what: &str, n: usize) -> Result<(), String> {
     if n == 0 {
-        Err(format!("{what} must be > 0"))
+        Err(format!("{what} must be a positive integer, not 0"))
     } else if n > MAX_RAYS {
         Err(format!(
             "{what} is {n}, more than the limit of {MAX_RAYS} rays per scan"
@@ -243,7 +243,10 @@ mod tests {
         for n in [1, 181, 361, 541, 1081, 2000, 3200, 36_000, MAX_RAYS] {
             assert_eq!(check_rays("nrays", n), Ok(()));
         }
-        assert_eq!(check_rays("nrays", 0).unwrap_err(), "nrays must be > 0");
+        assert_eq!(
+            check_rays("nrays", 0).unwrap_err(),
+            "nrays must be a positive integer, not 0"
+        );
         assert_eq!(
             check_rays("nrays", 1_000_000).unwrap_err(),
             "nrays is 1000000, more than the limit of 100000 rays per scan"

@@ -93,7 +93,16 @@ pub fn read_any<R: BufRead + Send>(
                 "a ROS bag on a stream: give the bag's path as the input file instead",
             ));
         }
-        // Other text is a CARMEN log whose unknown lines are skipped (as CARMEN readers do).
+        // Other text is a CARMEN log whose unknown lines are skipped (as CARMEN readers do);
+        // binary (an image, say) is named as a wrong kind, as `level` names it, rather than
+        // read as a log and refused for its bytes.
+        kind::FileKind::Unknown if kind::looks_binary(head) => {
+            return Err(kind::wrong_kind(
+                &name,
+                kind::FileKind::Unknown,
+                "scans are wanted (JSON Lines, a CARMEN log or a ROS bag)",
+            ));
+        }
         k @ (kind::FileKind::FloorPlan | kind::FileKind::Sqlite) => {
             return Err(kind::wrong_kind(
                 &name,

@@ -69,6 +69,8 @@ pub fn read_plan_from(reader: impl Read, name: &str) -> Result<Plan, InputError>
 
 /// Parses and validates the text of a `.wall` file; `name` is used in error messages.
 pub fn parse_plan(text: &str, name: &str) -> Result<Plan, InputError> {
+    // A byte order mark (editors on Windows write one) is no JSON: serde would stop at it.
+    let text = text.strip_prefix('\u{feff}').unwrap_or(text);
     let kind = super::kind::sniff(&text.as_bytes()[..text.len().min(1 << 16)]);
     use super::kind::FileKind;
     if !matches!(
@@ -322,6 +324,12 @@ mod tests {
 
     fn parse_err(text: &str) -> String {
         parse_plan(text, "room.wall").unwrap_err().to_string()
+    }
+
+    #[test]
+    fn a_byte_order_mark_before_the_plan_is_skipped() {
+        let plan = parse_plan(&format!("\u{feff}{ROOM}"), "room.wall").unwrap();
+        assert_eq!(plan, parse_plan(ROOM, "room.wall").unwrap());
     }
 
     #[test]

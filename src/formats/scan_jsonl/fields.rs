@@ -98,28 +98,50 @@ impl Value for Count {
 
 impl<'de> Deserialize<'de> for Count {
     fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
-        struct V;
-        impl Visitor<'_> for V {
-            type Value = u64;
-            fn expecting(&self, f: &mut fmt::Formatter) -> fmt::Result {
-                f.write_str("an integer >= 0")
-            }
-            fn visit_u64<E: de::Error>(self, v: u64) -> Result<u64, E> {
-                Ok(v)
-            }
-            fn visit_i64<E: de::Error>(self, v: i64) -> Result<u64, E> {
-                u64::try_from(v).map_err(|_| E::custom(format!("must be an integer >= 0, not {v}")))
-            }
-            fn visit_f64<E: de::Error>(self, v: f64) -> Result<u64, E> {
-                // 2^53: beyond it a float no longer says which integer it is.
-                if v >= 0.0 && v.fract() == 0.0 && v <= 9_007_199_254_740_992.0 {
-                    Ok(v as u64)
-                } else {
-                    Err(E::custom(format!("must be an integer >= 0, not {v}")))
-                }
-            }
+        d.deserialize_any(CountVisitor("an integer >= 0"))
+            .map(Count)
+    }
+}
+
+/// A count of rays, worded as what it must be, a positive integer, so that `-3` and `0`
+/// (refused by [`limits::check_rays`]) get the same words. Read as [`Count`].
+pub(super) struct RayCount(pub(super) u64);
+
+impl Value for RayCount {
+    type Out = u64;
+    fn into_out(self) -> u64 {
+        self.0
+    }
+}
+
+impl<'de> Deserialize<'de> for RayCount {
+    fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        d.deserialize_any(CountVisitor("a positive integer"))
+            .map(RayCount)
+    }
+}
+
+/// Reads a whole number >= 0; `.0` says what it must be, in errors.
+struct CountVisitor(&'static str);
+
+impl Visitor<'_> for CountVisitor {
+    type Value = u64;
+    fn expecting(&self, f: &mut fmt::Formatter) -> fmt::Result {
+        f.write_str(self.0)
+    }
+    fn visit_u64<E: de::Error>(self, v: u64) -> Result<u64, E> {
+        Ok(v)
+    }
+    fn visit_i64<E: de::Error>(self, v: i64) -> Result<u64, E> {
+        u64::try_from(v).map_err(|_| E::custom(format!("must be {}, not {v}", self.0)))
+    }
+    fn visit_f64<E: de::Error>(self, v: f64) -> Result<u64, E> {
+        // 2^53: beyond it a float no longer says which integer it is.
+        if v >= 0.0 && v.fract() == 0.0 && v <= 9_007_199_254_740_992.0 {
+            Ok(v as u64)
+        } else {
+            Err(E::custom(format!("must be {}, not {v}", self.0)))
         }
-        d.deserialize_any(V).map(Count)
     }
 }
 

@@ -40,8 +40,38 @@ fn parse_scan_line_with(text: &str, skip_hit: bool) -> Result<Scan, String> {
     let mut de = serde_json::Deserializer::from_str(text);
     let raw = de::DeserializeSeed::deserialize(RawScanVisitor { skip_hit }, &mut de)
         .and_then(|raw| de.end().map(|()| raw))
-        .map_err(|e| json_error_message(&e))?;
+        .map_err(|e| {
+            let message = json_error_message(&e);
+            if is_non_finite_literal(text, &e) {
+                format!("{message}; JSON has no NaN or Infinity: write null for no return")
+            } else {
+                message
+            }
+        })?;
     raw.into_scan()
+}
+
+/// Whether a syntax error stopped at a `NaN`, `Infinity` or `inf` literal, as Python's and
+/// other JSON writers emit for missing ranges: serde then says only "expected value" (or
+/// "invalid number" after a minus sign, "expected ident" for `nan`, read as a `null` begun).
+fn is_non_finite_literal(text: &str, e: &serde_json::Error) -> bool {
+    // Inside a field the error is re-raised with the field's name, so not as a syntax error.
+    let text_of_error = e.to_string();
+    let syntax = ["expected value", "invalid number", "expected ident"];
+    if !syntax.iter().any(|m| text_of_error.contains(m)) || e.column() == 0 {
+        return false;
+    }
+    // The column counts from 1 and stops at or just after the literal's first letter.
+    let at = text
+        .char_indices()
+        .nth(e.column().saturating_sub(2))
+        .map_or(text.len(), |(i, _)| i);
+    let near: String = text[at..]
+        .chars()
+        .take(12)
+        .collect::<String>()
+        .to_lowercase();
+    near.contains("nan") || near.contains("inf")
 }
 
 fn is_blank(line: &str) -> bool {

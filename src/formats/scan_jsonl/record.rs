@@ -3,7 +3,7 @@
 //! [`Scan`].
 
 use super::fields::{
-    Array, Count, Flag, HitCode, HitLen, Num, Offset, Opt, PoseField, Stamp, in_field,
+    Array, Count, Flag, HitCode, HitLen, Num, Offset, Opt, PoseField, RayCount, Stamp, in_field,
 };
 use crate::formats::limits;
 use crate::geometry::Pose;
@@ -196,7 +196,7 @@ impl<'de> Visitor<'de> for RawScanVisitor {
             let wrap = |e| in_field(field, e);
             match field {
                 "sequence" => raw.sequence = map.next_value::<Opt<Count>>().map_err(wrap)?.get(),
-                "nrays" => raw.nrays = map.next_value::<Opt<Count>>().map_err(wrap)?.get(),
+                "nrays" => raw.nrays = map.next_value::<Opt<RayCount>>().map_err(wrap)?.get(),
                 "elevation" => raw.elevation = map.next_value::<Opt<Num>>().map_err(wrap)?.get(),
                 "ray_elevation" => {
                     raw.ray_elevation = map.next_value::<Opt<Array<Num>>>().map_err(wrap)?.get()

@@ -177,20 +177,36 @@ fn arrays_of_the_wrong_length_name_the_field() {
 fn non_positive_or_fractional_nrays_is_rejected() {
     assert_eq!(
         err(r#"{"nrays": 0, "theta": [], "readings": []}"#),
-        "nrays must be > 0"
+        "nrays must be a positive integer, not 0"
     );
     assert!(
         err(r#"{"nrays": -3, "theta": [], "readings": []}"#)
-            .starts_with("nrays: must be an integer >= 0, not -3")
+            .starts_with("nrays: must be a positive integer, not -3")
     );
     assert!(
         err(r#"{"nrays": 2.5, "theta": [0, 1], "readings": [1, 2]}"#)
-            .starts_with("nrays: must be an integer >= 0, not 2.5")
+            .starts_with("nrays: must be a positive integer, not 2.5")
     );
     assert!(
         err(r#"{"nrays": "2", "theta": [0, 1], "readings": [1, 2]}"#)
-            .starts_with("nrays: invalid type: string \"2\", expected an integer >= 0")
+            .starts_with("nrays: invalid type: string \"2\", expected a positive integer")
     );
+}
+
+#[test]
+fn nan_and_infinity_literals_get_a_hint() {
+    for bad in ["NaN", "Infinity", "-Infinity", "nan"] {
+        let e = err(&format!(
+            r#"{{"nrays": 3, "theta": [0, 1, 2], "readings": [1, {bad}, 2]}}"#
+        ));
+        assert!(
+            e.ends_with("; JSON has no NaN or Infinity: write null for no return"),
+            "{bad}: {e}"
+        );
+    }
+    // Other syntax errors get no such hint.
+    let e = err(r#"{"nrays": 3, "theta": [0, 1, 2], "readings": [1, ?, 2]}"#);
+    assert!(!e.contains("NaN"), "{e}");
 }
 
 #[test]
@@ -273,7 +289,7 @@ fn reader_skips_blank_lines_and_reports_file_and_line() {
     assert_eq!(items[1].as_ref().unwrap().0, 4);
     assert_eq!(
         items[2].as_ref().unwrap_err().to_string(),
-        "scans.jsonl:5: nrays must be > 0"
+        "scans.jsonl:5: nrays must be a positive integer, not 0"
     );
 }
 
