@@ -13,8 +13,8 @@
 //! Two figures come out:
 //! - [`PathBound::ate`]: the ATE an efficient estimator that saw the whole run at once (a
 //!   smoother) would show, in expectation: errors drawn from the bound's joint covariance of
-//!   all poses, scored like a run ([`ate`]). No estimator, causal or not, does better on
-//!   average.
+//!   all poses, scored like a run ([`ate`]). No unbiased estimator, causal or not, has a
+//!   smaller error covariance.
 //! - [`PathBound::causal_rms`]: the root mean square over poses of the position sigma an
 //!   efficient estimator has when it places each pose from the scans and odometry up to it
 //!   (a filter, as `match` is), without the ATE's alignment.
