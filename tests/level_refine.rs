@@ -345,3 +345,55 @@ fn floor_just_in_front_of_a_wall_foot_levels_a_pose_its_walls_cannot() {
         assert!(e.abs() <= 3.0 * s);
     }
 }
+
+/// A corridor (30 m by 2 m, no ceiling) seen from inside, the scanner facing a side wall or
+/// looking along it: the walls in view are parallel and the floor shows only in the last rays
+/// of each scan, where the three scans meet nearly the same spots (no quad, no floor-like range
+/// steps, under 30 points). The sweep over the walls' free angle finds the floor's height and
+/// levels these poses honestly; they failed as `no_up` before (docs/ESTIMATOR.md section 17).
+#[test]
+fn a_corridor_pose_that_sees_the_floor_only_at_the_scans_ends_levels() {
+    let corridor = Room::polygon(
+        &[[0.0, 0.0], [30.0, 0.0], [30.0, 2.0], [0.0, 2.0]],
+        3.0,
+        false,
+    );
+    // (x, y, yaw, pitch, roll) [m, deg]: poses `simulate corridor.wall --random 100 --seed 5`
+    // failed.
+    let poses = [
+        (8.96, 1.49, 68.46, -1.78, 2.80),
+        (14.50, 1.33, -83.95, -18.55, 17.26),
+        (4.97, 0.83, 4.68, -1.01, 17.80),
+        (6.64, 0.95, -67.83, -17.24, -8.48),
+    ];
+    let mut leveled = 0;
+    for (k, &(x, y, yaw, pitch, roll)) in poses.iter().enumerate() {
+        let pose = Pose::new(x, y, 0.45, deg(yaw), deg(pitch), deg(roll));
+        let scans = scans_at(
+            &corridor,
+            &pose,
+            &elevations(3, 5.0),
+            0.01,
+            40 + k as u64,
+            k as u64,
+        );
+        let est = level_pose(&scans, &LevelParams::default());
+        let Some(att) = est.attitude else {
+            continue;
+        };
+        leveled += 1;
+        let (truth, sigmas) = (pose.attitude(), est.sigmas.unwrap());
+        for (e, s) in [att.theta_x - truth.theta_x, att.theta_y - truth.theta_y]
+            .iter()
+            .zip(sigmas)
+        {
+            assert!(
+                e.abs() <= 3.0 * s && e.abs() < deg(1.0),
+                "pose {k}: {:.3} deg off, sigma {:.3}",
+                e.to_degrees(),
+                s.to_degrees()
+            );
+        }
+    }
+    assert!(leveled >= 3, "{leveled} of 4 leveled");
+}

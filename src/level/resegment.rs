@@ -136,7 +136,9 @@ pub fn refine_estimate(
 /// Starts of re-segmentation found without a level frame, for a pose whose first solution
 /// failed the gate: the ungated robust solution; the walls with the floor's or ceiling's
 /// lines (walls that cannot fix up alone, as one wall split into patches, leave up free to
-/// turn about their normal); and a floor or ceiling found by its range steps alone.
+/// turn about their normal); a floor or ceiling found by its range steps alone; and walls of
+/// one family with the height their free angle puts most other points at
+/// ([`refine::swept_start`]).
 pub(crate) fn blind_starts(
     est: &LevelEstimate,
     grid: &PoseGrid,
@@ -157,7 +159,12 @@ pub(crate) fn blind_starts(
             up::up_robust(&obs, sigma_eff, params.iterations)
         });
     let level = refine::level_start(grid, steps, params, sigma);
-    [walls, with_lines, level].into_iter().flatten().collect()
+    // Walls of one family leave one angle of up free: swept for a floor or ceiling.
+    let swept = refine::swept_start(grid, &est.patches, &est.labels, params, sigma);
+    [walls, with_lines, level, swept]
+        .into_iter()
+        .flatten()
+        .collect()
 }
 
 /// The solution of the `refined` model when it passes the gate, widened by its distance from

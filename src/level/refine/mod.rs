@@ -31,6 +31,7 @@ pub(crate) mod lines;
 mod ransac;
 mod steps;
 mod support;
+mod sweep;
 #[cfg(test)]
 mod tests;
 mod walls;
@@ -47,6 +48,7 @@ pub use steps::{LevelSteps, level_steps};
 pub(crate) use steps::{row_pairs, row_steps};
 pub(crate) use support::supported_rows;
 use support::*;
+pub(crate) use sweep::swept_start;
 use walls::*;
 
 /// One model of the refined segmentation: a plane and the grid points assigned to it.

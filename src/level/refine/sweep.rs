@@ -1,0 +1,185 @@
+//! A start for poses whose walls all face one way (a corridor seen from inside, a hall's long
+//! wall): the walls pin up to the plane normal to them and leave one angle free. Of the ups
+//! that angle allows, the one under which most of the points no wall holds lie at one height
+//! (a floor or a ceiling) is taken, with that plane as level. It needs no quads and no range
+//! steps, which both fail where such poses see the floor: at the ends of the scans, where the
+//! hinge turns about the scans' end rays and scans at different elevations meet nearly the same
+//! spots (docs/ESTIMATOR.md section 17).
+
+use super::*;
+use crate::level::grid::PlaneAccumulator;
+use crate::level::params::up::*;
+use crate::level::patches::{Patch, UNLABELLED};
+
+/// Coarse and fine steps of the sweep over the free angle \[deg\].
+const COARSE_DEG: f64 = 1.0;
+const FINE_DEG: f64 = 0.1;
+/// Wall patches farther than this from their mean normal are not one family \[deg\].
+const FAMILY_DEG: f64 = 10.0;
+/// Another angle at least this far from the best that puts this share of its points at one
+/// height makes the sweep ambiguous \[deg, 1\].
+const RIVAL_DEG: f64 = 2.0;
+const RIVAL_SHARE: f64 = 0.8;
+/// Points the coarse sweep counts at most.
+const COARSE_POINTS: usize = 160;
+
+/// The start (see the module's notes): `None` when the wall patches are not one family, or no
+/// angle puts `level_line_min_points` of the other points at one height away from the
+/// scanner, or another angle does nearly as well.
+pub(crate) fn swept_start(
+    grid: &PoseGrid,
+    patches: &[Patch],
+    labels: &[u32],
+    params: &LevelParams,
+    sigma: f64,
+) -> Option<UpSolution> {
+    let s = sigma.max(params.min_sigma);
+    let walls: Vec<&Patch> = patches
+        .iter()
+        .filter(|p| p.kind == SurfaceKind::Wall)
+        .collect();
+    let n = family_normal(&walls)?;
+    // Up = cos(a) z + sin(a) e: the robot's up made normal to the walls, turned about them.
+    let z = (Vector3::z() - n * n.z).try_normalize(1e-9)?;
+    let e = n.cross(&z);
+    let up_at = |a: f64| z * a.cos() + e * a.sin();
+    let free: Vec<&GridPoint> = grid
+        .points
+        .iter()
+        .zip(labels)
+        .filter(|&(_, &l)| l == UNLABELLED || patches[l as usize].kind != SurfaceKind::Wall)
+        .filter_map(|(g, _)| g.as_ref())
+        .collect();
+    let min_points = params.level_line_min_points;
+    if free.len() < min_points {
+        return None;
+    }
+    // A point's tolerance along up: `refine_k` sigmas of its range noise along up (a floor
+    // seen at a grazing angle holds its points within millimetres of its height).
+    let ms2 = params.min_sigma * params.min_sigma;
+    let tolerance = |g: &GridPoint, up: &Vector3<f64>| {
+        params.refine_k * (s * s * g.dir.dot(up).powi(2) + ms2).sqrt()
+    };
+    // The coarse sweep on at most `COARSE_POINTS` of them, evenly taken (the counts only
+    // compare angles), the fine one on all.
+    let stride = free.len().div_ceil(COARSE_POINTS);
+    let some: Vec<&GridPoint> = free.iter().step_by(stride).copied().collect();
+    let mut ends = Vec::new();
+    let max = MAX_TILT_DEG.to_radians();
+    let coarse: Vec<(f64, usize)> = (0..)
+        .map(|i| -max + i as f64 * COARSE_DEG.to_radians())
+        .take_while(|&a| a <= max)
+        .map(|a| {
+            (
+                a,
+                most_at_one_height(&some, &up_at(a), &tolerance, &mut ends).0,
+            )
+        })
+        .collect();
+    let mut ends = Vec::new();
+    let mut level_at = |a: f64| most_at_one_height(&free, &up_at(a), &tolerance, &mut ends);
+    let &(a0, c0) = coarse.iter().max_by_key(|x| x.1)?;
+    let rival = coarse
+        .iter()
+        .filter(|x| (x.0 - a0).abs() > RIVAL_DEG.to_radians())
+        .map(|x| x.1)
+        .max()
+        .unwrap_or(0);
+    if c0 * stride < min_points || rival as f64 >= RIVAL_SHARE * c0 as f64 {
+        return None;
+    }
+    let (a, (count, height)) = (-10..=10)
+        .map(|i| a0 + i as f64 * FINE_DEG.to_radians())
+        .map(|a| (a, level_at(a)))
+        .max_by_key(|x| x.1.0)?;
+    if count < min_points {
+        return None;
+    }
+    let up = up_at(a);
+    let mut acc = PlaneAccumulator::default();
+    for g in free
+        .iter()
+        .filter(|g| (up.dot(&g.p.coords) - height).abs() <= tolerance(g, &up))
+    {
+        acc.add(g);
+    }
+    let level = acc.fit(sigma)?;
+    let misfit = |f: &PlaneFit| f.misfit_ratio(s).max(1.0);
+    let mut obs: Vec<PlaneObs> = walls
+        .iter()
+        .map(|w| PlaneObs::wall(&w.fit, misfit(&w.fit)))
+        .collect();
+    obs.push(PlaneObs::level(
+        &level,
+        misfit(&level) * params.level_inflation,
+    ));
+    up::up_robust(&obs, s, params.iterations)
+}
+
+/// The walls' common normal (weighted by their points, one sign), when every wall lies within
+/// `FAMILY_DEG` of it.
+fn family_normal(walls: &[&Patch]) -> Option<Vector3<f64>> {
+    let first = walls.first()?.fit.normal;
+    let sum = walls.iter().fold(Vector3::zeros(), |acc, w| {
+        let n = w.fit.normal;
+        acc + if n.dot(&first) < 0.0 { -n } else { n } * w.fit.n as f64
+    });
+    let n = sum.try_normalize(1e-12)?;
+    let family = FAMILY_DEG.to_radians().cos();
+    walls
+        .iter()
+        .all(|w| w.fit.normal.dot(&n).abs() >= family)
+        .then_some(n)
+}
+
+/// The most `points` within their `tolerance` of one height along `up`, away from the scanner
+/// (a plane through it is one scan's own, not a surface): `(count, height)`. The deepest
+/// overlap of the intervals `height ± tolerance`, found by sorting their ends (a sweep line):
+/// the count at each interval's lower end, outside the band about the scanner. `ends` carries
+/// the ends' order from the last call: from one angle to the next the order hardly changes,
+/// and the (adaptive) sort of a nearly sorted list is nearly linear.
+fn most_at_one_height(
+    points: &[&GridPoint],
+    up: &Vector3<f64>,
+    tolerance: &impl Fn(&GridPoint, &Vector3<f64>) -> f64,
+    ends: &mut Vec<(f64, i32, usize)>,
+) -> (usize, f64) {
+    if ends.len() != 2 * points.len() {
+        ends.clear();
+        ends.extend((0..points.len()).flat_map(|i| [(0.0, 1, i), (0.0, -1, i)]));
+    }
+    let mut widest: f64 = 0.0;
+    let bounds: Vec<(f64, f64)> = points
+        .iter()
+        .map(|g| {
+            let (h, t) = (up.dot(&g.p.coords), tolerance(g, up));
+            widest = widest.max(t);
+            (h - t, h + t)
+        })
+        .collect();
+    for end in ends.iter_mut() {
+        let (lo, hi) = bounds[end.2];
+        end.0 = if end.1 > 0 { lo } else { hi };
+    }
+    // Opening ends before closing ones at one height: touching intervals overlap. Insertion
+    // sort: linear in the ends plus the few swaps a small turn of up causes.
+    let before = |a: &(f64, i32, usize), b: &(f64, i32, usize)| {
+        a.0.total_cmp(&b.0).then(b.1.cmp(&a.1)) == std::cmp::Ordering::Less
+    };
+    for i in 1..ends.len() {
+        let mut j = i;
+        while j > 0 && before(&ends[j], &ends[j - 1]) {
+            ends.swap(j, j - 1);
+            j -= 1;
+        }
+    }
+    let mut best = (0, 0.0);
+    let mut depth = 0i32;
+    for &(at, step, _) in ends.iter() {
+        depth += step;
+        if step > 0 && at.abs() >= 2.0 * widest && depth as usize > best.0 {
+            best = (depth as usize, at);
+        }
+    }
+    best
+}
