@@ -62,7 +62,7 @@ pub(crate) fn swept_start(
     };
     // The coarse sweep on at most `COARSE_POINTS` of them, evenly taken (the counts only
     // compare angles), the fine one on all.
-    let stride = free.len().div_ceil(COARSE_POINTS);
+    let stride = free.len().div_ceil(COARSE_POINTS).max(1);
     let some: Vec<&GridPoint> = free.iter().step_by(stride).copied().collect();
     let mut ends = Vec::new();
     let max = MAX_TILT_DEG.to_radians();
