@@ -16,8 +16,8 @@ const COARSE_DEG: f64 = 1.0;
 const FINE_DEG: f64 = 0.1;
 /// Wall patches farther than this from their mean normal are not one family \[deg\].
 const FAMILY_DEG: f64 = 10.0;
-/// Another angle at least this far from the best that puts this share of its points at one
-/// height makes the sweep ambiguous \[deg, 1\].
+/// Another angle at least this far from the best that puts this share of its count at one
+/// height, mostly other points, makes the sweep ambiguous \[deg, 1\].
 const RIVAL_DEG: f64 = 2.0;
 const RIVAL_SHARE: f64 = 0.8;
 /// Points the coarse sweep counts at most.
@@ -66,28 +66,43 @@ pub(crate) fn swept_start(
     let some: Vec<&GridPoint> = free.iter().step_by(stride).copied().collect();
     let mut ends = Vec::new();
     let max = MAX_TILT_DEG.to_radians();
-    let coarse: Vec<(f64, usize)> = (0..)
+    let coarse: Vec<(f64, (usize, f64))> = (0..)
         .map(|i| -max + i as f64 * COARSE_DEG.to_radians())
         .take_while(|&a| a <= max)
         .map(|a| {
             (
                 a,
-                most_at_one_height(&some, &up_at(a), &tolerance, &mut ends).0,
+                most_at_one_height(&some, &up_at(a), &tolerance, &mut ends),
             )
         })
         .collect();
-    let mut ends = Vec::new();
-    let mut level_at = |a: f64| most_at_one_height(&free, &up_at(a), &tolerance, &mut ends);
-    let &(a0, c0) = coarse.iter().max_by_key(|x| x.1)?;
-    let rival = coarse
-        .iter()
-        .filter(|x| (x.0 - a0).abs() > RIVAL_DEG.to_radians())
-        .map(|x| x.1)
-        .max()
-        .unwrap_or(0);
-    if c0 * stride < min_points || rival as f64 >= RIVAL_SHARE * c0 as f64 {
+    let &(a0, (c0, h0)) = coarse.iter().max_by_key(|x| x.1.0)?;
+    if c0 * stride < min_points {
         return None;
     }
+    // Which of `some` lie at `height` under the up of angle `a`.
+    let on = |a: f64, height: f64| -> Vec<bool> {
+        let up = up_at(a);
+        some.iter()
+            .map(|g| (up.dot(&g.p.coords) - height).abs() <= tolerance(g, &up))
+            .collect()
+    };
+    // A rival is another angle that puts nearly as many points at one height, mostly other
+    // points (a box's top beside the floor). The same points at neighbouring angles are one
+    // short floor seen over a range of angles, which the fit below weighs.
+    let best = on(a0, h0);
+    let rival = coarse.iter().any(|&(a, (c, h))| {
+        (a - a0).abs() > RIVAL_DEG.to_radians() && c as f64 >= RIVAL_SHARE * c0 as f64 && {
+            let theirs = on(a, h);
+            let shared = theirs.iter().zip(&best).filter(|&(&t, &b)| t && b).count();
+            2 * shared < c
+        }
+    });
+    if rival {
+        return None;
+    }
+    let mut ends = Vec::new();
+    let mut level_at = |a: f64| most_at_one_height(&free, &up_at(a), &tolerance, &mut ends);
     let (a, (count, height)) = (-10..=10)
         .map(|i| a0 + i as f64 * FINE_DEG.to_radians())
         .map(|a| (a, level_at(a)))
