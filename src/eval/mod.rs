@@ -10,4 +10,6 @@ pub mod pair_bound;
 pub mod path_bound;
 pub mod real;
 pub mod run;
+#[cfg(test)]
+mod test_scenes;
 pub mod true_segments;

@@ -277,16 +277,10 @@ fn chance_within(cov: &Matrix2<f64>, m: f64) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::eval::test_scenes::{rays_at, segment};
     use crate::plan::Segment;
 
     const SIGMA: f64 = 0.01;
-
-    fn segment(a: (f64, f64), b: (f64, f64)) -> Segment {
-        Segment {
-            a: Point2::new(a.0, a.1),
-            b: Point2::new(b.0, b.1),
-        }
-    }
 
     /// An L-shaped room with a pillar and a wall broken by a door (two segments, one line).
     fn room() -> Vec<Segment> {
@@ -305,19 +299,13 @@ mod tests {
         ]
     }
 
-    fn bearings() -> impl Iterator<Item = f64> + Clone {
-        (0..181).map(|i| -std::f64::consts::FRAC_PI_2 + i as f64 * std::f64::consts::PI / 180.0)
-    }
-
     fn bound_in(
         segments: &[Segment],
         a: &Pose2,
         b: &Pose2,
     ) -> (Option<Matrix3<f64>>, Vec<PairRay>, Vec<PairRay>, WallPlanes) {
-        let world = World::from_segments(segments.to_vec(), 3.0, false);
-        let planes = WallPlanes::new(segments);
-        let ra = scan_rays(&world, &planes, a, bearings(), 30.0);
-        let rb = scan_rays(&world, &planes, b, bearings(), 30.0);
+        let (planes, mut rays) = rays_at(segments, &[*a, *b]);
+        let (rb, ra) = (rays.pop().unwrap(), rays.pop().unwrap());
         let cov = pair_bound(&planes, (a, &ra), (b, &rb), SIGMA);
         (cov, ra, rb, planes)
     }

@@ -67,6 +67,8 @@ pub fn path_bound(
         return None;
     }
     let mut path = Information::new(poses, rays);
+    // Poses 1.. come first, three unknowns each; the walls' follow.
+    let first_wall = 3 * (n - 1);
     // Per pose, the unknowns measured so far (a filter at that pose knows nothing later).
     let mut active: Vec<usize> = Vec::new();
     let mut seen = vec![false; path.info.nrows()];
@@ -82,12 +84,11 @@ pub fn path_bound(
             path.add_ray(planes, poses, k, ray, sigma);
         }
         if k > 0 {
-            let cov = covariance_of(&path.info, &active, &walls_in(&active, n), 3 * (k - 1))?;
+            let cov = covariance_of(&path.info, &active, first_wall, 3 * (k - 1))?;
             causal += cov[(0, 0)] + cov[(1, 1)];
         }
     }
-    let all: Vec<usize> = (0..path.info.nrows()).collect();
-    let pose_cov = pose_covariance(&path.info, &all, &walls_in(&all, n), n)?;
+    let pose_cov = pose_covariance(&path.info, first_wall)?;
     Some(PathBound {
         ate: expected_ate(poses, &pose_cov, seed)?,
         causal_rms: (causal / (n - 1) as f64).sqrt(),
@@ -240,17 +241,12 @@ fn activate(active: &mut Vec<usize>, seen: &mut [bool], new: std::ops::Range<usi
     }
 }
 
-/// Which of `active` are wall unknowns (indices from `3 (n - 1)` on).
-fn walls_in(active: &[usize], n: usize) -> Vec<bool> {
-    active.iter().map(|&i| i >= 3 * (n - 1)).collect()
-}
-
-/// The information restricted to the unknowns `active`, walls (per `wall`) given the weak
-/// prior, factored.
+/// The information restricted to the unknowns `active`, factored; the walls' (indices from
+/// `first_wall` on) given the weak prior.
 fn factored(
     info: &DMatrix<f64>,
     active: &[usize],
-    wall: &[bool],
+    first_wall: usize,
 ) -> Option<nalgebra::Cholesky<f64, nalgebra::Dyn>> {
     let m = active.len();
     let scale = (0..m)
@@ -258,7 +254,7 @@ fn factored(
         .fold(0.0, f64::max)
         .max(1e-300);
     let sub = DMatrix::from_fn(m, m, |i, j| {
-        let prior = if i == j && wall[i] {
+        let prior = if i == j && active[i] >= first_wall {
             WALL_PRIOR * scale
         } else {
             0.0
@@ -272,10 +268,10 @@ fn factored(
 fn covariance_of(
     info: &DMatrix<f64>,
     active: &[usize],
-    wall: &[bool],
+    first_wall: usize,
     pose: usize,
 ) -> Option<Matrix3<f64>> {
-    let chol = factored(info, active, wall)?;
+    let chol = factored(info, active, first_wall)?;
     let at = active.iter().position(|&i| i == pose)?;
     let mut rhs = DMatrix::zeros(active.len(), 3);
     for q in 0..3 {
@@ -285,18 +281,14 @@ fn covariance_of(
     Some(Matrix3::from_fn(|r, q| x[(at + r, q)]))
 }
 
-/// The joint covariance of poses 1.. (in their order) from all the information.
-fn pose_covariance(
-    info: &DMatrix<f64>,
-    active: &[usize],
-    wall: &[bool],
-    n: usize,
-) -> Option<DMatrix<f64>> {
-    let chol = factored(info, active, wall)?;
-    let m = 3 * (n - 1);
-    let rhs = DMatrix::from_fn(active.len(), m, |i, j| if i == j { 1.0 } else { 0.0 });
+/// The joint covariance of poses 1.. (the unknowns before `first_wall`, in their order) from
+/// all the information.
+fn pose_covariance(info: &DMatrix<f64>, first_wall: usize) -> Option<DMatrix<f64>> {
+    let all: Vec<usize> = (0..info.nrows()).collect();
+    let chol = factored(info, &all, first_wall)?;
+    let rhs = DMatrix::from_fn(all.len(), first_wall, |i, j| if i == j { 1.0 } else { 0.0 });
     let x = chol.solve(&rhs);
-    Some(x.rows(0, m).into_owned())
+    Some(x.rows(0, first_wall).into_owned())
 }
 
 /// The mean ATE RMSE of runs whose poses 1.. err by draws from `cov` (pose 0 exact).
@@ -328,34 +320,9 @@ fn expected_ate(poses: &[Pose2], cov: &DMatrix<f64>, seed: u64) -> Option<f64> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::eval::pair_bound::scan_rays;
-    use crate::plan::Segment;
-    use crate::simulate::World;
-    use nalgebra::Point2;
+    use crate::eval::test_scenes::{rays_at, segment};
 
     const SIGMA: f64 = 0.01;
-
-    fn segment(a: (f64, f64), b: (f64, f64)) -> Segment {
-        Segment {
-            a: Point2::new(a.0, a.1),
-            b: Point2::new(b.0, b.1),
-        }
-    }
-
-    fn bearings() -> impl Iterator<Item = f64> + Clone {
-        (0..181).map(|i| -std::f64::consts::FRAC_PI_2 + i as f64 * std::f64::consts::PI / 180.0)
-    }
-
-    /// The rays of scans at `poses` in the room of `segments`.
-    fn scene(segments: &[Segment], poses: &[Pose2]) -> (WallPlanes, Vec<Vec<PairRay>>) {
-        let world = World::from_segments(segments.to_vec(), 3.0, false);
-        let planes = WallPlanes::new(segments);
-        let rays = poses
-            .iter()
-            .map(|p| scan_rays(&world, &planes, p, bearings(), 30.0))
-            .collect();
-        (planes, rays)
-    }
 
     fn odometry() -> OdometryParams {
         OdometryParams::default()
@@ -412,7 +379,7 @@ mod tests {
             Pose2::new(1.6, 1.2, 0.5),
             Pose2::new(2.0, 2.6, -0.4),
         ];
-        let (planes, rays) = scene(&room, &poses);
+        let (planes, rays) = rays_at(&room, &poses);
         let odo = odometry();
         let mut path = Information::new(&poses, &rays);
         for (k, scan) in rays.iter().enumerate() {
@@ -467,7 +434,7 @@ mod tests {
         let poses: Vec<Pose2> = (0..n).map(|k| Pose2::new(k as f64, 1.0, 0.0)).collect();
         let odo = odometry();
         let s_t = odo.trans_per_m + odo.trans_const;
-        let (planes, rays) = scene(&corridor, &poses);
+        let (planes, rays) = rays_at(&corridor, &poses);
         let bound = path_bound(&planes, &poses, &rays, SIGMA, &odo, 1).expect("bound");
         let along = s_t * (n as f64 / 2.0).sqrt();
         // y and the heading add a little: the walls pin them to millimetres.
@@ -482,7 +449,7 @@ mod tests {
             segment((10.0, 2.0), (-1.0, 2.0)),
             segment((-1.0, 2.0), (-1.0, 0.0)),
         ];
-        let (planes, rays) = scene(&room, &poses);
+        let (planes, rays) = rays_at(&room, &poses);
         let bound = path_bound(&planes, &poses, &rays, SIGMA, &odo, 1).expect("bound");
         assert!(bound.causal_rms < 0.2 * s_t, "{}", bound.causal_rms);
         assert!(bound.ate < bound.causal_rms, "{bound:?}");
@@ -514,7 +481,7 @@ mod tests {
         let poses: Vec<Pose2> = (0..6)
             .map(|k| Pose2::new(1.0 + 0.8 * k as f64, 1.5, 0.05 * k as f64))
             .collect();
-        let (planes, rays) = scene(&room, &poses);
+        let (planes, rays) = rays_at(&room, &poses);
         let odo = odometry();
         let mut last = 0.0;
         for m in [0, 2, 3, 5, 10] {

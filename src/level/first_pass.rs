@@ -56,17 +56,32 @@ pub(crate) fn robust_obs<'a>(
     params: &LevelParams,
     sigma: f64,
 ) -> Vec<PlaneObs<'a>> {
-    let misfit = |f: &PlaneFit| f.misfit_ratio(sigma.max(params.min_sigma)).max(1.0);
     let rows = est.grid.as_ref().map_or(0, PoseGrid::rows);
     let full_rows = params.quad_rows.min(rows).saturating_sub(1);
-    let level = |f: &'a PlaneFit| PlaneObs::level(f, misfit(f) * params.level_inflation);
     est.patches
         .iter()
         .filter(|p| p.kind == SurfaceKind::Wall)
         .filter(|p| p.row_range.1 - p.row_range.0 >= full_rows)
-        .map(|p| PlaneObs::wall(&p.fit, misfit(&p.fit)))
-        .chain(levels.iter().map(level))
+        .map(|p| wall_obs(&p.fit, params, sigma))
+        .chain(levels.iter().map(|f| level_obs(f, params, sigma)))
         .collect()
+}
+
+/// A wall's plane as evidence of up at range noise `sigma`, its normal's variance widened by
+/// how much worse than the noise the plane fits its points.
+pub(crate) fn wall_obs<'a>(fit: &'a PlaneFit, params: &LevelParams, sigma: f64) -> PlaneObs<'a> {
+    PlaneObs::wall(fit, misfit(fit, params, sigma))
+}
+
+/// A floor's or ceiling's plane as evidence of up, widened as a wall's and by
+/// `level_inflation` (what cleaning leaves of a wall's foot in it).
+pub(crate) fn level_obs<'a>(fit: &'a PlaneFit, params: &LevelParams, sigma: f64) -> PlaneObs<'a> {
+    PlaneObs::level(fit, misfit(fit, params, sigma) * params.level_inflation)
+}
+
+/// How much worse than the noise `fit` explains its points, at least 1.
+fn misfit(fit: &PlaneFit, params: &LevelParams, sigma: f64) -> f64 {
+    fit.misfit_ratio(sigma.max(params.min_sigma)).max(1.0)
 }
 
 /// Floor and ceiling planes usable as level (when `level_surfaces` is on): each floor or

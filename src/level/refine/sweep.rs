@@ -7,6 +7,7 @@
 //! spots (docs/ESTIMATOR.md section 17).
 
 use super::*;
+use crate::level::first_pass::{level_obs, wall_obs};
 use crate::level::grid::PlaneAccumulator;
 use crate::level::params::up::*;
 use crate::level::patches::{Patch, UNLABELLED};
@@ -63,24 +64,19 @@ pub(crate) fn swept_start(
     // The coarse sweep on at most `COARSE_POINTS` of them, evenly taken (the counts only
     // compare angles), the fine one on all.
     let stride = free.len().div_ceil(COARSE_POINTS).max(1);
-    let some: Vec<&GridPoint> = free.iter().step_by(stride).copied().collect();
-    let mut ends = Vec::new();
+    let mut coarse_sweep = HeightSweep::new(free.iter().step_by(stride).copied().collect());
     let max = MAX_TILT_DEG.to_radians();
     let coarse: Vec<(f64, (usize, f64))> = (0..)
         .map(|i| -max + i as f64 * COARSE_DEG.to_radians())
         .take_while(|&a| a <= max)
-        .map(|a| {
-            (
-                a,
-                most_at_one_height(&some, &up_at(a), &tolerance, &mut ends),
-            )
-        })
+        .map(|a| (a, coarse_sweep.most_at_one_height(&up_at(a), &tolerance)))
         .collect();
     let &(a0, (c0, h0)) = coarse.iter().max_by_key(|x| x.1.0)?;
     if c0 * stride < min_points {
         return None;
     }
-    // Which of `some` lie at `height` under the up of angle `a`.
+    // Which of the coarse sweep's points lie at `height` under the up of angle `a`.
+    let some = &coarse_sweep.points;
     let on = |a: f64, height: f64| -> Vec<bool> {
         let up = up_at(a);
         some.iter()
@@ -101,8 +97,8 @@ pub(crate) fn swept_start(
     if rival {
         return None;
     }
-    let mut ends = Vec::new();
-    let mut level_at = |a: f64| most_at_one_height(&free, &up_at(a), &tolerance, &mut ends);
+    let mut fine_sweep = HeightSweep::new(free);
+    let mut level_at = |a: f64| fine_sweep.most_at_one_height(&up_at(a), &tolerance);
     let (a, (count, height)) = (-10..=10)
         .map(|i| a0 + i as f64 * FINE_DEG.to_radians())
         .map(|a| (a, level_at(a)))
@@ -112,22 +108,19 @@ pub(crate) fn swept_start(
     }
     let up = up_at(a);
     let mut acc = PlaneAccumulator::default();
-    for g in free
+    for g in fine_sweep
+        .points
         .iter()
         .filter(|g| (up.dot(&g.p.coords) - height).abs() <= tolerance(g, &up))
     {
         acc.add(g);
     }
     let level = acc.fit(sigma)?;
-    let misfit = |f: &PlaneFit| f.misfit_ratio(s).max(1.0);
     let mut obs: Vec<PlaneObs> = walls
         .iter()
-        .map(|w| PlaneObs::wall(&w.fit, misfit(&w.fit)))
+        .map(|w| wall_obs(&w.fit, params, sigma))
         .collect();
-    obs.push(PlaneObs::level(
-        &level,
-        misfit(&level) * params.level_inflation,
-    ));
+    obs.push(level_obs(&level, params, sigma));
     up::up_robust(&obs, s, params.iterations)
 }
 
@@ -147,54 +140,70 @@ fn family_normal(walls: &[&Patch]) -> Option<Vector3<f64>> {
         .then_some(n)
 }
 
-/// The most `points` within their `tolerance` of one height along `up`, away from the scanner
-/// (a plane through it is one scan's own, not a surface): `(count, height)`. The deepest
-/// overlap of the intervals `height ± tolerance`, found by sorting their ends (a sweep line):
-/// the count at each interval's lower end, outside the band about the scanner. `ends` carries
-/// the ends' order from the last call: from one angle to the next the order hardly changes,
-/// and the (adaptive) sort of a nearly sorted list is nearly linear.
-fn most_at_one_height(
-    points: &[&GridPoint],
-    up: &Vector3<f64>,
-    tolerance: &impl Fn(&GridPoint, &Vector3<f64>) -> f64,
-    ends: &mut Vec<(f64, i32, usize)>,
-) -> (usize, f64) {
-    if ends.len() != 2 * points.len() {
-        ends.clear();
-        ends.extend((0..points.len()).flat_map(|i| [(0.0, 1, i), (0.0, -1, i)]));
+/// The points a sweep counts, with the order of their intervals' ends kept from one angle to
+/// the next: a turn of a degree hardly reorders them, so the ends are re-sorted by insertion
+/// in about linear time.
+struct HeightSweep<'p> {
+    points: Vec<&'p GridPoint>,
+    /// Each interval's end: its height, +1 opening or -1 closing, and its point.
+    ends: Vec<(f64, i32, usize)>,
+    /// Scratch: each point's interval under the current up.
+    bounds: Vec<(f64, f64)>,
+}
+
+impl<'p> HeightSweep<'p> {
+    fn new(points: Vec<&'p GridPoint>) -> Self {
+        let ends = (0..points.len())
+            .flat_map(|i| [(0.0, 1, i), (0.0, -1, i)])
+            .collect();
+        HeightSweep {
+            bounds: Vec::with_capacity(points.len()),
+            points,
+            ends,
+        }
     }
-    let mut widest: f64 = 0.0;
-    let bounds: Vec<(f64, f64)> = points
-        .iter()
-        .map(|g| {
+
+    /// The most points within their `tolerance` of one height along `up`, away from the
+    /// scanner (a plane through it is one scan's own, not a surface): `(count, height)`. The
+    /// deepest overlap of the intervals `height ± tolerance`, by a sweep line over their
+    /// sorted ends: the count at each interval's lower end, outside the band about the
+    /// scanner.
+    fn most_at_one_height(
+        &mut self,
+        up: &Vector3<f64>,
+        tolerance: &impl Fn(&GridPoint, &Vector3<f64>) -> f64,
+    ) -> (usize, f64) {
+        let mut widest: f64 = 0.0;
+        self.bounds.clear();
+        self.bounds.extend(self.points.iter().map(|g| {
             let (h, t) = (up.dot(&g.p.coords), tolerance(g, up));
             widest = widest.max(t);
             (h - t, h + t)
-        })
-        .collect();
-    for end in ends.iter_mut() {
-        let (lo, hi) = bounds[end.2];
-        end.0 = if end.1 > 0 { lo } else { hi };
-    }
-    // Opening ends before closing ones at one height: touching intervals overlap. Insertion
-    // sort: linear in the ends plus the few swaps a small turn of up causes.
-    let before = |a: &(f64, i32, usize), b: &(f64, i32, usize)| {
-        a.0.total_cmp(&b.0).then(b.1.cmp(&a.1)) == std::cmp::Ordering::Less
-    };
-    for i in 1..ends.len() {
-        let mut j = i;
-        while j > 0 && before(&ends[j], &ends[j - 1]) {
-            ends.swap(j, j - 1);
-            j -= 1;
+        }));
+        for end in self.ends.iter_mut() {
+            let (lo, hi) = self.bounds[end.2];
+            end.0 = if end.1 > 0 { lo } else { hi };
         }
-    }
-    let mut best = (0, 0.0);
-    let mut depth = 0i32;
-    for &(at, step, _) in ends.iter() {
-        depth += step;
-        if step > 0 && at.abs() >= 2.0 * widest && depth as usize > best.0 {
-            best = (depth as usize, at);
+        // Opening ends before closing ones at one height: touching intervals overlap.
+        let ends = &mut self.ends;
+        let before = |a: &(f64, i32, usize), b: &(f64, i32, usize)| {
+            a.0.total_cmp(&b.0).then(b.1.cmp(&a.1)) == std::cmp::Ordering::Less
+        };
+        for i in 1..ends.len() {
+            let mut j = i;
+            while j > 0 && before(&ends[j], &ends[j - 1]) {
+                ends.swap(j, j - 1);
+                j -= 1;
+            }
         }
+        let mut best = (0, 0.0);
+        let mut depth = 0i32;
+        for &(at, step, _) in ends.iter() {
+            depth += step;
+            if step > 0 && at.abs() >= 2.0 * widest && depth as usize > best.0 {
+                best = (depth as usize, at);
+            }
+        }
+        best
     }
-    best
 }
