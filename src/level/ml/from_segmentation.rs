@@ -14,6 +14,7 @@
 //! ceiling's edges. Where the core
 //! refuses, the leveler's answer stands, or the pose fails as before.
 
+use super::discover::with_missing_walls;
 use super::relabel::{Neighbours, relabel, without_level_edges};
 use super::solve::{one_step, refine_labelled_from};
 use super::{LabelledPoint, MlParams, MlSolution, Surface};
@@ -120,7 +121,8 @@ fn final_estimate(
 /// The last stage on one segmentation (`labels`, per point of `points`), before the gate: the
 /// core's fit from `up`, relabelled by the fitted model and refitted until the labels settle
 /// (an EM over the segmentation, [`relabel`], at most `relabel_passes` times, and no more once
-/// a refit moves the attitude by less than `relabel_settle_sigmas`), its covariance
+/// a refit moves the attitude by less than `relabel_settle_sigmas`; the first relabelling also
+/// takes in the walls the segmentation lacks, [`with_missing_walls`]), its covariance
 /// widened by its distance from the rival segmentations of the same ranges: the fit on only
 /// the points relabelling left where they were ([`agreed`]) and, when the range sigma exceeds
 /// `level_edges_above`, the fit without the floor's and ceiling's edges. `None` when the core
@@ -137,8 +139,8 @@ pub(crate) fn last_stage(
     let mut sol = fit(points, labels, up, None, params)?;
     let first = sol.attitude;
     let mut current = labels.to_vec();
-    for _ in 0..params.ml.relabel_passes {
-        let next = relabel(
+    for pass in 0..params.ml.relabel_passes {
+        let mut next = relabel(
             points,
             neighbours,
             &current,
@@ -147,6 +149,11 @@ pub(crate) fn last_stage(
             params.ml.relabel_margin,
             params.ml.min_incidence,
         );
+        // Once the first fit has leveled the points, the walls the segmentation lacks show
+        // as straight runs of points nothing explains (docs/ESTIMATOR.md, section 18).
+        if pass == 0 && params.ml.missing_walls {
+            next = with_missing_walls(points, neighbours, &next, &sol, &params.ml);
+        }
         if next == current {
             break;
         }
