@@ -129,8 +129,9 @@ pub(crate) fn with_missing_walls(
     out
 }
 
-/// Per scan, the candidates' runs (neighbours in bearing within `max_gap`), split where they
-/// leave a straight line (Douglas-Peucker at `k` sigmas), of at least `min_run` points.
+/// Per scan, the candidates' runs (neighbours in bearing within `missing_wall_max_gap`), split
+/// where they leave a straight line (Douglas-Peucker at `huber_k` sigmas), of at least
+/// `missing_wall_min_run` points.
 fn straight_runs(
     points: &[LabelledPoint],
     neighbours: &Neighbours,
@@ -149,28 +150,29 @@ fn straight_runs(
         }
         let (row, col) = (neighbours.index[i] / cols, neighbours.index[i] % cols);
         let joins = last.is_some_and(|(r, c0)| r == row && col - c0 <= params.missing_wall_max_gap);
-        if !joins {
-            split_straight(points, xy, &current, params, &mut runs, last.map(|l| l.0));
+        if let Some((done, _)) = last.filter(|_| !joins) {
+            split_straight(points, xy, &current, done, params, &mut runs);
             current.clear();
         }
         current.push(i);
         last = Some((row, col));
     }
-    split_straight(points, xy, &current, params, &mut runs, last.map(|l| l.0));
+    if let Some((done, _)) = last {
+        split_straight(points, xy, &current, done, params, &mut runs);
+    }
     runs
 }
 
-/// Douglas-Peucker on one run: kept whole when every point lies within `k` of its sigmas of
-/// the chord, else split at the farthest point.
+/// Douglas-Peucker on one run of scan `row`: kept whole when every point lies within
+/// `huber_k` of its sigmas of the chord, else split at the farthest point.
 fn split_straight(
     points: &[LabelledPoint],
     xy: &[Vector2<f64>],
     run: &[usize],
+    row: usize,
     params: &MlParams,
     out: &mut Vec<Run>,
-    row: Option<usize>,
 ) {
-    let Some(row) = row else { return };
     if run.len() < params.missing_wall_min_run {
         return;
     }
@@ -195,13 +197,14 @@ fn split_straight(
         return;
     }
     let far = far.clamp(1, run.len() - 2);
-    split_straight(points, xy, &run[..=far], params, out, Some(row));
-    split_straight(points, xy, &run[far..], params, out, Some(row));
+    split_straight(points, xy, &run[..=far], row, params, out);
+    split_straight(points, xy, &run[far..], row, params, out);
 }
 
 /// The runs joined into walls, longest first: a run joins a wall when every point of it lies
-/// within `k` of its sigmas of the wall's line and it reaches the wall's stretch within
-/// `max_along_gap`. Walls of one scan, or of fewer than `min_points`, are dropped.
+/// within `huber_k` of its sigmas of the wall's line and it reaches the wall's stretch within
+/// `missing_wall_along_gap`. Walls of one scan, or of fewer than `missing_wall_min_points`,
+/// are dropped.
 fn joined(
     points: &[LabelledPoint],
     xy: &[Vector2<f64>],
