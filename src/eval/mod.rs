@@ -11,5 +11,5 @@ pub mod path_bound;
 pub mod real;
 pub mod run;
 #[cfg(test)]
-mod test_scenes;
+pub(crate) mod test_scenes;
 pub mod true_segments;

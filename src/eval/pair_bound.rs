@@ -177,26 +177,16 @@ pub fn pair_bound(
     for (pose, rays, moves) in [(&Pose2::identity(), a, false), (&motion, b, true)] {
         for ray in rays {
             let line = wall_in_a(ray.wall);
-            let (n, d) = (Vector2::new(line.x, line.y), line.z);
-            let n_perp = Vector2::new(-n.y, n.x);
-            let (s, c) = (pose.theta + ray.bearing).sin_cos();
-            let u = Vector2::new(c, s);
-            let t = Vector2::new(pose.x, pose.y);
-            let nu = n.dot(&u);
-            if nu.abs() < 1e-12 {
+            let n = Vector2::new(line.x, line.y);
+            let Some((by_motion, by_wall)) = range_derivatives(&n, line.z, pose, ray.bearing)
+            else {
                 continue;
-            }
-            // r = (d - n . t) / (n . u), at the noise-free range.
-            let r = (d - n.dot(&t)) / nu;
-            let hit = t + u * r;
-            let by_wall = Vector2::new(-n_perp.dot(&hit) / nu, 1.0 / nu);
+            };
             let entry = walls
                 .entry(ray.wall)
                 .or_insert((Matrix3x2::zeros(), Matrix2::zeros()));
             entry.1 += w * by_wall * by_wall.transpose();
             if moves {
-                let u_perp = Vector2::new(-u.y, u.x);
-                let by_motion = Vector3::new(-n.x / nu, -n.y / nu, -r * n.dot(&u_perp) / nu);
                 h_mm += w * by_motion * by_motion.transpose();
                 entry.0 += w * by_motion * by_wall.transpose();
             }
@@ -215,6 +205,30 @@ pub fn pair_bound(
         return None;
     }
     schur.try_inverse()
+}
+
+/// A ray's noise-free range `r = (d - n . t) / (n . u)`, from `pose` along `bearing` to the
+/// wall line `n . p = d`, differentiated by the pose `(x, y, theta)` and by the wall's (normal
+/// angle, offset); `None` where the ray runs along the wall.
+pub(crate) fn range_derivatives(
+    n: &Vector2<f64>,
+    d: f64,
+    pose: &Pose2,
+    bearing: f64,
+) -> Option<(Vector3<f64>, Vector2<f64>)> {
+    let (s, c) = (pose.theta + bearing).sin_cos();
+    let u = Vector2::new(c, s);
+    let t = Vector2::new(pose.x, pose.y);
+    let nu = n.dot(&u);
+    if nu.abs() < 1e-12 {
+        return None;
+    }
+    let r = (d - n.dot(&t)) / nu;
+    let hit = t + u * r;
+    let (n_perp, u_perp) = (Vector2::new(-n.y, n.x), Vector2::new(-u.y, u.x));
+    let by_pose = Vector3::new(-n.x / nu, -n.y / nu, -r * n.dot(&u_perp) / nu);
+    let by_wall = Vector2::new(-n_perp.dot(&hit) / nu, 1.0 / nu);
+    Some((by_pose, by_wall))
 }
 
 /// Far enough for any reading \[m\].

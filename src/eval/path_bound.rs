@@ -23,10 +23,10 @@
 
 use super::bound::WallPlanes;
 use super::metrics::ate;
-use super::pair_bound::PairRay;
+use super::pair_bound::{PairRay, range_derivatives};
 use crate::geometry::Pose2;
 use crate::simulate::OdometryParams;
-use nalgebra::{DMatrix, DVector, Matrix3, Vector2};
+use nalgebra::{DMatrix, DVector, Matrix3};
 use rand::SeedableRng;
 use rand::rngs::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};
@@ -131,28 +131,14 @@ impl Information {
         let w = self.walls[&ray.wall];
         let info = &mut self.info;
         let (normal, d) = planes.line(ray.wall);
-        let pose = &poses[k];
-        let (s, c) = (pose.theta + ray.bearing).sin_cos();
-        let u = Vector2::new(c, s);
-        let t = Vector2::new(pose.x, pose.y);
-        let nu = normal.dot(&u);
-        if nu.abs() < 1e-12 {
+        // The range's derivatives by the pose and the wall, as in the pair bound.
+        let Some((by_pose, by_wall)) = range_derivatives(&normal, d, &poses[k], ray.bearing) else {
             return;
-        }
-        // r = (d - n . t) / (n . u) at the noise-free range; its derivatives by the pose and by
-        // the wall's (normal angle, offset), as in the pair bound.
-        let r = (d - normal.dot(&t)) / nu;
-        let hit = t + u * r;
-        let n_perp = Vector2::new(-normal.y, normal.x);
-        let u_perp = Vector2::new(-u.y, u.x);
-        let mut entries: Vec<(usize, f64)> = vec![(w, -n_perp.dot(&hit) / nu), (w + 1, 1.0 / nu)];
+        };
+        let mut entries: Vec<(usize, f64)> = vec![(w, by_wall.x), (w + 1, by_wall.y)];
         if k > 0 {
             let p = 3 * (k - 1);
-            entries.extend([
-                (p, -normal.x / nu),
-                (p + 1, -normal.y / nu),
-                (p + 2, -r * normal.dot(&u_perp) / nu),
-            ]);
+            entries.extend([(p, by_pose.x), (p + 1, by_pose.y), (p + 2, by_pose.z)]);
         }
         let weight = 1.0 / (sigma * sigma);
         for &(i, a) in &entries {
@@ -321,6 +307,7 @@ fn expected_ate(poses: &[Pose2], cov: &DMatrix<f64>, seed: u64) -> Option<f64> {
 mod tests {
     use super::*;
     use crate::eval::test_scenes::{rays_at, segment};
+    use nalgebra::Vector2;
 
     const SIGMA: f64 = 0.01;
 

@@ -67,9 +67,7 @@ impl TrueSegmentsFit {
 
 /// The leveler's last stage (`ml::from_segmentation::last_stage`: the core's fit, relabelled
 /// and refitted, widened by its rival segmentations) on the true segmentation from `start`,
-/// before the leveler's gate; `None` when the core refuses or the scans make no grid. The rays
-/// sit in the leveler's own grid ([`PoseGrid::from_scans`]: rows by ascending elevation, the
-/// rays' indices as columns).
+/// before the leveler's gate; `None` when the core refuses or the scans make no grid.
 pub fn last_stage_true_segments(
     rays: &[BoundRay],
     scans: &[Scan],
@@ -77,6 +75,22 @@ pub fn last_stage_true_segments(
     start: &Vector3<f64>,
     params: &LevelParams,
 ) -> Option<TrueSegmentsFit> {
+    let (points, neighbours) = in_grid(rays, scans, sigma, params.ml.relabel_window)?;
+    let labels: Vec<Option<Surface>> = points.iter().map(|p| Some(p.surface)).collect();
+    let sol = last_stage(&points, &neighbours, &labels, start, sigma, params)?;
+    Some(TrueSegmentsFit::of(&sol))
+}
+
+/// The rays as labelled points (range noise `sigma`) in the leveler's own grid
+/// ([`PoseGrid::from_scans`]: rows by ascending elevation, the rays' indices as columns), in
+/// its row-major order, with their neighbourhoods within `window` bearings; `None` when the
+/// scans make no grid.
+pub(crate) fn in_grid(
+    rays: &[BoundRay],
+    scans: &[Scan],
+    sigma: f64,
+    window: usize,
+) -> Option<(Vec<LabelledPoint>, Neighbours)> {
     let grid = PoseGrid::from_scans(scans).ok()?;
     let mut row_of = vec![None; scans.len()];
     for (row, &k) in grid.scan_index.iter().enumerate() {
@@ -89,51 +103,24 @@ pub fn last_stage_true_segments(
         .collect();
     placed.sort_by_key(|&(cell, _)| cell);
     let (index, rays): (Vec<usize>, Vec<BoundRay>) = placed.into_iter().unzip();
-    let points = labelled_points(&rays, sigma);
-    let labels: Vec<Option<Surface>> = points.iter().map(|p| Some(p.surface)).collect();
-    let neighbours = Neighbours::new(
-        index,
-        grid.points.len(),
-        grid.cols,
-        params.ml.relabel_window,
-    );
-    let sol = last_stage(&points, &neighbours, &labels, start, sigma, params)?;
-    Some(TrueSegmentsFit::of(&sol))
+    let neighbours = Neighbours::new(index, grid.points.len(), grid.cols, window);
+    Some((labelled_points(&rays, sigma), neighbours))
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::eval::bound::{WallPlanes, pose_rays};
+    use crate::eval::test_scenes::tilted_room_scans;
     use crate::geometry::Pose;
-    use crate::plan::box_plan;
-    use crate::simulate::{ScannerParams, World, elevations_centred, simulate_pose};
-    use rand::SeedableRng;
-    use rand::rngs::ChaCha8Rng;
+    use crate::simulate::World;
 
     const DEG: f64 = std::f64::consts::PI / 180.0;
 
     /// A tilted pose in a 6 x 4 m room with a low ceiling: its scans at `noise`, and their
     /// true rays.
     fn pose_scans(noise: f64, seed: u64) -> (Pose, Vec<Scan>, World, WallPlanes) {
-        let plan = box_plan(6.0, 4.0, 0.8, true);
-        let world = World::from_plan(&plan);
-        let truth = Pose {
-            x: 2.0,
-            y: 1.5,
-            z: 0.45,
-            rz: 0.4,
-            ry: 9.0 * DEG,
-            rx: -6.0 * DEG,
-        };
-        let scanner = ScannerParams {
-            noise_sigma: noise,
-            ..ScannerParams::default()
-        };
-        let mut rng = ChaCha8Rng::seed_from_u64(seed);
-        let elevations = elevations_centred(4, 5.0 * DEG);
-        let scans = simulate_pose(&world, 0, &truth, &elevations, &scanner, &mut rng);
-        (truth, scans, world, WallPlanes::new(&plan.segments()))
+        tilted_room_scans(0.8, (9.0 * DEG, -6.0 * DEG), noise, seed)
     }
 
     fn start_off(truth: &Pose, by: f64) -> Vector3<f64> {

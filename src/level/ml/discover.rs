@@ -13,10 +13,11 @@
 //! on one line of the level frame. A wall met by one scan only is not looked for: any line in
 //! space lies in some vertical plane, so it says nothing about up.
 
-use super::model::{Plane, Rotations, predict_level};
-use super::relabel::Neighbours;
+use super::model::{Placement, Plane, Rotations, predict_level};
+use super::relabel::{Leveled, Neighbours, leveled};
 use super::{LabelledPoint, MlParams, MlSolution, Surface};
-use nalgebra::{Vector2, Vector3};
+use crate::geometry::minor_axis_2x2;
+use nalgebra::{Matrix2, Vector2};
 
 /// A run of points of one scan that lie on one line of the level frame.
 struct Run {
@@ -43,16 +44,14 @@ struct Line {
 impl Line {
     /// The total-least-squares line through `xy` (at least two points).
     fn fit(xy: &[Vector2<f64>]) -> Option<Line> {
-        let n = xy.len() as f64;
-        let centroid = xy.iter().sum::<Vector2<f64>>() / n;
-        let (mut sxx, mut sxy, mut syy) = (0.0, 0.0, 0.0);
-        for p in xy {
+        let centroid = xy.iter().sum::<Vector2<f64>>() / xy.len() as f64;
+        let scatter = xy.iter().fold(Matrix2::zeros(), |m, p| {
             let d = p - centroid;
-            (sxx, sxy, syy) = (sxx + d.x * d.x, sxy + d.x * d.y, syy + d.y * d.y);
-        }
-        // The major axis of the scatter.
-        let angle = 0.5 * (2.0 * sxy).atan2(sxx - syy);
-        let dir = Vector2::new(angle.cos(), angle.sin());
+            m + d * d.transpose()
+        });
+        // Along the scatter's major axis.
+        let normal = minor_axis_2x2(&scatter);
+        let dir = Vector2::new(normal.y, -normal.x);
         let mut stretch = (f64::INFINITY, f64::NEG_INFINITY);
         for p in xy {
             let t = dir.dot(&(p - centroid));
@@ -87,23 +86,16 @@ pub(crate) fn with_missing_walls(
     params: &MlParams,
 ) -> Vec<Option<Surface>> {
     let rot = Rotations::at(&Vector2::new(sol.attitude[0], sol.attitude[1]));
-    let level = &rot.level_from_robot;
-    let xy: Vec<Vector2<f64>> = points
-        .iter()
-        .map(|p| {
-            let q = level * (p.origin.coords + p.dir * p.range);
-            Vector2::new(q.x, q.y)
-        })
-        .collect();
+    let level: Vec<Leveled> = points.iter().map(|p| leveled(p, &rot)).collect();
+    let xy: Vec<Vector2<f64>> = level.iter().map(|l| l.q.xy()).collect();
     let level_planes: Vec<Plane> = [(Surface::Floor, sol.floor), (Surface::Ceiling, sol.ceiling)]
         .into_iter()
-        .filter_map(|(s, h)| Some(Plane::at(&super::model::Placement::level(h?), s)))
+        .filter_map(|(s, h)| Some(Plane::at(&Placement::level(h?), s)))
         .collect();
     let on_level_plane = |i: usize| {
-        let p = &points[i];
-        let (lu, lo): (Vector3<f64>, Vector3<f64>) = (level * p.dir, level * p.origin.coords);
+        let (p, l) = (&points[i], &level[i]);
         level_planes.iter().any(|plane| {
-            let t = predict_level(plane, &lu, &lo).0;
+            let t = predict_level(plane, &l.u, &l.o).0;
             t > 0.0 && (p.range - t).abs() <= params.huber_k * p.sigma
         })
     };
@@ -255,17 +247,13 @@ fn joined(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::eval::bound::{WallPlanes, pose_rays};
-    use crate::eval::true_segments::labelled_points;
+    use crate::eval::bound::pose_rays;
+    use crate::eval::test_scenes::tilted_room_scans;
+    use crate::eval::true_segments::in_grid;
     use crate::geometry::{Attitude, Pose};
     use crate::level::LevelParams;
-    use crate::level::grid::PoseGrid;
     use crate::level::ml::from_segmentation::last_stage;
     use crate::level::ml::solve::refine_labelled;
-    use crate::plan::box_plan;
-    use crate::simulate::{ScannerParams, World, elevations_centred, simulate_pose};
-    use rand::SeedableRng;
-    use rand::rngs::ChaCha8Rng;
 
     const DEG: f64 = std::f64::consts::PI / 180.0;
 
@@ -273,38 +261,11 @@ mod tests {
     /// noise `noise`: its points in grid order with their true surfaces, their neighbourhoods,
     /// and the truth.
     fn scene(noise: f64, sigma: f64, seed: u64) -> (Vec<LabelledPoint>, Neighbours, Pose) {
-        let plan = box_plan(6.0, 4.0, 2.4, true);
-        let world = World::from_plan(&plan);
-        let truth = Pose {
-            x: 2.0,
-            y: 1.5,
-            z: 0.45,
-            rz: 0.4,
-            ry: 7.0 * DEG,
-            rx: -5.0 * DEG,
-        };
-        let scanner = ScannerParams {
-            noise_sigma: noise,
-            ..ScannerParams::default()
-        };
-        let mut rng = ChaCha8Rng::seed_from_u64(seed);
-        let elevations = elevations_centred(4, 5.0 * DEG);
-        let scans = simulate_pose(&world, 0, &truth, &elevations, &scanner, &mut rng);
-        let planes = WallPlanes::new(&plan.segments());
+        let (truth, scans, world, planes) =
+            tilted_room_scans(2.4, (7.0 * DEG, -5.0 * DEG), noise, seed);
         let rays = pose_rays(&world, &planes, &scans, &truth, 30.0);
-        let grid = PoseGrid::from_scans(&scans).unwrap();
-        let mut row_of = vec![0; scans.len()];
-        for (row, &k) in grid.scan_index.iter().enumerate() {
-            row_of[k] = row;
-        }
-        let mut placed: Vec<_> = rays
-            .iter()
-            .map(|r| (row_of[r.scan] * grid.cols + r.col, *r))
-            .collect();
-        placed.sort_by_key(|&(cell, _)| cell);
-        let (index, rays): (Vec<usize>, Vec<_>) = placed.into_iter().unzip();
-        let neighbours = Neighbours::new(index, grid.points.len(), grid.cols, 1);
-        (labelled_points(&rays, sigma), neighbours, truth)
+        let (points, neighbours) = in_grid(&rays, &scans, sigma, 1).unwrap();
+        (points, neighbours, truth)
     }
 
     /// The wall with the most points, and the true labels without it.

@@ -94,13 +94,13 @@ impl Neighbours {
 
 /// A point leveled with the fitted attitude, once for every surface it is tried on: the
 /// measured point `L (o + u r)`, the ray's direction `L u` and its origin `L o`.
-struct Leveled {
-    q: Vector3<f64>,
-    u: Vector3<f64>,
-    o: Vector3<f64>,
+pub(super) struct Leveled {
+    pub q: Vector3<f64>,
+    pub u: Vector3<f64>,
+    pub o: Vector3<f64>,
 }
 
-fn leveled(p: &LabelledPoint, rot: &Rotations) -> Leveled {
+pub(super) fn leveled(p: &LabelledPoint, rot: &Rotations) -> Leveled {
     let l = &rot.level_from_robot;
     Leveled {
         q: l * (p.origin.coords + p.dir * p.range),
