@@ -50,6 +50,40 @@ fn two_scans_per_pose_fail_every_pose_and_level_says_so() {
     );
 }
 
+/// `parallel_walls` stands for every way the gate refuses a pose; the warning says which ways
+/// these were, with the hint for the most common: here a gate far tighter than 5 cm of range
+/// noise allows.
+#[test]
+fn a_tight_gate_is_named_behind_parallel_walls() {
+    let scans = simulate(&["--sigma", "0.05"]);
+    let out = run_with_stdin(&["level", "--max-sigma", "0.1"], &scans);
+    let failed = records(&out)
+        .iter()
+        .filter(|p| p["level"]["reason"] == "parallel_walls")
+        .count();
+    assert!(failed > 15, "{failed}");
+    let lines = stderr_lines(&out);
+    assert_eq!(lines.len(), 2, "{lines:?}");
+    let warning = &lines[1];
+    let head = "most often parallel_walls (sigma above --max-sigma ";
+    let split = warning
+        .split_once(head)
+        .map(|(_, rest)| rest)
+        .unwrap_or_else(|| panic!("{warning}"));
+    // The split's counts add up to the records' parallel_walls.
+    let (counts, hint) = split.split_once("): ").unwrap();
+    let total: usize = std::iter::once(counts.split(',').next().unwrap())
+        .chain(counts.split(", ").skip(1))
+        .map(|part| part.rsplit(' ').next().unwrap().parse::<usize>().unwrap())
+        .sum();
+    assert_eq!(total, failed, "{warning}");
+    assert!(
+        hint.starts_with("the walls, floor and ceiling in view do not pin roll and pitch")
+            && hint.ends_with("a larger --max-sigma accepts looser attitudes"),
+        "{hint}"
+    );
+}
+
 #[test]
 fn a_good_run_gets_one_line_with_its_counts() {
     let out = run_with_stdin(&["level"], &simulate(&[]));

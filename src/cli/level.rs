@@ -3,7 +3,7 @@
 
 use super::bag_output::{BagOutput, Kind as BagKind, OutputFormat, output_format};
 use super::scan_input::{BagArgs, open_bag};
-use super::summary::{Kind, Outcome, Tally};
+use super::summary::{Kind, Tally};
 use super::{LevelArgs, open_input, open_output};
 use levelscan::formats::level_record::level_record;
 use levelscan::formats::{InputError, ParallelScanReader, write_scan};
@@ -232,15 +232,15 @@ fn write_batch(
     polygons: bool,
     tally: &mut Tally,
 ) -> anyhow::Result<()> {
-    let records: Vec<Scan> = batch
+    let (records, causes): (Vec<Scan>, Vec<_>) = batch
         .par_iter()
         .map_init(BearingTrigCache::default, |cache, scans| {
             let est = level_pose_with(scans, params, cache);
-            level_record(scans, &est, pseudo, polygons)
+            (level_record(scans, &est, pseudo, polygons), est.cause)
         })
-        .collect();
-    for record in &records {
-        tally.add(Outcome::of(record, "level"));
+        .unzip();
+    for (record, cause) in records.iter().zip(causes) {
+        tally.add_leveled(record, cause);
     }
     match sink {
         Sink::Jsonl(out) => {

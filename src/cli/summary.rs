@@ -7,6 +7,7 @@
 //! so the line says what the output says, whatever statuses and reasons the output grows.
 
 use indicatif::ProgressBar;
+use levelscan::level::FailCause;
 use levelscan::scan::Scan;
 use std::collections::BTreeMap;
 
@@ -52,8 +53,66 @@ pub(crate) struct Tally {
     /// not level (their `level.status` is failed, so no ray was kept): the warning then blames
     /// the leveling, not the input's kind or units.
     unleveled: usize,
+    /// `level`: the `parallel_walls` failures by what lies behind them. The contract has one
+    /// reason for every way the gate refuses a pose; which way it was decides what helps.
+    gated: BTreeMap<Gated, usize>,
     /// Records counted so far, on a terminal's standard error (hidden elsewhere).
     bar: ProgressBar,
+}
+
+/// What lies behind a `parallel_walls` failure ([`FailCause`]s grouped by what helps).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
+enum Gated {
+    /// Up was found, but not within the gate: the surfaces pin it too loosely for the noise.
+    Loose,
+    /// The walls fix only one tilt axis (or none).
+    OneFamily,
+    /// Two readings of the same scans lie farther apart than the gate allows.
+    Disagree,
+    /// Up came out farther from the robot's z axis than walls and floors are told apart by.
+    Steep,
+}
+
+impl Gated {
+    fn of(cause: FailCause) -> Option<Gated> {
+        Some(match cause {
+            FailCause::SigmaAboveGate => Gated::Loose,
+            FailCause::NoUp | FailCause::WallsParallel => Gated::OneFamily,
+            FailCause::ResegmentationDisagrees | FailCause::LastStageDisagrees => Gated::Disagree,
+            FailCause::BeyondWallAngle => Gated::Steep,
+            _ => return None,
+        })
+    }
+
+    fn label(self) -> &'static str {
+        match self {
+            Gated::Loose => "sigma above --max-sigma",
+            Gated::OneFamily => "walls of one direction",
+            Gated::Disagree => "two readings disagree",
+            Gated::Steep => "tilt beyond 45 degrees",
+        }
+    }
+
+    fn hint(self) -> &'static str {
+        match self {
+            Gated::Loose => {
+                "the walls, floor and ceiling in view do not pin roll and pitch within \
+                 --max-sigma at this range noise; scans at more elevations per pose, or \
+                 elevations farther apart, pin them better; a larger --max-sigma accepts \
+                 looser attitudes"
+            }
+            Gated::OneFamily => "the walls in view all face one way, which pins only one tilt axis",
+            Gated::Disagree => {
+                "two segmentations of the same scans give attitudes farther apart than \
+                 --max-sigma allows (clutter, or much noise for the scans per pose)"
+            }
+            Gated::Steep => {
+                "up came out tilted more than 45 degrees from the robot's z axis, beyond which \
+                 walls and floors cannot be told apart; are the elevations in radians and \
+                 positive tilting the beam down?"
+            }
+        }
+    }
 }
 
 impl Tally {
@@ -67,6 +126,7 @@ impl Tally {
             counts: BTreeMap::new(),
             total: 0,
             unleveled: 0,
+            gated: BTreeMap::new(),
             bar,
         }
     }
@@ -75,6 +135,17 @@ impl Tally {
         *self.counts.entry(outcome).or_default() += 1;
         self.total += 1;
         self.bar.inc(1);
+    }
+
+    /// Counts a `level` output record, with the leveler's `cause` for a failed pose.
+    pub fn add_leveled(&mut self, record: &Scan, cause: Option<FailCause>) {
+        let outcome = Outcome::of(record, "level");
+        if outcome.reason.as_deref() == Some("parallel_walls")
+            && let Some(g) = cause.and_then(Gated::of)
+        {
+            *self.gated.entry(g).or_default() += 1;
+        }
+        self.add(outcome);
     }
 
     /// Counts a `match` output record, noting one that had no ray because `level` failed it.
@@ -232,6 +303,15 @@ impl Tally {
                     hint(self.kind, top).unwrap_or_default()
                 ));
             }
+        } else if self.kind == Kind::Level && top == "parallel_walls" && !self.gated.is_empty() {
+            // By count, most first; ties in the enum's order.
+            let mut gated: Vec<(Gated, usize)> = self.gated.iter().map(|(g, n)| (*g, *n)).collect();
+            gated.sort_by(|a, b| b.1.cmp(&a.1).then(a.0.cmp(&b.0)));
+            let split: Vec<String> = gated
+                .iter()
+                .map(|(g, n)| format!("{} {n}", g.label()))
+                .collect();
+            line.push_str(&format!(" ({}): {}", split.join(", "), gated[0].0.hint()));
         } else if let Some(hint) = hint(self.kind, top) {
             line.push_str(": ");
             line.push_str(hint);
@@ -369,6 +449,69 @@ mod tests {
                  elevation values (simulate: --scans 3 or more, a --step other than 0)"
             ]
         );
+    }
+
+    /// A leveled or failed record as `level_record` writes its status object.
+    fn level_record(status: &str, reason: Option<&str>) -> Scan {
+        let mut scan = Scan::default();
+        scan.extra.insert(
+            "level".to_string(),
+            json!({"status": status, "reason": reason}),
+        );
+        scan
+    }
+
+    #[test]
+    fn parallel_walls_is_explained_by_what_lies_behind_it() {
+        let mut t = Tally::new(Kind::Level);
+        t.add_leveled(&level_record("ok", None), None);
+        let failed = level_record("failed", Some("parallel_walls"));
+        for cause in [
+            FailCause::SigmaAboveGate,
+            FailCause::SigmaAboveGate,
+            FailCause::NoUp,
+            FailCause::LastStageDisagrees,
+        ] {
+            t.add_leveled(&failed, Some(cause));
+        }
+        let lines = t.lines("in.jsonl");
+        // The summary line says what the records say; the warning, why.
+        assert_eq!(
+            lines[0],
+            "levelscan level: 5 poses: 1 leveled, 4 failed (parallel_walls 4)"
+        );
+        assert_eq!(
+            lines[1],
+            "levelscan level: warning: 4 of 5 poses failed, most often parallel_walls (sigma \
+             above --max-sigma 2, walls of one direction 1, two readings disagree 1): the \
+             walls, floor and ceiling in view do not pin roll and pitch within --max-sigma at \
+             this range noise; scans at more elevations per pose, or elevations farther apart, \
+             pin them better; a larger --max-sigma accepts looser attitudes"
+        );
+        // Walls of one direction, the most common: the hint is theirs.
+        let mut t = Tally::new(Kind::Level);
+        for cause in [
+            FailCause::WallsParallel,
+            FailCause::NoUp,
+            FailCause::SigmaAboveGate,
+        ] {
+            t.add_leveled(&failed, Some(cause));
+        }
+        assert!(
+            t.lines("f")[1].ends_with(
+                "(walls of one direction 2, sigma above --max-sigma 1): the walls in view all \
+                 face one way, which pins only one tilt axis"
+            ),
+            "{:?}",
+            t.lines("f")
+        );
+        // Another reason's count is not split.
+        let mut t = Tally::new(Kind::Level);
+        t.add_leveled(
+            &level_record("failed", Some("too_few_polygons")),
+            Some(FailCause::TooFewPolygons),
+        );
+        assert!(!t.lines("f")[1].contains("sigma above"));
     }
 
     #[test]
