@@ -348,7 +348,7 @@ fn efficiency_table(stats: &[CellStats]) -> String {
     );
     let _ = writeln!(
         s,
-        "| estimator | scans | noise [m] | poses | error / bound | sigma / bound | efficient estimator | within 1 sigma x/y | 2 sigma x/y | 3 sigma x/y |"
+        "| estimator | scans | noise [m] | poses | error / bound (95%) | sigma / bound | efficient estimator | within 1 sigma x/y | 2 sigma x/y | 3 sigma x/y |"
     );
     let _ = writeln!(s, "|---|---|---|---|---|---|---|---|---|---|");
     let row = |s: &mut String, name: &str, c: &CellStats, e: &Efficiency| {
@@ -365,7 +365,7 @@ fn efficiency_table(stats: &[CellStats]) -> String {
             c.scans,
             c.noise,
             e.efficiency_poses,
-            fmt_two(e.error_over_bound),
+            with_interval(e.error_over_bound, e.error_over_bound_interval),
             fmt_two(e.sigma_over_bound),
             fmt_two(e.efficient_over_bound),
             within(0),
@@ -404,6 +404,15 @@ fn fit_json(f: TrueSegmentsFit) -> serde_json::Value {
         "inflation": f.inflation,
         "converged": f.converged,
     })
+}
+
+/// A median and its 95% interval: `0.96 (0.89-1.03)`.
+fn with_interval(median: f64, [lo, hi]: [f64; 2]) -> String {
+    if median.is_finite() && lo.is_finite() && hi.is_finite() {
+        format!("{median:.2} ({lo:.2}-{hi:.2})")
+    } else {
+        fmt_two(median)
+    }
 }
 
 fn fmt_two(x: f64) -> String {
