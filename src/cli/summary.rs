@@ -74,13 +74,21 @@ enum Gated {
 }
 
 impl Gated {
+    /// The group of a cause the contract reports as `parallel_walls`; `None` for the causes
+    /// it reports under their own reasons. Every cause is named, so that a new one is sorted
+    /// here when it is added.
     fn of(cause: FailCause) -> Option<Gated> {
         Some(match cause {
             FailCause::SigmaAboveGate => Gated::Loose,
             FailCause::NoUp | FailCause::WallsParallel => Gated::OneFamily,
             FailCause::ResegmentationDisagrees | FailCause::LastStageDisagrees => Gated::Disagree,
             FailCause::BeyondWallAngle => Gated::Steep,
-            _ => return None,
+            FailCause::TooFewScans
+            | FailCause::InconsistentScans
+            | FailCause::TooFewPolygons
+            | FailCause::NoWallPatches
+            | FailCause::FacingFloor
+            | FailCause::FacingCeiling => return None,
         })
     }
 
@@ -137,15 +145,13 @@ impl Tally {
         self.bar.inc(1);
     }
 
-    /// Counts a `level` output record, with the leveler's `cause` for a failed pose.
+    /// Counts a `level` output record, with the leveler's `cause` for a failed pose (only the
+    /// causes reported as `parallel_walls` are grouped, [`Gated::of`]).
     pub fn add_leveled(&mut self, record: &Scan, cause: Option<FailCause>) {
-        let outcome = Outcome::of(record, "level");
-        if outcome.reason.as_deref() == Some("parallel_walls")
-            && let Some(g) = cause.and_then(Gated::of)
-        {
+        if let Some(g) = cause.and_then(Gated::of) {
             *self.gated.entry(g).or_default() += 1;
         }
-        self.add(outcome);
+        self.add(Outcome::of(record, "level"));
     }
 
     /// Counts a `match` output record, noting one that had no ray because `level` failed it.
