@@ -143,11 +143,13 @@ pub struct MlParams {
     pub max_iterations: usize,
     /// Converged when the attitude step is below this \[rad\]. Default 1e-10.
     pub step_tolerance: f64,
-    /// Converged, without taking the step, when the range residual's next step moves no
-    /// parameter (nor any combination) by more than this many of its sigmas, by the Newton
-    /// decrement \[1\]. Default 1e-3: the answer then lies within a thousandth of a sigma of
-    /// the optimum; the tighter `step_tolerance` alone took 3-4 steps and two refused trials
-    /// per refinement where 1-2 steps reach this (at 1 cm noise, docs/RESULTS.md).
+    /// Converged, without taking the step, when the range residual's next step moves the
+    /// attitude by less than this many of its own sigmas (in every direction, by its
+    /// information with the placements marginalised) \[1\]. Default 0.01: the answer then lies
+    /// within a hundredth of a sigma of the optimum, which moves no cell's median error or
+    /// sigma over the bound by more than 0.01 (docs/ESTIMATOR.md, section 24); the tighter
+    /// `step_tolerance` alone took 3-4 steps and two refused trials per refinement where 1-2
+    /// steps reach this (at 1 cm noise, docs/RESULTS.md).
     pub step_sigmas: f64,
     /// Huber kernel threshold, in sigmas of the point's range noise \[1\]. Default 3: a
     /// Gaussian point passes it 99.7% of the time, so the estimate keeps 99.9% of the
@@ -204,7 +206,7 @@ impl Default for MlParams {
             approach: true,
             max_iterations: 50,
             step_tolerance: 1e-10,
-            step_sigmas: 1e-3,
+            step_sigmas: 1e-2,
             huber_k: 3.0,
             min_surface_points: 3,
             min_incidence: 0.02,

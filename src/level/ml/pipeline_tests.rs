@@ -79,9 +79,10 @@ fn a_noise_free_room_is_leveled_exactly_with_sigmas_at_the_bound() {
         let a = attitude(&est);
         let rays = pose_rays(&world, &planes, &seen, &truth, 30.0);
         let bound = attitude_bound_cov(&rays, &truth, SIGMA).unwrap();
-        // Exact to the refinement's stopping rule: a step below `step_sigmas` (a thousandth)
+        // Exact to the refinement's stopping rule: a step below `step_sigmas` (a hundredth)
         // of the sigma is not taken.
-        let tolerance = 1e-3 * bound[(0, 0)].min(bound[(1, 1)]).sqrt();
+        let step = crate::level::MlParams::default().step_sigmas;
+        let tolerance = step * bound[(0, 0)].min(bound[(1, 1)]).sqrt();
         assert!((a[0] - truth.rx).abs() < tolerance, "{a:?} vs {truth:?}");
         assert!((a[1] - truth.ry).abs() < tolerance, "{a:?} vs {truth:?}");
         let sig = est.sigmas.unwrap();

@@ -294,6 +294,14 @@ impl<'a> State<'a> {
                 self.evaluate_at(&self.theta, &self.placements, k, true, &mut current);
                 known = true;
             }
+            // The attitude's information with every placement marginalised, when it fixes
+            // both tilts: the steps below are judged in its sigmas (it does not change with
+            // the damping).
+            let attitude_info = if plane {
+                None
+            } else {
+                observable_schur(&current.arrow)
+            };
             let mut accepted = false;
             let mut step_norm = f64::INFINITY;
             // Damp until the cost falls (Marquardt's scaling by the diagonal).
@@ -302,11 +310,21 @@ impl<'a> State<'a> {
                     lambda *= 10.0;
                     continue;
                 };
-                if !plane && decrement(&current.arrow, &d_theta, &d_place) < step_sigmas2 {
-                    // The step moves no parameter, nor any combination of them, by as much
-                    // as `step_sigmas` of its sigma: the state is the optimum for every
-                    // purpose, and taking the step would cost a pass for nothing (near the
-                    // optimum the cost's change is rounding, and trials get refused).
+                // The step's squared length in sigmas: the attitude's, or where the attitude
+                // is not yet fixed, every parameter's (the Newton decrement).
+                let step_sigmas_sq = match &attitude_info {
+                    Some(s) => d_theta.dot(&(s * d_theta)),
+                    None => decrement(&current.arrow, &d_theta, &d_place),
+                };
+                if !plane && step_sigmas_sq < step_sigmas2 {
+                    // The step moves the attitude by less than `step_sigmas` of its own sigma
+                    // (in every direction): the state is the optimum for every purpose, and
+                    // taking the step would cost a pass for nothing (near the optimum the
+                    // cost's change is rounding, and trials get refused). The placements are
+                    // not waited for: a surface whose points lie mostly beyond the kernel
+                    // walks towards them by centimetres a step for tens of steps while the
+                    // attitude moves by thousandths of its sigma (docs/ESTIMATOR.md,
+                    // section 24).
                     return self.keep(iteration, true, current);
                 }
                 let theta = self.theta + d_theta;
