@@ -51,6 +51,7 @@ const TESTED: &[Check] = &[
     Check::LinesPlaneMisfit,
     Check::CeilingBandSteps,
     Check::MaxTilt,
+    Check::LastStageShift,
     // In patches/tests.rs, beside the private functions they test.
     Check::PatchMinPoints,
     Check::PatchStacked,
@@ -612,4 +613,29 @@ fn max_tilt() {
     let up = |deg: f64| Vector3::new(deg.to_radians().sin(), 0.0, deg.to_radians().cos());
     assert!(within_max_tilt(&up(lo)));
     assert!(!within_max_tilt(&up(hi)));
+}
+
+/// The stage's answer `deg` about the x axis with sigmas `sigma` \[rad\] both ways.
+fn stage_answer(deg: f64, sigma: f64) -> crate::level::ml::MlSolution {
+    let up = solution(deg, sigma, (1.0, 1.0)).up;
+    let a = crate::geometry::Attitude::from_up(&up);
+    crate::level::ml::MlSolution {
+        attitude: [a.theta_x, a.theta_y],
+        up,
+        covariance: [[sigma * sigma, 0.0], [0.0, sigma * sigma]],
+        ..Default::default()
+    }
+}
+
+#[test]
+fn last_stage_shift() {
+    use crate::level::ml::from_segmentation::gate;
+    let p = LevelParams::default();
+    // A start of 0.01 rad sigma: the answer that many sigmas away about x (the offset in
+    // the start's tangent plane is the angle's sine).
+    let start = solution(0.0, 0.01, (1.0, 1.0));
+    let (lo, hi) = around(Check::LastStageShift.threshold(&p) * 0.01);
+    let at = |offset: f64| stage_answer(offset.asin().to_degrees(), 0.001);
+    assert!(gate(&at(lo), &start, &p));
+    assert!(!gate(&at(hi), &start, &p));
 }

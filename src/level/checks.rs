@@ -27,6 +27,8 @@ pub enum Stage {
     Resegment,
     /// Re-segmentation's engine: walls, floors, ceilings and their lines (`refine`).
     Refine,
+    /// Maximum likelihood on the chosen segmentation (`ml::from_segmentation`).
+    LastStage,
 }
 
 /// What failing a check does.
@@ -161,6 +163,8 @@ checks! {
         "points stepping as a ceiling does among the highest (refine::steps_as_ceiling)";
     MaxTilt: Refine, "deg", |_| up::MAX_TILT_DEG, Drops("up candidate"),
         "largest robot tilt the up search and the frameless level start consider (up::within_max_tilt, refine::ransac)";
+    LastStageShift: LastStage, "sigma", |p| p.ml.max_shift_sigmas, Drops("the stage's answer"),
+        "the stage's answer within this of its start's sigmas (ml::from_segmentation::gate)";
 }
 
 impl Check {
@@ -206,7 +210,7 @@ mod tests {
         for (i, spec) in CHECKS.iter().enumerate() {
             assert_eq!(spec.check as usize, i, "{:?}", spec.check);
         }
-        assert_eq!(CHECKS.len(), Check::MaxTilt as usize + 1);
+        assert_eq!(CHECKS.len(), Check::LastStageShift as usize + 1);
     }
 
     /// The thresholds read the parameters: the defaults of the gate's, and a changed value.

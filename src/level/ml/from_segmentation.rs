@@ -20,6 +20,7 @@ use super::solve::{one_step, refine_labelled_from};
 use super::{LabelledPoint, MlParams, MlSolution, Surface};
 use crate::geometry::Attitude;
 use crate::level::attitude::attitude_sigmas;
+use crate::level::checks::Check;
 use crate::level::failure::within_wall_angle;
 use crate::level::grid::PoseGrid;
 use crate::level::patches::Patch;
@@ -267,11 +268,12 @@ fn initial_labels(grid: &PoseGrid, index: &[usize], groups: &[Group<'_>]) -> Vec
 /// sigmas within `max_sigma_deg`, up within `wall_min_angle_deg` of the robot's z axis, and
 /// no farther from the start than `ml.max_shift_sigmas` of the start's own uncertainty (a
 /// refinement that runs that far left the basin of the segmentation it was given).
-fn gate(sol: &MlSolution, start: &UpSolution, params: &LevelParams) -> bool {
+pub(crate) fn gate(sol: &MlSolution, start: &UpSolution, params: &LevelParams) -> bool {
     let max_sigma = params.max_sigma_deg.to_radians();
     let tight = sol.sigmas().iter().all(|&s| s <= max_sigma);
-    let near = mahalanobis2(&start.offset_to(&sol.up), &start.cov)
-        .is_some_and(|z2| z2 <= params.ml.max_shift_sigmas.powi(2));
+    let shift = Check::LastStageShift.threshold(params);
+    let near =
+        mahalanobis2(&start.offset_to(&sol.up), &start.cov).is_some_and(|z2| z2 <= shift * shift);
     tight && near && within_wall_angle(&sol.up, params)
 }
 
