@@ -310,13 +310,14 @@ impl<'a> State<'a> {
                     lambda *= 10.0;
                     continue;
                 };
-                // The step's squared length in sigmas: the attitude's, or where the attitude
-                // is not yet fixed, every parameter's (the Newton decrement).
-                let step_z2 = match &attitude_info {
+                // The step's squared length in sigmas (the range residual's only): the
+                // attitude's, or where the attitude is not yet fixed, every parameter's (the
+                // Newton decrement).
+                let step_z2 = || match &attitude_info {
                     Some(s) => d_theta.dot(&(s * d_theta)),
                     None => decrement(&current.arrow, &d_theta, &d_place),
                 };
-                if !plane && step_z2 < step_sigmas2 {
+                if !plane && step_z2() < step_sigmas2 {
                     // The step moves the attitude by less than `step_sigmas` of its own sigma
                     // (in every direction): the state is the optimum for every purpose, and
                     // taking the step would cost a pass for nothing (near the optimum the
