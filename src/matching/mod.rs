@@ -8,6 +8,7 @@
 //! - [`correlative`]: the coarse correlative search (Olson 2009) that widens the basin.
 //! - [`map`]: the bounded voxel map for metascan matching.
 //! - [`covariance`]: the match's covariance (sandwich estimator, Censi 2007).
+//! - `dense`: local lines of scans denser than they are built for, from runs of rays.
 //! - [`deskew`](mod@deskew): each ray moved to where the scanner was at the scan's stamp (the
 //!   robot's motion during the sweep).
 //! - `degeneracy`: where the odometry anchors a degeneracy-aware solve (solution remapping,
@@ -22,6 +23,7 @@
 pub mod correlative;
 pub mod covariance;
 pub(crate) mod degeneracy;
+pub(crate) mod dense;
 pub mod deskew;
 pub(crate) mod grid;
 pub mod icp;

@@ -171,7 +171,7 @@ pub fn estimate_lines(
 /// one surface: farther than `max_gap` and than `gap_spacings` times the rays' spacing at
 /// the nearer range (`|u × v| / max(|u|, |v|)` = min(|u|, |v|) sin of the angle between them:
 /// the rays' spacing where no ray between them was dropped).
-fn is_gap(u: Vector2<f64>, v: Vector2<f64>, params: &NormalParams) -> bool {
+pub(crate) fn is_gap(u: Vector2<f64>, v: Vector2<f64>, params: &NormalParams) -> bool {
     let spacing = u.perp(&v).abs() / u.norm().max(v.norm()).max(f64::MIN_POSITIVE);
     (u - v).norm() > params.max_gap.max(params.gap_spacings * spacing)
 }
