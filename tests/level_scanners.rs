@@ -5,18 +5,15 @@
 //! view; these runs hold it to the same promises as the paper's scanner: most poses leveled,
 //! honest sigmas, and no pose reported ok while grossly off.
 
-use levelscan::formats::read_plan;
+mod common;
+
+use common::example_plan;
 use levelscan::geometry::Pose;
 use levelscan::level::{LevelParams, level_pose};
 use levelscan::simulate::{
     RandomPoseParams, ScannerParams, World, elevations_centred, random_poses, simulate_pose,
 };
 use rand::SeedableRng;
-
-fn world(name: &str) -> World {
-    let path = format!("{}/examples/plans/{name}.wall", env!("CARGO_MANIFEST_DIR"));
-    World::from_plan(&read_plan(std::path::Path::new(&path)).unwrap())
-}
 
 /// One scanner's run over random poses (the paper's protocol: roll and pitch uniform in +-20
 /// degrees) in three example rooms.
@@ -48,7 +45,7 @@ fn run(rays: usize, fov_deg: f64, noise: f64, nscans: usize) -> Outcome {
         worst_error_deg: 0.0,
     };
     for (k, name) in ["office", "two_rooms", "angled"].into_iter().enumerate() {
-        let world = world(name);
+        let world = World::from_plan(&example_plan(name));
         let poses: Vec<Pose> = random_poses(&world, 40, &pose_params, 30 + k as u64).unwrap();
         for (i, pose) in poses.iter().enumerate() {
             let mut rng = rand::rngs::ChaCha8Rng::seed_from_u64(1000 * k as u64 + i as u64);

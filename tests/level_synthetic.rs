@@ -3,8 +3,7 @@
 
 mod common;
 
-use common::{Room, elevations, scans_at};
-use levelscan::formats::read_plan;
+use common::{Room, elevations, example_plan, scans_at};
 use levelscan::geometry::{Attitude, Pose};
 use levelscan::level::{Estimator, FailReason, LevelParams, MlParams, level_pose};
 use levelscan::pseudo_level::{PseudoLevelParams, pseudo_level_scan};
@@ -417,12 +416,6 @@ fn a_wall_line_with_a_floor_line_at_its_foot_never_levels_a_pose_wrongly() {
         "the scene no longer fools the extraction"
     );
     assert_eq!(wrong, 0);
-}
-
-/// An example plan, examples/plans/NAME.wall.
-fn example_plan(name: &str) -> levelscan::plan::Plan {
-    let path = format!("{}/examples/plans/{name}.wall", env!("CARGO_MANIFEST_DIR"));
-    read_plan(std::path::Path::new(&path)).unwrap()
 }
 
 /// An example plan for the library's own simulator.

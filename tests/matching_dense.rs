@@ -1,12 +1,12 @@
 //! Scanners denser than the SICK family's 0.5 degree: their local lines come from the means of
-//! runs of rays (`RangeParams::max_rays_per_degree`), where lines fitted over a few raw rays
+//! runs of rays (`NormalParams::max_rays_per_degree`), where lines fitted over a few raw rays
 //! at 0.25 degree spanned too little of a wall to beat the range noise.
 
 mod matching_support;
 
 use levelscan::eval::metrics::ate;
 use levelscan::geometry::Pose2;
-use levelscan::matching::{Matcher, MatcherParams, Mode, RangeParams};
+use levelscan::matching::{Matcher, MatcherParams, Mode, NormalParams};
 use matching_support::*;
 
 /// Metascan ATE round the office loop with `nrays` over 180 degrees at 1 cm, odometry off by
@@ -17,9 +17,9 @@ fn loop_ate(nrays: usize, max_rays_per_degree: f64) -> f64 {
     let odo = noisy_odometry(&truth, 0.02, 1f64.to_radians(), 7);
     let mut m = Matcher::new(MatcherParams {
         mode: Mode::Metascan,
-        ranges: RangeParams {
+        normals: NormalParams {
             max_rays_per_degree,
-            ..RangeParams::default()
+            ..NormalParams::default()
         },
         ..MatcherParams::default()
     });

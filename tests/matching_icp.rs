@@ -1,7 +1,9 @@
 //! The matcher on synthetic scans with known answers.
 
+mod common;
 mod matching_support;
 
+use common::example_plan;
 use levelscan::eval::metrics::{ate, rpe};
 use levelscan::geometry::{Pose2, wrap_angle};
 use levelscan::matching::{
@@ -436,14 +438,6 @@ fn the_correction_gate_applies_only_to_a_guess_from_odometry() {
             ),
         }
     }
-}
-
-/// A plan under examples/plans, e.g. "long_hall" or "halls/pilaster_hall".
-fn example_plan(name: &str) -> levelscan::plan::Plan {
-    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("examples/plans")
-        .join(format!("{name}.wall"));
-    levelscan::formats::read_plan(&path).unwrap()
 }
 
 /// Asserts that no step of `run` fell back whole for one of `reasons`.

@@ -130,7 +130,7 @@ pub struct MatchOptions {
     /// of consecutive rays, spaced at most this density: the lines are fitted over a few rays
     /// each side, which at 0.25 degree (a Hokuyo UTM-30LX) span too little of a wall to beat
     /// the range noise. Every ray is still matched. 0 fits the lines through the raw rays
-    #[arg(long, default_value_t = RangeParams::default().max_rays_per_degree)]
+    #[arg(long, default_value_t = NormalParams::default().max_rays_per_degree)]
     pub max_rays_per_degree: f64,
     /// Pairwise: match each scan one way only (the default also matches the previous scan
     /// against it and takes the midpoint of the two motions).
@@ -334,7 +334,10 @@ impl MatchOptions {
                 kernel_scale: self.kernel_scale,
                 ..IcpParams::default()
             },
-            normals: NormalParams::default(),
+            normals: NormalParams {
+                max_rays_per_degree: self.max_rays_per_degree,
+                ..NormalParams::default()
+            },
             coarse: match self.coarse {
                 CoarseArg::Never => Coarse::Never,
                 CoarseArg::Auto => Coarse::Auto,
@@ -359,7 +362,6 @@ impl MatchOptions {
             ranges: RangeParams {
                 min_range: self.min_range,
                 max_range: self.match_max_range(),
-                max_rays_per_degree: self.max_rays_per_degree,
             },
             symmetric: !self.one_way,
             local_tolerance_factor: MatcherParams::default().local_tolerance_factor,

@@ -115,7 +115,15 @@ pub(crate) fn inflation(params: &CovarianceParams, rms: f64, rays_per_degree: f6
 /// consecutive points (robot frame, ray order). The median ignores the gaps of dropped rays.
 /// 0 with fewer than two points.
 pub fn rays_per_degree(points: &[Point2<f64>]) -> f64 {
-    let bearings: Vec<f64> = points.iter().map(|p| p.y.atan2(p.x)).collect();
+    rays_per_degree_from(points, &Point2::origin())
+}
+
+/// [`rays_per_degree`] of points seen from `sensor`.
+pub(crate) fn rays_per_degree_from(points: &[Point2<f64>], sensor: &Point2<f64>) -> f64 {
+    let bearings: Vec<f64> = points
+        .iter()
+        .map(|p| (p.y - sensor.y).atan2(p.x - sensor.x))
+        .collect();
     let mut gaps: Vec<f64> = bearings
         .windows(2)
         .map(|w| crate::geometry::wrap_angle(w[1] - w[0]).abs())

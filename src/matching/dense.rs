@@ -12,7 +12,7 @@
 //! by `sqrt(k)` (as a Hokuyo's own grouping of steps does); every ray is still matched, with
 //! its run's line. A scan at or below the density is left as it is.
 
-use super::reference::{Line, NormalParams, estimate_lines, is_gap};
+use super::reference::{Line, NormalParams, is_gap, lines_through};
 use nalgebra::{Point2, Vector2};
 
 /// How many consecutive rays to average for a scan of `rays_per_degree` to be at most
@@ -61,37 +61,29 @@ pub(crate) fn averaged(
     (means, run_of)
 }
 
-/// The local lines of a scan denser than `max_rays_per_degree` (at `rays_per_degree`): fitted
-/// through the means of its runs of rays ([`averaged`]), each point taking its run's line,
-/// anchored where the point projects onto it. Every point is still matched: averaging serves
-/// only the fits, so a pair's information is what it was (a scan of fewer, averaged points
-/// would leave a hall's length to the odometry sooner). `None` for a scan at or below the
-/// density: [`estimate_lines`] as it is.
-pub(crate) fn dense_lines(
+/// The local lines of a scan whose rays are averaged in runs of `k` ([`averaged`]): fitted
+/// through the runs' means, each point taking its run's line, anchored where the point
+/// projects onto it. Every point is still matched: averaging serves only the fits, so a pair's
+/// information is what it was (a scan of fewer, averaged points would leave a hall's length
+/// to the odometry sooner).
+pub(crate) fn lines_from_runs(
     points: &[Point2<f64>],
     sensor: &Point2<f64>,
-    rays_per_degree: f64,
-    max_rays_per_degree: f64,
+    k: usize,
     normals: &NormalParams,
-) -> Option<Vec<Option<Line>>> {
-    let k = group_size(rays_per_degree, max_rays_per_degree);
-    if k <= 1 {
-        return None;
-    }
+) -> Vec<Option<Line>> {
     let (means, run_of) = averaged(points, sensor, k, normals);
-    let run_lines = estimate_lines(&means, sensor, normals);
-    Some(
-        points
-            .iter()
-            .zip(&run_of)
-            .map(|(p, &run)| {
-                run_lines[run].map(|l| Line {
-                    normal: l.normal,
-                    anchor: p - l.normal * l.normal.dot(&(p - l.anchor)),
-                })
+    let run_lines = lines_through(&means, sensor, normals);
+    points
+        .iter()
+        .zip(&run_of)
+        .map(|(p, &run)| {
+            run_lines[run].map(|l| Line {
+                normal: l.normal,
+                anchor: p - l.normal * l.normal.dot(&(p - l.anchor)),
             })
-            .collect(),
-    )
+        })
+        .collect()
 }
 
 #[cfg(test)]
@@ -159,9 +151,8 @@ mod tests {
             })
             .collect();
         let params = NormalParams::default();
-        let rpd = crate::matching::rays_per_degree(&pts);
-        let dense = dense_lines(&pts, &Point2::origin(), rpd, 2.0, &params).unwrap();
-        let raw = estimate_lines(&pts, &Point2::origin(), &params);
+        let dense = crate::matching::estimate_lines(&pts, &Point2::origin(), &params);
+        let raw = lines_through(&pts, &Point2::origin(), &params);
         // Angle of each line's normal from the wall's (-1, 0), degrees.
         let errors = |lines: &[Option<Line>]| -> Vec<f64> {
             lines

@@ -142,12 +142,6 @@ pub struct RangeParams {
     /// Readings at or beyond this are ignored (CARMEN writes the maximum range for "no
     /// return") \[m\]. Default 40.
     pub max_range: f64,
-    /// A denser scan takes its local lines from the means of runs of consecutive rays, spaced
-    /// at most this density \[rays/deg\]. Default 2 (0.5 degree, the finest spacing of the
-    /// SICK family and of the CARMEN logs, which are matched as they were): the lines' windows
-    /// are counted in rays, and at 0.25 degree they span too little of a wall to beat the
-    /// range noise (`dense`). 0 fits them through the raw rays.
-    pub max_rays_per_degree: f64,
 }
 
 impl Default for RangeParams {
@@ -155,7 +149,6 @@ impl Default for RangeParams {
         Self {
             min_range: 0.05,
             max_range: 40.0,
-            max_rays_per_degree: 2.0,
         }
     }
 }

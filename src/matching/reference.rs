@@ -5,6 +5,8 @@
 //! corner the centred window straddles two walls, so the one-sided windows are tried as well
 //! and the flattest fit wins.
 
+use super::covariance::rays_per_degree_from;
+use super::dense;
 use super::grid::{Hit, PointGrid, scan_cell};
 use super::solve::symmetric_eigenvalues_2x2;
 use crate::geometry::minor_axis_2x2;
@@ -113,6 +115,12 @@ pub struct NormalParams {
     /// Largest accepted thickness of the fit, sqrt(λ_min / λ_max) of the scatter [-].
     /// Default 0.15.
     pub max_thickness: f64,
+    /// A denser scan takes its lines from the means of runs of consecutive rays, spaced at
+    /// most this density \[rays/deg\]. Default 2 (0.5 degree, the finest spacing of the SICK
+    /// family and of the CARMEN logs, whose lines are fitted as they were): `window` is
+    /// counted in rays, and at 0.25 degree it spans too little of a wall to beat the range
+    /// noise ([`dense`](super::dense)). 0 fits the lines through the raw rays.
+    pub max_rays_per_degree: f64,
 }
 
 impl Default for NormalParams {
@@ -122,12 +130,38 @@ impl Default for NormalParams {
             max_gap: 0.3,
             gap_spacings: 4.0,
             max_thickness: 0.15,
+            max_rays_per_degree: 2.0,
         }
     }
 }
 
 /// Local lines of points given in scan order, seen from `sensor` (normals face it).
 pub fn estimate_lines(
+    points: &[Point2<f64>],
+    sensor: &Point2<f64>,
+    params: &NormalParams,
+) -> Vec<Option<Line>> {
+    let density = rays_per_degree_from(points, sensor);
+    estimate_lines_at(points, sensor, density, params)
+}
+
+/// [`estimate_lines`] for a scan of `rays_per_degree` already known: through every ray, or
+/// for a scan denser than `params.max_rays_per_degree` through the means of runs of rays
+/// ([`dense::lines_from_runs`]).
+pub(crate) fn estimate_lines_at(
+    points: &[Point2<f64>],
+    sensor: &Point2<f64>,
+    rays_per_degree: f64,
+    params: &NormalParams,
+) -> Vec<Option<Line>> {
+    match dense::group_size(rays_per_degree, params.max_rays_per_degree) {
+        1 => lines_through(points, sensor, params),
+        k => dense::lines_from_runs(points, sensor, k, params),
+    }
+}
+
+/// Local lines fitted through every point's neighbours in scan order.
+pub(crate) fn lines_through(
     points: &[Point2<f64>],
     sensor: &Point2<f64>,
     params: &NormalParams,

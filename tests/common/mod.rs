@@ -135,3 +135,12 @@ pub fn elevations(n: usize, step_deg: f64) -> Vec<f64> {
         .map(|k| (k as f64 - (n as f64 - 1.0) / 2.0) * step_deg.to_radians())
         .collect()
 }
+
+/// A plan under examples/plans, e.g. "office" or "halls/pilaster_hall" (for the tests that
+/// run the library's own simulator in the example rooms).
+pub fn example_plan(name: &str) -> levelscan::plan::Plan {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("examples/plans")
+        .join(format!("{name}.wall"));
+    levelscan::formats::read_plan(&path).unwrap()
+}

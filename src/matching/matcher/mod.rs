@@ -12,12 +12,11 @@ mod trigger;
 use super::correlative::CorrelativeScratch;
 pub use super::covariance::CovarianceParams;
 use super::covariance::{fuse, inflation, rays_per_degree, rotate_into};
-use super::dense;
 use super::deskew::RayTiming;
 use super::icp::{IcpResult, icp};
 use super::map::VoxelMap;
 pub use super::params::{CheckParams, Coarse, MatcherParams, Mode, OdometryPrior, RangeParams};
-use super::reference::{Line, ScanReference, estimate_lines};
+use super::reference::{Line, ScanReference, estimate_lines_at};
 pub use super::report::{FallbackReason, MatchReport, MatchStatus};
 use crate::geometry::Pose2;
 use crate::scan::Scan;
@@ -132,12 +131,8 @@ impl Matcher {
             odometry.is_some() && self.previous.is_some_and(|(_, prev)| prev.is_some());
         self.rays_per_degree = rays_per_degree(points);
         self.built = None;
-        // A scan denser than the local lines are built for takes them from its runs' means.
         let (origin, normals) = (Point2::origin(), &self.params.normals);
-        let max_density = self.params.ranges.max_rays_per_degree;
-        self.lines =
-            dense::dense_lines(points, &origin, self.rays_per_degree, max_density, normals)
-                .unwrap_or_else(|| estimate_lines(points, &origin, normals));
+        self.lines = estimate_lines_at(points, &origin, self.rays_per_degree, normals);
         let report = match self.previous {
             None => self.first(points, odometry),
             Some((prev_estimate, prev_odometry)) => match self.params.mode {
