@@ -17,6 +17,7 @@ use rand::SeedableRng;
 
 /// One scanner's run over random poses (the paper's protocol: roll and pitch uniform in +-20
 /// degrees) in three example rooms.
+#[derive(Default)]
 struct Outcome {
     poses: usize,
     leveled: usize,
@@ -38,12 +39,7 @@ fn run(rays: usize, fov_deg: f64, noise: f64, nscans: usize) -> Outcome {
         ..RandomPoseParams::default()
     };
     let elevations = elevations_centred(nscans, 5f64.to_radians());
-    let mut out = Outcome {
-        poses: 0,
-        leveled: 0,
-        within_3_sigma: 0,
-        worst_error_deg: 0.0,
-    };
+    let mut out = Outcome::default();
     for (k, name) in ["office", "two_rooms", "angled"].into_iter().enumerate() {
         let world = World::from_plan(&example_plan(name));
         let poses: Vec<Pose> = random_poses(&world, 40, &pose_params, 30 + k as u64).unwrap();
