@@ -104,6 +104,24 @@ impl Scan {
             .map(|(r, &v)| r.filter(|r| v && r.is_finite() && *r > 0.0))
     }
 
+    /// The scan's range noise as its `readings_sigma` states it \[m\]: the median over its valid
+    /// rays of their finite, non-negative sigmas; `None` when no valid ray states one.
+    pub fn stated_range_sigma(&self) -> Option<f64> {
+        let sigmas = self.readings_sigma.as_ref()?;
+        let mut given: Vec<f64> = self
+            .ranges()
+            .zip(sigmas)
+            .filter_map(|(r, s)| r.and(*s))
+            .filter(|s| s.is_finite() && *s >= 0.0)
+            .collect();
+        if given.is_empty() {
+            return None;
+        }
+        let mid = given.len() / 2;
+        let (_, m, _) = given.select_nth_unstable_by(mid, f64::total_cmp);
+        Some(*m)
+    }
+
     pub fn valid_count(&self) -> usize {
         (0..self.nrays())
             .filter(|&i| self.range(i).is_some())
@@ -204,6 +222,37 @@ mod tests {
         let each: Vec<Option<f64>> = (0..s.nrays()).map(|i| s.range(i)).collect();
         assert_eq!(s.ranges().collect::<Vec<_>>(), each);
         assert_eq!(each.iter().flatten().count(), 2);
+    }
+
+    #[test]
+    fn stated_range_sigma_is_the_median_over_valid_rays() {
+        let s = Scan {
+            theta: vec![0.0; 6],
+            readings: vec![Some(1.0), Some(2.0), Some(3.0), None, Some(4.0), Some(5.0)],
+            valid: vec![true, true, true, true, false, true],
+            // Ray 3 has no reading and ray 4 is invalid: their sigmas do not count; ray 5's
+            // is not finite.
+            readings_sigma: Some(vec![
+                Some(0.03),
+                Some(0.01),
+                Some(0.02),
+                Some(9.0),
+                Some(9.0),
+                Some(f64::NAN),
+            ]),
+            ..Scan::default()
+        };
+        assert_eq!(s.stated_range_sigma(), Some(0.02));
+        let none = Scan {
+            readings_sigma: None,
+            ..s.clone()
+        };
+        assert_eq!(none.stated_range_sigma(), None);
+        let nulls = Scan {
+            readings_sigma: Some(vec![None; 6]),
+            ..s
+        };
+        assert_eq!(nulls.stated_range_sigma(), None);
     }
 
     #[test]

@@ -88,13 +88,18 @@ fn level_writes_one_contract_record_per_pose_in_order() {
     for (k, (r, pose)) in records.iter().zip(&poses).enumerate() {
         assert_eq!(r["sequence"], k as u64);
         let n = r["nrays"].as_u64().unwrap() as usize;
-        for key in ["theta", "readings", "valid"] {
+        for key in ["theta", "readings", "valid", "readings_sigma"] {
             assert_eq!(r[key].as_array().unwrap().len(), n, "{key}");
         }
         for i in 0..n {
             let valid = r["valid"][i].as_u64().unwrap();
             assert_eq!(valid == 1, r["readings"][i].is_number(), "ray {i}");
             assert!(r["theta"][i].is_number());
+            // Each kept ray states the noise the leveler estimated (1 cm simulated).
+            assert_eq!(valid == 1, r["readings_sigma"][i].is_number(), "ray {i}");
+            if let Some(s) = r["readings_sigma"][i].as_f64() {
+                assert!((0.007..0.014).contains(&s), "ray {i}: {s}");
+            }
         }
         assert_eq!(r["min_theta"], r["theta"][0]);
         assert_eq!(
@@ -127,6 +132,21 @@ fn level_writes_one_contract_record_per_pose_in_order() {
                 .count()
                 > 50
         );
+    }
+    std::fs::remove_file(path).ok();
+}
+
+/// The noise given as `--sigma` is the noise each kept ray states, for `match` to fit to.
+#[test]
+fn level_states_the_noise_it_used_on_every_kept_ray() {
+    let path = scan_file("stated", &poses());
+    let out = level(&[path.to_str().unwrap(), "--sigma", "0.03"]);
+    assert_ran(&out);
+    for r in records(&out) {
+        let sigmas = r["readings_sigma"].as_array().unwrap();
+        let kept = sigmas.iter().filter(|s| !s.is_null()).count();
+        assert!(kept > 50, "{kept} rays state a noise");
+        assert!(sigmas.iter().flat_map(|s| s.as_f64()).all(|s| s == 0.03));
     }
     std::fs::remove_file(path).ok();
 }

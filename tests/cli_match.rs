@@ -395,6 +395,8 @@ fn help_shows_every_default() {
         "--format",
         // The rays' timing: the scans' own unless given.
         "--time-increment",
+        // The range noise: the scans' own unless given.
+        "--sigma",
     ];
     // Switches (flags without a value) have no default to show.
     let switches = [
@@ -1007,5 +1009,72 @@ fn the_odometry_noise_flags_price_what_the_odometry_fills_in() {
     );
     for (d, t) in default.iter().zip(&told) {
         assert!(*t > 3.0 * d, "{d} {t}: {default:?} {told:?}");
+    }
+}
+
+/// The two-room plan's first `poses` level scans at `sigma` of range noise, stating it in
+/// `readings_sigma` when `with_sigma`.
+fn noisy_level_scans(poses: usize, sigma: &str, with_sigma: bool) -> Vec<u8> {
+    let mut cmd = bin();
+    cmd.args(["simulate", plan("two_rooms").to_str().unwrap()])
+        .args([
+            "--flat",
+            "--elevations",
+            "0",
+            "--seed",
+            "3",
+            "--sigma",
+            sigma,
+        ]);
+    if with_sigma {
+        cmd.arg("--with-sigma");
+    }
+    let out = cmd.output().unwrap();
+    assert_ran(&out);
+    let text = String::from_utf8(out.stdout).unwrap();
+    let kept: Vec<&str> = text.lines().take(poses).collect();
+    (kept.join("\n") + "\n").into_bytes()
+}
+
+fn estimates(out: &Output) -> Vec<[f64; 3]> {
+    records(out).iter().map(|r| pose3(&r["estimate"])).collect()
+}
+
+/// The noise a scan states in `readings_sigma` and the noise given as `--sigma` are one: the
+/// same matches. And at 5 cm it is not 1 cm: the lines come from runs of rays.
+#[test]
+fn stated_noise_and_sigma_flag_match_alike() {
+    let stated = run_match(
+        &["--mode", "metascan"],
+        &noisy_level_scans(40, "0.05", true),
+    );
+    let unstated = noisy_level_scans(40, "0.05", false);
+    let flagged = run_match(&["--mode", "metascan", "--sigma", "0.05"], &unstated);
+    let plain = run_match(&["--mode", "metascan"], &unstated);
+    for out in [&stated, &flagged, &plain] {
+        assert_ran(out);
+    }
+    assert_eq!(estimates(&stated), estimates(&flagged));
+    assert_ne!(estimates(&flagged), estimates(&plain));
+    // The flag wins over what the scans state: told 1 cm, they match as if unstated.
+    let told_1cm = run_match(
+        &["--mode", "metascan", "--sigma", "0.01"],
+        &noisy_level_scans(40, "0.05", true),
+    );
+    assert_ran(&told_1cm);
+    assert_eq!(estimates(&told_1cm), estimates(&plain));
+}
+
+#[test]
+fn a_sigma_that_is_not_a_positive_number_is_refused() {
+    let input = simulated_level_scans(3);
+    for bad in ["0", "-0.01", "nan", "inf"] {
+        let out = run_match(&[&format!("--sigma={bad}")], &input);
+        assert!(!out.status.success(), "--sigma {bad} accepted");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(
+            err.contains("--sigma") && !err.contains("panicked"),
+            "--sigma {bad}: {err}"
+        );
     }
 }

@@ -76,7 +76,10 @@ pub fn run_matching(args: MatchingArgs) -> anyhow::Result<()> {
         "--sigma must be >= 0"
     );
     let odometry = args.odometry.params()?;
-    let matcher = told_the_odometry_noise(args.options.params()?, &odometry);
+    let mut matcher = told_the_odometry_noise(args.options.params()?, &odometry);
+    // The simulated scanner's range noise, for the level-floor runs' local lines (a leveled
+    // scan states the noise the leveler used in its `readings_sigma`).
+    matcher.normals.range_sigma = args.sigma.max(f64::MIN_POSITIVE);
     let params = ExperimentParams {
         seed: args.seed,
         odometry,

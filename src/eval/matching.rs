@@ -13,7 +13,7 @@
 use super::metrics::{Ate, Rpe, ate, rpe};
 use crate::geometry::{Pose, Pose2};
 use crate::level::{LevelParams, level_pose};
-use crate::matching::{MatchReport, MatchStatus, MatcherParams, Mode, match_run, scan_points};
+use crate::matching::{MatchReport, MatchStatus, Matcher, MatcherParams, Mode, scan_points};
 use crate::plan::Plan;
 use crate::pseudo_level::{PseudoLevelParams, pseudo_level_scan};
 use crate::scan::Scan;
@@ -210,7 +210,13 @@ pub fn match_scans(
             )
         })
         .collect();
-    let reports = match_run(&inputs, &params);
+    // Each scan's stated noise, as `match` takes it (level writes the one it estimated).
+    let mut matcher = Matcher::new(params);
+    let reports: Vec<MatchReport> = inputs
+        .iter()
+        .zip(scans)
+        .map(|((p, o), s)| matcher.push_with_sigma(p, *o, s.stated_range_sigma()))
+        .collect();
     let estimates: Vec<Pose2> = reports.iter().map(|r| r.estimate).collect();
     let ate_result = ate(&estimates, truth);
     let alignment = ate_result.map(|a| a.alignment).unwrap_or_default();

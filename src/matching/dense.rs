@@ -11,6 +11,15 @@
 //! means of runs of consecutive rays, spaced as the window was made for, with the noise cut
 //! by `sqrt(k)` (as a Hokuyo's own grouping of steps does); every ray is still matched, with
 //! its run's line. A scan at or below the density is left as it is.
+//!
+//! Noisier scanners need the same: the window was made for 1 cm of range noise, and at 5 cm a
+//! wall's fit over nine rays is too thick to give a line. A line's normal through `n` points of
+//! noise `s` spread over a length `L` has a sigma of about `s sqrt(12 / n) / L`; averaging runs
+//! of `k` rays cuts `s` by `sqrt(k)` and, the window being counted in runs, stretches `L` by
+//! `k`, so the normal's sigma falls as `k^1.5`. A scan whose range noise is stated
+//! (`NormalParams::range_sigma`) takes the run length that brings its normals back to the
+//! window's own: the nearest whole `k` to `(sigma / 1 cm)^(2/3)`, 2 from 1.84 cm, 3 at 5 cm,
+//! 5 at 10 cm (docs/RESULTS.md, sixteenth session).
 
 use super::reference::{Line, NormalParams, is_gap, lines_through};
 use nalgebra::{Point2, Vector2};
@@ -28,6 +37,29 @@ pub(crate) fn group_size(rays_per_degree: f64, max_rays_per_degree: f64) -> usiz
     }
     let k = (rays_per_degree / max_rays_per_degree * (1.0 - 1e-6)).ceil();
     if k > 1.0 { k as usize } else { 1 }
+}
+
+/// The range noise the line window (`NormalParams::window`, four rays a side) was made for
+/// \[m\]: the simulator's default and the paper's scanner.
+pub(crate) const WINDOW_SIGMA: f64 = 0.01;
+
+/// How many consecutive rays to average for lines whose normals are as good as the window's
+/// at [`WINDOW_SIGMA`], for a scan of range noise `range_sigma` \[m\]: the nearest whole number
+/// to `(range_sigma / WINDOW_SIGMA)^(2/3)`, at least 1 (also for a noise not finite).
+pub(crate) fn noise_group_size(range_sigma: f64) -> usize {
+    let k = (range_sigma / WINDOW_SIGMA).powf(2.0 / 3.0).round();
+    if k > 1.0 && k.is_finite() {
+        k as usize
+    } else {
+        1
+    }
+}
+
+/// The run length for a scan of `rays_per_degree` under `params`: long enough for both its
+/// density ([`group_size`]) and its range noise ([`noise_group_size`]).
+pub(crate) fn run_length(rays_per_degree: f64, params: &NormalParams) -> usize {
+    group_size(rays_per_degree, params.max_rays_per_degree)
+        .max(noise_group_size(params.range_sigma))
 }
 
 /// `points` (one scan in ray order, seen from `sensor`) with each run of `k` consecutive points
@@ -115,6 +147,46 @@ mod tests {
         assert_eq!(group_size(6.0, 0.0), 1);
         assert_eq!(group_size(6.0, f64::INFINITY), 1);
         assert_eq!(group_size(f64::NAN, 2.0), 1);
+    }
+
+    #[test]
+    fn noise_group_size_brings_the_normals_back_to_the_windows_own() {
+        // The window's own noise and anything up to 1.84 cm: untouched.
+        assert_eq!(noise_group_size(WINDOW_SIGMA), 1);
+        assert_eq!(noise_group_size(0.0), 1);
+        assert_eq!(noise_group_size(0.018), 1);
+        assert_eq!(noise_group_size(0.02), 2);
+        assert_eq!(noise_group_size(0.05), 3);
+        assert_eq!(noise_group_size(0.1), 5);
+        assert_eq!(noise_group_size(f64::NAN), 1);
+        assert_eq!(noise_group_size(f64::INFINITY), 1);
+        // Brute force: k is the whole number whose normal sigma, (s / 1 cm) / k^1.5 of the
+        // window's, lies nearest to it on the scale of k^1.5 (the rounding of its 2/3 power).
+        for mm in 1..300 {
+            let s = mm as f64 * 1e-3;
+            let target = (s / WINDOW_SIGMA).powf(2.0 / 3.0);
+            let best = (1..50usize)
+                .min_by(|a, b| {
+                    let da = (*a as f64 - target).abs();
+                    let db = (*b as f64 - target).abs();
+                    da.partial_cmp(&db).unwrap()
+                })
+                .unwrap();
+            assert_eq!(noise_group_size(s), best, "{mm} mm");
+        }
+    }
+
+    #[test]
+    fn run_length_takes_the_longer_of_density_and_noise() {
+        let at = |range_sigma: f64| NormalParams {
+            range_sigma,
+            ..NormalParams::default()
+        };
+        assert_eq!(run_length(1.0, &at(0.01)), 1);
+        assert_eq!(run_length(6.0, &at(0.01)), 3);
+        assert_eq!(run_length(1.0, &at(0.05)), 3);
+        assert_eq!(run_length(4.0, &at(0.05)), 3);
+        assert_eq!(run_length(6.0, &at(0.1)), 5);
     }
 
     #[test]

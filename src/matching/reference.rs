@@ -121,6 +121,11 @@ pub struct NormalParams {
     /// counted in rays, and at 0.25 degree it spans too little of a wall to beat the range
     /// noise ([`dense`](super::dense)). 0 fits the lines through the raw rays.
     pub max_rays_per_degree: f64,
+    /// The scan's range noise \[m\]. Default 0.01, what `window` is made for. A noisier scan
+    /// takes its lines from the means of runs of rays as a dense one does, long enough for
+    /// normals as good as the window's at 1 cm (3 rays at 5 cm, 5 at 10 cm;
+    /// [`dense`](super::dense)). `match` sets it from `--sigma` or the scans' `readings_sigma`.
+    pub range_sigma: f64,
 }
 
 impl Default for NormalParams {
@@ -131,6 +136,7 @@ impl Default for NormalParams {
             gap_spacings: 4.0,
             max_thickness: 0.15,
             max_rays_per_degree: 2.0,
+            range_sigma: dense::WINDOW_SIGMA,
         }
     }
 }
@@ -146,15 +152,15 @@ pub fn estimate_lines(
 }
 
 /// [`estimate_lines`] for a scan of `rays_per_degree` already known: through every ray, or
-/// for a scan denser than `params.max_rays_per_degree` through the means of runs of rays
-/// ([`dense::lines_from_runs`]).
+/// for a scan denser than `params.max_rays_per_degree` or noisier than the window is made for
+/// (`params.range_sigma`) through the means of runs of rays ([`dense::lines_from_runs`]).
 pub(crate) fn estimate_lines_at(
     points: &[Point2<f64>],
     sensor: &Point2<f64>,
     rays_per_degree: f64,
     params: &NormalParams,
 ) -> Vec<Option<Line>> {
-    match dense::group_size(rays_per_degree, params.max_rays_per_degree) {
+    match dense::run_length(rays_per_degree, params) {
         1 => lines_through(points, sensor, params),
         k => dense::lines_from_runs(points, sensor, k, params),
     }

@@ -16,7 +16,7 @@ use super::deskew::RayTiming;
 use super::icp::{IcpResult, icp};
 use super::map::VoxelMap;
 pub use super::params::{CheckParams, Coarse, MatcherParams, Mode, OdometryPrior, RangeParams};
-use super::reference::{Line, ScanReference, estimate_lines_at};
+use super::reference::{Line, NormalParams, ScanReference, estimate_lines_at};
 pub use super::report::{FallbackReason, MatchReport, MatchStatus};
 use crate::geometry::Pose2;
 use crate::scan::Scan;
@@ -127,12 +127,27 @@ impl Matcher {
     /// Matches the next scan: `points` in its robot frame (ray order), `odometry` its dead
     /// reckoning pose if known.
     pub fn push(&mut self, points: &[Point2<f64>], odometry: Option<Pose2>) -> MatchReport {
+        self.push_with_sigma(points, odometry, None)
+    }
+
+    /// [`push`](Self::push) for a scan whose range noise is known \[m\] (its `readings_sigma`):
+    /// a noisy scan fits its local lines over runs of rays ([`NormalParams::range_sigma`]).
+    /// `None` takes `params.normals.range_sigma`.
+    pub fn push_with_sigma(
+        &mut self,
+        points: &[Point2<f64>],
+        odometry: Option<Pose2>,
+        range_sigma: Option<f64>,
+    ) -> MatchReport {
         self.has_odometry =
             odometry.is_some() && self.previous.is_some_and(|(_, prev)| prev.is_some());
         self.rays_per_degree = rays_per_degree(points);
         self.built = None;
-        let (origin, normals) = (Point2::origin(), &self.params.normals);
-        self.lines = estimate_lines_at(points, &origin, self.rays_per_degree, normals);
+        let normals = NormalParams {
+            range_sigma: range_sigma.unwrap_or(self.params.normals.range_sigma),
+            ..self.params.normals
+        };
+        self.lines = estimate_lines_at(points, &Point2::origin(), self.rays_per_degree, &normals);
         let report = match self.previous {
             None => self.first(points, odometry),
             Some((prev_estimate, prev_odometry)) => match self.params.mode {
