@@ -151,6 +151,44 @@ fn level_states_the_noise_it_used_on_every_kept_ray() {
     std::fs::remove_file(path).ok();
 }
 
+/// Scans that state their noise pass it on as they state it, ray by ray.
+#[test]
+fn level_passes_on_the_noise_the_scans_state() {
+    let plan = plan_file("stated");
+    let sim = bin()
+        .args([
+            "simulate",
+            plan.to_str().unwrap(),
+            "--random",
+            "4",
+            "--seed",
+            "2",
+        ])
+        .args(["--sigma", "0.02", "--with-sigma"])
+        .output()
+        .unwrap();
+    assert_ran(&sim);
+    let out = run_with_stdin(&["level"], &sim.stdout);
+    assert_ran(&out);
+    let mut stated = 0;
+    for r in records(&out) {
+        for (reading, sigma) in r["readings"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .zip(r["readings_sigma"].as_array().unwrap())
+        {
+            assert_eq!(reading.is_null(), sigma.is_null());
+            if let Some(s) = sigma.as_f64() {
+                assert_eq!(s, 0.02);
+                stated += 1;
+            }
+        }
+    }
+    assert!(stated > 100, "{stated} rays state a noise");
+    std::fs::remove_file(plan).ok();
+}
+
 #[test]
 fn level_reads_standard_input_and_fails_a_two_scan_pose_with_a_reason() {
     let path = scan_file("stdin", &poses()[..1]);
