@@ -1056,6 +1056,14 @@ fn stated_noise_and_sigma_flag_match_alike() {
     }
     assert_eq!(estimates(&stated), estimates(&flagged));
     assert_ne!(estimates(&flagged), estimates(&plain));
+    // The summary says so, and why; a scan at 1 cm and 1 degree has nothing to say.
+    let said = |out: &Output| String::from_utf8_lossy(&out.stderr).to_string();
+    assert!(
+        said(&flagged).contains("40 of 40 scans fitted their local lines through the means of runs of 3 rays (for their range noise, up to 5.0 cm"),
+        "{}",
+        said(&flagged)
+    );
+    assert!(!said(&plain).contains("runs of"), "{}", said(&plain));
     // The flag wins over what the scans state: told 1 cm, they match as if unstated.
     let told_1cm = run_match(
         &["--mode", "metascan", "--sigma", "0.01"],

@@ -456,6 +456,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let mut matcher = Matcher::new(params);
     let mut tally = Tally::new(Kind::Match);
     let mut sweep = args.options.deskew().map(Sweep::new);
+    let mut runs = RunLengths::default();
     for (index, item) in input.source.enumerate() {
         let (line, mut scan) = item?;
         // A raw bag (no /scan_level) is still matched as it is: its /odom_matched per /scan
@@ -476,6 +477,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         };
         let odometry = scan.odometry.map(|p| p.to_pose2());
         let sigma = args.sigma.or_else(|| scan.stated_range_sigma());
+        runs.add(&points, sigma, &params.normals);
         let report = matcher.push_with_sigma(&points, odometry, sigma);
         annotate(&mut scan, &report);
         tally.add_matched(&scan);
@@ -501,10 +503,56 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     reference.finish(&input.name)?;
     tally.report(&input.name);
+    if let Some(line) = runs.summary() {
+        eprintln!("{line}");
+    }
     if let Some(sweep) = sweep {
         eprintln!("{}", sweep.summary());
     }
     Ok(())
+}
+
+/// How many scans fitted their local lines through the means of runs of rays, how long, and
+/// why, so that a user of a dense or noisy scanner sees why its lines differ from a SICK's.
+#[derive(Default)]
+struct RunLengths {
+    /// Scans per run length above 1.
+    scans: std::collections::BTreeMap<usize, usize>,
+    total: usize,
+    /// The largest stated range noise of the scans whose runs their noise made longer \[m\].
+    noise: Option<f64>,
+}
+
+impl RunLengths {
+    fn add(&mut self, points: &[Point2<f64>], sigma: Option<f64>, normals: &NormalParams) {
+        use levelscan::matching::line_run_length;
+        self.total += 1;
+        let told = NormalParams {
+            range_sigma: sigma.unwrap_or(normals.range_sigma),
+            ..*normals
+        };
+        let k = line_run_length(points, &Point2::origin(), &told);
+        if k > 1 {
+            *self.scans.entry(k).or_default() += 1;
+            if k > line_run_length(points, &Point2::origin(), normals) {
+                self.noise = Some(self.noise.unwrap_or(0.0).max(told.range_sigma));
+            }
+        }
+    }
+
+    fn summary(&self) -> Option<String> {
+        let (&k, _) = self.scans.iter().max_by_key(|(_, n)| **n)?;
+        let n: usize = self.scans.values().sum();
+        let why = match self.noise {
+            Some(s) => format!("for their range noise, up to {:.1} cm; --sigma", s * 100.0),
+            None => "for their density; --max-rays-per-degree".to_string(),
+        };
+        Some(format!(
+            "levelscan match: {n} of {} scans fitted their local lines through the means of runs \
+             of {k} rays ({why})",
+            self.total
+        ))
+    }
 }
 
 /// When the rays of the scan at `line` of `name` were cast, for deskewing: the time between

@@ -46,5 +46,5 @@ pub use matcher::{
     timed_scan_points,
 };
 pub use params::{CheckParams, Coarse, MatcherParams, Mode, OdometryPrior, RangeParams};
-pub use reference::{Line, NormalParams, ScanReference, Target, estimate_lines};
+pub use reference::{Line, NormalParams, ScanReference, Target, estimate_lines, line_run_length};
 pub use solve::PosePrior;

@@ -151,6 +151,17 @@ pub fn estimate_lines(
     estimate_lines_at(points, sensor, density, params)
 }
 
+/// How many consecutive rays [`estimate_lines`] averages for each line fit of a scan of
+/// `points` (seen from `sensor`): 1 for a scan at the density and noise the line window is made
+/// for, more for a denser or noisier one ([`dense`]).
+pub fn line_run_length(
+    points: &[Point2<f64>],
+    sensor: &Point2<f64>,
+    params: &NormalParams,
+) -> usize {
+    dense::run_length(rays_per_degree_from(points, sensor), params)
+}
+
 /// [`estimate_lines`] for a scan of `rays_per_degree` already known: through every ray, or
 /// for a scan denser than `params.max_rays_per_degree` or noisier than the window is made for
 /// (`params.range_sigma`) through the means of runs of rays ([`dense::lines_from_runs`]).
