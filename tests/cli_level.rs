@@ -189,6 +189,62 @@ fn level_passes_on_the_noise_the_scans_state() {
     std::fs::remove_file(plan).ok();
 }
 
+/// A converter's placeholder in `readings_sigma` (1 m on every ray, where the ranges scatter by
+/// 1 cm) is set aside: the poses level as if the scans stated nothing, and the output states
+/// the noise level used instead.
+#[test]
+fn a_placeholder_readings_sigma_is_set_aside() {
+    let plan = plan_file("placeholder");
+    let sim = |extra: &[&str]| {
+        let out = bin()
+            .args([
+                "simulate",
+                plan.to_str().unwrap(),
+                "--random",
+                "6",
+                "--seed",
+                "4",
+            ])
+            .args(extra)
+            .output()
+            .unwrap();
+        assert_ran(&out);
+        String::from_utf8(out.stdout).unwrap()
+    };
+    let plain = sim(&[]);
+    let placeholder: String = sim(&["--with-sigma"])
+        .lines()
+        .map(|l| {
+            let mut v: Value = serde_json::from_str(l).unwrap();
+            let n = v["readings_sigma"].as_array().unwrap().len();
+            v["readings_sigma"] = serde_json::json!(vec![1.0; n]);
+            v.to_string() + "\n"
+        })
+        .collect();
+    let attitudes = |out: &std::process::Output| -> Vec<(Value, Value)> {
+        records(out)
+            .iter()
+            .map(|r| (r["level"]["theta_x"].clone(), r["level"]["theta_y"].clone()))
+            .collect()
+    };
+    let a = run_with_stdin(&["level"], plain.as_bytes());
+    let b = run_with_stdin(&["level"], placeholder.as_bytes());
+    assert_ran(&a);
+    assert_ran(&b);
+    assert_eq!(attitudes(&a), attitudes(&b));
+    for r in records(&b) {
+        for s in r["readings_sigma"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .flat_map(|s| s.as_f64())
+        {
+            assert!((0.005..0.02).contains(&s), "{s}");
+        }
+    }
+    std::fs::remove_file(plan).ok();
+}
+
 #[test]
 fn level_reads_standard_input_and_fails_a_two_scan_pose_with_a_reason() {
     let path = scan_file("stdin", &poses()[..1]);

@@ -1075,9 +1075,13 @@ fn stated_noise_and_sigma_flag_match_alike() {
 
 #[test]
 fn a_sigma_that_is_not_a_positive_number_is_refused() {
-    let input = simulated_level_scans(3);
+    // From a file: `match` refuses the flag before it reads a scan, so a pipe would break.
+    let input = TempFile::new("bad-sigma.jsonl", &simulated_level_scans(3));
     for bad in ["0", "-0.01", "nan", "inf"] {
-        let out = run_match(&[&format!("--sigma={bad}")], &input);
+        let out = bin()
+            .args(["match", input.0.to_str().unwrap(), &format!("--sigma={bad}")])
+            .output()
+            .unwrap();
         assert!(!out.status.success(), "--sigma {bad} accepted");
         let err = String::from_utf8_lossy(&out.stderr);
         assert!(

@@ -10,6 +10,7 @@ use clap::ValueEnum;
 use levelscan::formats::bag::convert::ros_number;
 use levelscan::formats::{CarmenParams, write_tum};
 use levelscan::geometry::Pose;
+use levelscan::level::believed_range_sigma;
 use levelscan::matching::{
     CheckParams, Coarse, CorrelativeParams, CovarianceParams, DeskewParams, IcpParams, Kernel,
     MapParams, MatchReport, MatchStatus, Matcher, MatcherParams, Metric, Mode, NormalParams,
@@ -390,8 +391,8 @@ pub struct Args {
     #[command(flatten)]
     pub options: MatchOptions,
     /// Range noise (m): the standard deviation of the readings' errors; default: each scan's
-    /// `readings_sigma` (level writes the noise it estimated), else 0.01, what the local lines
-    /// are made for. A noisier scan fits its lines through the means of runs of rays (3 at 5
+    /// `readings_sigma` (level writes the noise it used) when its ranges' scatter bears it out,
+    /// else 0.01, what the local lines are made for. A noisier scan fits its lines through the means of runs of rays (3 at 5
     /// cm, 5 at 10 cm): single rays give none at that noise
     #[arg(long)]
     pub sigma: Option<f64>,
@@ -476,7 +477,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             None => scan_points(&scan, &params.ranges),
         };
         let odometry = scan.odometry.map(|p| p.to_pose2());
-        let sigma = args.sigma.or_else(|| scan.stated_range_sigma());
+        let sigma = args
+            .sigma
+            .or_else(|| believed_range_sigma(std::slice::from_ref(&scan)));
         runs.add(&points, sigma, &params.normals);
         let report = matcher.push_with_sigma(&points, odometry, sigma);
         annotate(&mut scan, &report);

@@ -12,7 +12,7 @@
 
 use super::metrics::{Ate, Rpe, ate, rpe};
 use crate::geometry::{Pose, Pose2};
-use crate::level::{LevelParams, level_pose};
+use crate::level::{LevelParams, believed_range_sigma, level_pose};
 use crate::matching::{MatchReport, MatchStatus, Matcher, MatcherParams, Mode, scan_points};
 use crate::plan::Plan;
 use crate::pseudo_level::{PseudoLevelParams, pseudo_level_scan};
@@ -215,7 +215,10 @@ pub fn match_scans(
     let reports: Vec<MatchReport> = inputs
         .iter()
         .zip(scans)
-        .map(|((p, o), s)| matcher.push_with_sigma(p, *o, s.stated_range_sigma()))
+        .map(|((p, o), s)| {
+            let sigma = believed_range_sigma(std::slice::from_ref(s));
+            matcher.push_with_sigma(p, *o, sigma)
+        })
         .collect();
     let estimates: Vec<Pose2> = reports.iter().map(|r| r.estimate).collect();
     let ate_result = ate(&estimates, truth);

@@ -37,6 +37,7 @@ pub(crate) mod up;
 pub use failure::FailCause;
 pub use first_pass::level_fits;
 pub use ml::MlParams;
+pub use noise::believed_range_sigma;
 pub use params::LevelParams;
 pub use resegment::{Resegmented, refine_estimate};
 
@@ -123,6 +124,9 @@ pub struct LevelEstimate {
     pub up: Option<Vector3<f64>>,
     /// The range noise used \[m\].
     pub range_sigma: f64,
+    /// Whether `range_sigma` is the scans' own `readings_sigma`, borne out by their ranges: the
+    /// last stage then weighs each ray by its own.
+    pub noise_stated: bool,
     /// The grid of robot-frame points (absent when the scans could not form one).
     pub grid: Option<PoseGrid>,
     /// All coplanar quads, walls, floors and ceilings (see `kind`).
@@ -191,12 +195,17 @@ impl LevelEstimate {
     }
 }
 
-/// The range noise for a pose: `params.sigma`, else the median of the scans' `readings_sigma`,
-/// else estimated from the data ([`noise::estimate_range_sigma_with`]), else
+/// The range noise for a pose: `params.sigma`, else the median of the scans' `readings_sigma`
+/// when the data bear it out ([`noise::stated_is_believable`]), else estimated from the data
+/// ([`noise::estimate_range_sigma_with`]), else
 /// `params.min_sigma`; given the `(sin, cos)` of the bearings when every scan shares them.
-fn range_sigma_with(scans: &[Scan], params: &LevelParams, trig: Option<&[(f64, f64)]>) -> f64 {
+fn range_sigma_with(
+    scans: &[Scan],
+    params: &LevelParams,
+    trig: Option<&[(f64, f64)]>,
+) -> (f64, bool) {
     if let Some(s) = params.sigma {
-        return s;
+        return (s, false);
     }
     // The given sigmas' median; when they grow with range, the farther half's
     // (`noise::far_if_noisier`).
@@ -213,12 +222,18 @@ fn range_sigma_with(scans: &[Scan], params: &LevelParams, trig: Option<&[(f64, f
             }
         }
     }
+    let scatter = noise::estimate_range_sigma_with(scans, trig);
     if !given.is_empty() {
         let halves = noise::split_at_median_range(&ranged, &ranges)
             .map(|(mut near, mut far)| (median_of(&mut near), median_of(&mut far)));
-        return noise::far_if_noisier(median_of(&mut given), halves);
+        let stated = noise::far_if_noisier(median_of(&mut given), halves);
+        // A stated noise the ranges contradict is a placeholder (a converter's 1 m): the
+        // data's own estimate stands instead.
+        if noise::stated_is_believable(stated, scatter) {
+            return (stated, true);
+        }
     }
-    noise::estimate_range_sigma_with(scans, trig).unwrap_or(params.min_sigma)
+    (scatter.unwrap_or(params.min_sigma), false)
 }
 
 /// Levels one pose: its scans (any order, at least three distinct elevations) in, attitude,
@@ -236,13 +251,14 @@ pub fn level_pose_with(
 ) -> LevelEstimate {
     // The range noise, then the grid of robot-frame points (sect. 5.1).
     let trig = cache.shared(scans);
-    let sigma = range_sigma_with(scans, params, trig.as_deref());
+    let (sigma, noise_stated) = range_sigma_with(scans, params, trig.as_deref());
     let grid = match PoseGrid::from_scans_with(scans, trig.as_deref()) {
         Ok(g) => g,
         Err(cause) => return LevelEstimate::failed(cause, sigma),
     };
     // The paper's quads (sect. 5.2), grown into whole-wall patches (robust estimator).
     let mut est = segmented(grid, params, sigma, trig);
+    est.noise_stated = noise_stated;
     // Up from walls and level surfaces, and failure detection (sect. 5.3-5.5).
     let levels = first_pass::level_fits(&est, params);
     let first = first_pass::solve(&est, &levels, params, sigma);

@@ -56,6 +56,32 @@ pub(crate) fn estimate_range_sigma_with(
     Some(far_if_noisier(pooled, halves))
 }
 
+/// How far a stated range noise may lie from the ranges' own scatter and still be believed [-]:
+/// a factor of 3 either way. The scatter reads a little high on real surfaces (corners left in,
+/// small-scale structure) and the statement may be a scanner's datasheet figure, but a
+/// converter's placeholder (CSM's `readings_sigma` of 1 m, or 0) lies orders of magnitude off.
+pub(crate) const STATED_NOISE_FACTOR: f64 = 3.0;
+
+/// Whether a `stated` range noise is borne out by the `scatter` the ranges themselves show
+/// (both \[m\]): within [`STATED_NOISE_FACTOR`] of it either way; believed when the data show
+/// none.
+pub(crate) fn stated_is_believable(stated: f64, scatter: Option<f64>) -> bool {
+    scatter.is_none_or(|d| stated <= STATED_NOISE_FACTOR * d && stated * STATED_NOISE_FACTOR >= d)
+}
+
+/// The range noise `scans` state in their `readings_sigma` (the median over their valid rays)
+/// when their ranges' own scatter bears it out ([`stated_is_believable`]); `None` when they
+/// state none or one the data contradict. What `match` takes a scan's noise from.
+pub fn believed_range_sigma(scans: &[Scan]) -> Option<f64> {
+    let mut stated: Vec<f64> = scans.iter().filter_map(Scan::stated_range_sigma).collect();
+    if stated.is_empty() {
+        return None;
+    }
+    let mid = stated.len() / 2;
+    let s = *stated.select_nth_unstable_by(mid, f64::total_cmp).1;
+    stated_is_believable(s, estimate_range_sigma_with(scans, None)).then_some(s)
+}
+
 /// A cheap screen before the halves' own estimates ([`far_if_noisier`]): whether the residuals
 /// within three of the pooled MAD sigma `mad` are [`SCREEN_RATIO`] times larger in RMS beyond
 /// the mean range than within it. Most poses' noise is the same at every range and pay for
@@ -238,6 +264,40 @@ mod tests {
             s.valid[i] = true;
         }
         s
+    }
+
+    #[test]
+    fn a_stated_noise_is_believed_within_a_factor_of_three_of_the_scatter() {
+        assert!(stated_is_believable(0.05, Some(0.05)));
+        assert!(stated_is_believable(0.03, Some(0.01)));
+        assert!(stated_is_believable(0.01, Some(0.03)));
+        assert!(!stated_is_believable(0.031, Some(0.01)));
+        assert!(!stated_is_believable(0.01, Some(0.031)));
+        assert!(!stated_is_believable(1.0, Some(0.01)));
+        assert!(!stated_is_believable(0.0, Some(0.01)));
+        // Nothing to test it against.
+        assert!(stated_is_believable(1.0, None));
+    }
+
+    /// Scans that state their true noise are believed; a converter's placeholder of 1 m (or 0)
+    /// on the same ranges is not, nor is anything on scans that state nothing.
+    #[test]
+    fn believed_range_sigma_sets_placeholders_aside() {
+        let stating = |sigma: f64, stated: f64| -> Vec<Scan> {
+            (0..3)
+                .map(|k| {
+                    let mut s = wall_scan(3.0, sigma, k);
+                    s.readings_sigma = Some(vec![Some(stated); s.nrays()]);
+                    s
+                })
+                .collect()
+        };
+        assert_eq!(believed_range_sigma(&stating(0.01, 0.01)), Some(0.01));
+        assert_eq!(believed_range_sigma(&stating(0.05, 0.05)), Some(0.05));
+        assert_eq!(believed_range_sigma(&stating(0.01, 1.0)), None);
+        assert_eq!(believed_range_sigma(&stating(0.05, 0.0)), None);
+        let unstated: Vec<Scan> = (0..3).map(|k| wall_scan(3.0, 0.01, k)).collect();
+        assert_eq!(believed_range_sigma(&unstated), None);
     }
 
     #[test]

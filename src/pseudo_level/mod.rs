@@ -147,32 +147,17 @@ pub fn pseudo_level_scan_and_base(
             }
         }
     }
-    out.readings_sigma = Some(readings_sigma(&out, base, est.range_sigma));
+    out.readings_sigma = Some(readings_sigma(&out, est.range_sigma));
     (out, base_index)
 }
 
-/// The pseudo-level scan's `readings_sigma`: each kept ray's range noise, the base scan's own
-/// where it states one, else the noise the leveler used (given or estimated, to 0.1 mm), so
-/// that a matcher can fit its lines to it; null where the reading is. A leveled range is the
-/// ray's range times the cosine of the ray's small angle to the level plane: the ray's noise.
-fn readings_sigma(out: &Scan, base: &Scan, range_sigma: f64) -> Vec<Option<f64>> {
+/// The pseudo-level scan's `readings_sigma`: on each kept ray the range noise the leveler used
+/// (the scans' own when the data bear it out, else estimated; to 0.1 mm), so that a matcher
+/// can fit its lines to it; null where the reading is. A leveled range is the ray's range times
+/// the cosine of the ray's small angle to the level plane: the ray's noise.
+fn readings_sigma(out: &Scan, range_sigma: f64) -> Vec<Option<f64>> {
     let used = ((range_sigma * 1e4).round() / 1e4).max(1e-4);
-    let stated = base
-        .readings_sigma
-        .as_ref()
-        .filter(|s| s.len() == out.readings.len());
-    out.readings
-        .iter()
-        .enumerate()
-        .map(|(i, r)| {
-            r.map(|_| {
-                stated
-                    .and_then(|s| s[i])
-                    .filter(|s| s.is_finite() && *s >= 0.0)
-                    .unwrap_or(used)
-            })
-        })
-        .collect()
+    out.readings.iter().map(|r| r.map(|_| used)).collect()
 }
 
 /// The index of the base scan in `scans` (sect. 6): for a leveled pose, the scan whose

@@ -101,7 +101,8 @@ fn final_estimate(
 ) -> Option<MlSolution> {
     let grid = est.grid.as_ref()?;
     let groups = patch_groups(&est.patches, start, params, est.range_sigma);
-    let (index, points) = grid_points(grid, scans, est.range_sigma, params.min_sigma);
+    let stated = if est.noise_stated { scans } else { &[] };
+    let (index, points) = grid_points(grid, stated, est.range_sigma, params.min_sigma);
     let labels = initial_labels(grid, &index, &groups);
     let neighbours = Neighbours::new(
         index,
@@ -330,7 +331,9 @@ fn patch_groups<'a>(
 
 /// Every valid grid point as a labelled point (its surface a placeholder), with its grid
 /// index: the ray's origin and direction, its range, and its sigma (the ray's
-/// `readings_sigma` when its scan gives one, else `sigma`; at least `min_sigma`).
+/// `readings_sigma` when its scan in `stated` gives one, else `sigma`; at least `min_sigma`).
+/// `stated` is empty where the pose's noise is not the scans' own (given, or contradicted by
+/// the ranges).
 fn grid_points(
     grid: &PoseGrid,
     scans: &[Scan],
