@@ -1079,7 +1079,11 @@ fn a_sigma_that_is_not_a_positive_number_is_refused() {
     let input = TempFile::new("bad-sigma.jsonl", &simulated_level_scans(3));
     for bad in ["0", "-0.01", "nan", "inf"] {
         let out = bin()
-            .args(["match", input.0.to_str().unwrap(), &format!("--sigma={bad}")])
+            .args([
+                "match",
+                input.0.to_str().unwrap(),
+                &format!("--sigma={bad}"),
+            ])
             .output()
             .unwrap();
         assert!(!out.status.success(), "--sigma {bad} accepted");
