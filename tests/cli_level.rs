@@ -232,6 +232,18 @@ fn a_placeholder_readings_sigma_is_set_aside() {
     assert_ran(&a);
     assert_ran(&b);
     assert_eq!(attitudes(&a), attitudes(&b));
+    // Said once, with the count; a run stating nothing, or its true noise, says nothing.
+    let said = String::from_utf8_lossy(&b.stderr);
+    assert!(
+        said.contains(
+            "warning: 6 of 6 poses state a range noise (readings_sigma) over 3 times off"
+        ),
+        "{said}"
+    );
+    assert!(!String::from_utf8_lossy(&a.stderr).contains("readings_sigma"));
+    let told = run_with_stdin(&["level"], sim(&["--with-sigma"]).as_bytes());
+    assert_ran(&told);
+    assert!(!String::from_utf8_lossy(&told.stderr).contains("readings_sigma"));
     for r in records(&b) {
         for s in r["readings_sigma"]
             .as_array()

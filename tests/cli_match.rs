@@ -1094,3 +1094,31 @@ fn a_sigma_that_is_not_a_positive_number_is_refused() {
         );
     }
 }
+
+/// A placeholder `readings_sigma` (1 m on every ray, where the ranges scatter by 5 cm) is set
+/// aside with a warning: the scans match as scans that state none.
+#[test]
+fn a_placeholder_readings_sigma_is_set_aside_with_a_warning() {
+    let unstated = noisy_level_scans(30, "0.05", false);
+    let placeholder: String = String::from_utf8(unstated.clone())
+        .unwrap()
+        .lines()
+        .map(|l| {
+            let mut v: Value = serde_json::from_str(l).unwrap();
+            let n = v["nrays"].as_u64().unwrap() as usize;
+            v["readings_sigma"] = serde_json::json!(vec![1.0; n]);
+            v.to_string() + "\n"
+        })
+        .collect();
+    let plain = run_match(&["--mode", "metascan"], &unstated);
+    let set_aside = run_match(&["--mode", "metascan"], placeholder.as_bytes());
+    assert_ran(&plain);
+    assert_ran(&set_aside);
+    assert_eq!(estimates(&plain), estimates(&set_aside));
+    let said = String::from_utf8_lossy(&set_aside.stderr);
+    assert!(
+        said.contains("warning: 30 of 30 scans state a range noise (readings_sigma)")
+            && said.contains("matched as scans that state none"),
+        "{said}"
+    );
+}

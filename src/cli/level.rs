@@ -7,7 +7,7 @@ use super::summary::{Kind, Tally};
 use super::{LevelArgs, open_input, open_output};
 use levelscan::formats::level_record::level_record;
 use levelscan::formats::{InputError, ParallelScanReader, write_scan};
-use levelscan::level::{BearingTrigCache, Estimator, LevelParams, level_pose_with};
+use levelscan::level::{BearingTrigCache, Estimator, LevelParams, NoiseSource, level_pose_with};
 use levelscan::pseudo_level::PseudoLevelParams;
 use levelscan::scan::Scan;
 use rayon::prelude::*;
@@ -232,15 +232,19 @@ fn write_batch(
     polygons: bool,
     tally: &mut Tally,
 ) -> anyhow::Result<()> {
-    let (records, causes): (Vec<Scan>, Vec<_>) = batch
+    let (records, outcomes): (Vec<Scan>, Vec<_>) = batch
         .par_iter()
         .map_init(BearingTrigCache::default, |cache, scans| {
             let est = level_pose_with(scans, params, cache);
-            (level_record(scans, &est, pseudo, polygons), est.cause)
+            let record = level_record(scans, &est, pseudo, polygons);
+            (record, (est.cause, est.noise_source))
         })
         .unzip();
-    for (record, cause) in records.iter().zip(causes) {
+    for (record, (cause, noise)) in records.iter().zip(outcomes) {
         tally.add_leveled(record, cause);
+        if noise == NoiseSource::SetAside {
+            tally.note_noise_set_aside();
+        }
     }
     match sink {
         Sink::Jsonl(out) => {

@@ -477,9 +477,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             None => scan_points(&scan, &params.ranges),
         };
         let odometry = scan.odometry.map(|p| p.to_pose2());
-        let sigma = args
-            .sigma
-            .or_else(|| believed_range_sigma(std::slice::from_ref(&scan)));
+        let sigma = args.sigma.or_else(|| {
+            let believed = believed_range_sigma(std::slice::from_ref(&scan));
+            if believed.is_none() && scan.stated_range_sigma().is_some() {
+                tally.note_noise_set_aside();
+            }
+            believed
+        });
         runs.add(&points, sigma, &params.normals);
         let report = matcher.push_with_sigma(&points, odometry, sigma);
         annotate(&mut scan, &report);

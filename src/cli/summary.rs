@@ -56,6 +56,8 @@ pub(crate) struct Tally {
     /// `level`: the `parallel_walls` failures by what lies behind them. The contract has one
     /// reason for every way the gate refuses a pose; which way it was decides what helps.
     gated: BTreeMap<Gated, usize>,
+    /// Poses or scans whose stated `readings_sigma` their ranges contradict (set aside).
+    noise_set_aside: usize,
     /// Records counted so far, on a terminal's standard error (hidden elsewhere).
     bar: ProgressBar,
 }
@@ -135,6 +137,7 @@ impl Tally {
             total: 0,
             unleveled: 0,
             gated: BTreeMap::new(),
+            noise_set_aside: 0,
             bar,
         }
     }
@@ -152,6 +155,12 @@ impl Tally {
             *self.gated.entry(g).or_default() += 1;
         }
         self.add(Outcome::of(record, "level"));
+    }
+
+    /// Notes a pose or scan whose stated `readings_sigma` was set aside: its ranges contradict
+    /// it (a converter's placeholder).
+    pub fn note_noise_set_aside(&mut self) {
+        self.noise_set_aside += 1;
     }
 
     /// Counts a `match` output record, noting one that had no ray because `level` failed it.
@@ -190,6 +199,20 @@ impl Tally {
             groups.join(", ")
         )];
         lines.extend(self.warning());
+        if self.noise_set_aside > 0 {
+            let (one, many) = self.units();
+            let unit = if self.total == 1 { one } else { many };
+            let instead = match self.kind {
+                Kind::Level => "the noise estimated from their ranges is used instead",
+                Kind::Match => "they are matched as scans that state none",
+            };
+            lines.push(format!(
+                "levelscan {command}: warning: {} of {} {unit} state a range noise \
+                 (readings_sigma) over 3 times off the scatter of their own ranges, as \
+                 converters' placeholders do: set aside, {instead} (--sigma sets one)",
+                self.noise_set_aside, self.total
+            ));
+        }
         lines
     }
 

@@ -109,6 +109,21 @@ impl fmt::Display for FailReason {
     }
 }
 
+/// Where a pose's range noise came from ([`LevelEstimate::range_sigma`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum NoiseSource {
+    /// Estimated from the ranges: the scans state none.
+    #[default]
+    Estimated,
+    /// `LevelParams::sigma` (`--sigma`).
+    Given,
+    /// The scans' `readings_sigma`, borne out by their ranges.
+    Stated,
+    /// Estimated from the ranges, which contradict the `readings_sigma` the scans state (more
+    /// than a factor of 3 off their scatter: a converter's placeholder).
+    SetAside,
+}
+
 /// The result of leveling one pose.
 #[derive(Clone, Debug, Default)]
 pub struct LevelEstimate {
@@ -124,9 +139,9 @@ pub struct LevelEstimate {
     pub up: Option<Vector3<f64>>,
     /// The range noise used \[m\].
     pub range_sigma: f64,
-    /// Whether `range_sigma` is the scans' own `readings_sigma`, borne out by their ranges: the
-    /// last stage then weighs each ray by its own.
-    pub noise_stated: bool,
+    /// Where `range_sigma` came from. With [`NoiseSource::Stated`] the last stage weighs each
+    /// ray by its own `readings_sigma`.
+    pub noise_source: NoiseSource,
     /// The grid of robot-frame points (absent when the scans could not form one).
     pub grid: Option<PoseGrid>,
     /// All coplanar quads, walls, floors and ceilings (see `kind`).
@@ -203,9 +218,9 @@ fn range_sigma_with(
     scans: &[Scan],
     params: &LevelParams,
     trig: Option<&[(f64, f64)]>,
-) -> (f64, bool) {
+) -> (f64, NoiseSource) {
     if let Some(s) = params.sigma {
-        return (s, false);
+        return (s, NoiseSource::Given);
     }
     // The given sigmas' median; when they grow with range, the farther half's
     // (`noise::far_if_noisier`).
@@ -230,10 +245,11 @@ fn range_sigma_with(
         // A stated noise the ranges contradict is a placeholder (a converter's 1 m): the
         // data's own estimate stands instead.
         if noise::stated_is_believable(stated, scatter) {
-            return (stated, true);
+            return (stated, NoiseSource::Stated);
         }
+        return (scatter.unwrap_or(params.min_sigma), NoiseSource::SetAside);
     }
-    (scatter.unwrap_or(params.min_sigma), false)
+    (scatter.unwrap_or(params.min_sigma), NoiseSource::Estimated)
 }
 
 /// Levels one pose: its scans (any order, at least three distinct elevations) in, attitude,
@@ -251,14 +267,19 @@ pub fn level_pose_with(
 ) -> LevelEstimate {
     // The range noise, then the grid of robot-frame points (sect. 5.1).
     let trig = cache.shared(scans);
-    let (sigma, noise_stated) = range_sigma_with(scans, params, trig.as_deref());
+    let (sigma, noise_source) = range_sigma_with(scans, params, trig.as_deref());
     let grid = match PoseGrid::from_scans_with(scans, trig.as_deref()) {
         Ok(g) => g,
-        Err(cause) => return LevelEstimate::failed(cause, sigma),
+        Err(cause) => {
+            return LevelEstimate {
+                noise_source,
+                ..LevelEstimate::failed(cause, sigma)
+            };
+        }
     };
     // The paper's quads (sect. 5.2), grown into whole-wall patches (robust estimator).
     let mut est = segmented(grid, params, sigma, trig);
-    est.noise_stated = noise_stated;
+    est.noise_source = noise_source;
     // Up from walls and level surfaces, and failure detection (sect. 5.3-5.5).
     let levels = first_pass::level_fits(&est, params);
     let first = first_pass::solve(&est, &levels, params, sigma);

@@ -101,7 +101,10 @@ fn final_estimate(
 ) -> Option<MlSolution> {
     let grid = est.grid.as_ref()?;
     let groups = patch_groups(&est.patches, start, params, est.range_sigma);
-    let stated = if est.noise_stated { scans } else { &[] };
+    let stated = match est.noise_source {
+        crate::level::NoiseSource::Stated => scans,
+        _ => &[],
+    };
     let (index, points) = grid_points(grid, stated, est.range_sigma, params.min_sigma);
     let labels = initial_labels(grid, &index, &groups);
     let neighbours = Neighbours::new(
