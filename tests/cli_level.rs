@@ -151,24 +151,25 @@ fn level_states_the_noise_it_used_on_every_kept_ray() {
     std::fs::remove_file(path).ok();
 }
 
-/// Scans that state their noise pass it on as they state it, ray by ray.
+/// `simulate PLAN --random N --seed S EXTRA...`'s scans, checked to have run.
+fn simulated(plan: &std::path::Path, poses: &str, seed: &str, extra: &[&str]) -> String {
+    let out = bin()
+        .arg("simulate")
+        .arg(plan)
+        .args(["--random", poses, "--seed", seed])
+        .args(extra)
+        .output()
+        .unwrap();
+    assert_ran(&out);
+    String::from_utf8(out.stdout).unwrap()
+}
+
+/// Scans that state their true noise pass it on: every kept ray states it.
 #[test]
 fn level_passes_on_the_noise_the_scans_state() {
     let plan = plan_file("stated");
-    let sim = bin()
-        .args([
-            "simulate",
-            plan.to_str().unwrap(),
-            "--random",
-            "4",
-            "--seed",
-            "2",
-        ])
-        .args(["--sigma", "0.02", "--with-sigma"])
-        .output()
-        .unwrap();
-    assert_ran(&sim);
-    let out = run_with_stdin(&["level"], &sim.stdout);
+    let sim = simulated(&plan, "4", "2", &["--sigma", "0.02", "--with-sigma"]);
+    let out = run_with_stdin(&["level"], sim.as_bytes());
     assert_ran(&out);
     let mut stated = 0;
     for r in records(&out) {
@@ -195,22 +196,7 @@ fn level_passes_on_the_noise_the_scans_state() {
 #[test]
 fn a_placeholder_readings_sigma_is_set_aside() {
     let plan = plan_file("placeholder");
-    let sim = |extra: &[&str]| {
-        let out = bin()
-            .args([
-                "simulate",
-                plan.to_str().unwrap(),
-                "--random",
-                "6",
-                "--seed",
-                "4",
-            ])
-            .args(extra)
-            .output()
-            .unwrap();
-        assert_ran(&out);
-        String::from_utf8(out.stdout).unwrap()
-    };
+    let sim = |extra: &[&str]| simulated(&plan, "6", "4", extra);
     let plain = sim(&[]);
     let placeholder: String = sim(&["--with-sigma"])
         .lines()

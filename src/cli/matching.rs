@@ -13,8 +13,8 @@ use levelscan::geometry::Pose;
 use levelscan::level::believed_range_sigma;
 use levelscan::matching::{
     CheckParams, Coarse, CorrelativeParams, CovarianceParams, DeskewParams, IcpParams, Kernel,
-    MapParams, MatchReport, MatchStatus, Matcher, MatcherParams, Metric, Mode, NormalParams,
-    OdometryPrior, RangeParams, RayTiming, SweepTracker, deskew_summary, scan_points,
+    LineRuns, MapParams, MatchReport, MatchStatus, Matcher, MatcherParams, Metric, Mode,
+    NormalParams, OdometryPrior, RangeParams, RayTiming, SweepTracker, deskew_summary, scan_points,
     timed_scan_points,
 };
 use levelscan::scan::Scan;
@@ -484,8 +484,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             }
             believed
         });
-        runs.add(&points, sigma, &params.normals);
         let report = matcher.push_with_sigma(&points, odometry, sigma);
+        runs.add(
+            matcher.line_runs(),
+            sigma.unwrap_or(params.normals.range_sigma),
+        );
         annotate(&mut scan, &report);
         tally.add_matched(&scan);
         reference.push(&scan, index)?;
@@ -531,18 +534,13 @@ struct RunLengths {
 }
 
 impl RunLengths {
-    fn add(&mut self, points: &[Point2<f64>], sigma: Option<f64>, normals: &NormalParams) {
-        use levelscan::matching::line_run_length;
+    /// Counts one scan whose lines took `runs`, at range noise `sigma` \[m\].
+    fn add(&mut self, runs: LineRuns, sigma: f64) {
         self.total += 1;
-        let told = NormalParams {
-            range_sigma: sigma.unwrap_or(normals.range_sigma),
-            ..*normals
-        };
-        let k = line_run_length(points, &Point2::origin(), &told);
-        if k > 1 {
-            *self.scans.entry(k).or_default() += 1;
-            if k > line_run_length(points, &Point2::origin(), normals) {
-                self.noise = Some(self.noise.unwrap_or(0.0).max(told.range_sigma));
+        if runs.length > 1 {
+            *self.scans.entry(runs.length).or_default() += 1;
+            if runs.for_noise {
+                self.noise = Some(self.noise.unwrap_or(0.0).max(sigma));
             }
         }
     }

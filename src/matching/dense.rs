@@ -58,8 +58,27 @@ pub(crate) fn noise_group_size(range_sigma: f64) -> usize {
 /// The run length for a scan of `rays_per_degree` under `params`: long enough for both its
 /// density ([`group_size`]) and its range noise ([`noise_group_size`]).
 pub(crate) fn run_length(rays_per_degree: f64, params: &NormalParams) -> usize {
-    group_size(rays_per_degree, params.max_rays_per_degree)
-        .max(noise_group_size(params.range_sigma))
+    LineRuns::of(rays_per_degree, params).length
+}
+
+/// How a scan's local lines were fitted: through the means of runs of `length` rays (1: through
+/// every ray), made longer than its density asks for by its range noise when `for_noise`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct LineRuns {
+    pub length: usize,
+    pub for_noise: bool,
+}
+
+impl LineRuns {
+    /// The runs for a scan of `rays_per_degree` under `params` ([`run_length`]).
+    pub(crate) fn of(rays_per_degree: f64, params: &NormalParams) -> Self {
+        let density = group_size(rays_per_degree, params.max_rays_per_degree);
+        let noise = noise_group_size(params.range_sigma);
+        LineRuns {
+            length: density.max(noise),
+            for_noise: noise > density,
+        }
+    }
 }
 
 /// `points` (one scan in ray order, seen from `sensor`) with each run of `k` consecutive points

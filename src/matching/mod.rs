@@ -38,6 +38,7 @@ pub use correlative::{
     CorrelativeParams, CorrelativeScratch, correlative_search, correlative_search_with,
 };
 pub use covariance::{CovarianceParams, rays_per_degree};
+pub use dense::LineRuns;
 pub use deskew::{DeskewParams, RayTiming, SweepMotion, SweepTracker, deskew, deskew_summary};
 pub use icp::{IcpParams, IcpResult, Kernel, Metric, icp, icp_with_prior};
 pub use map::{MapParams, VoxelMap};
@@ -46,5 +47,5 @@ pub use matcher::{
     timed_scan_points,
 };
 pub use params::{CheckParams, Coarse, MatcherParams, Mode, OdometryPrior, RangeParams};
-pub use reference::{Line, NormalParams, ScanReference, Target, estimate_lines, line_run_length};
+pub use reference::{Line, NormalParams, ScanReference, Target, estimate_lines};
 pub use solve::PosePrior;

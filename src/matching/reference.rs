@@ -147,32 +147,21 @@ pub fn estimate_lines(
     sensor: &Point2<f64>,
     params: &NormalParams,
 ) -> Vec<Option<Line>> {
-    let density = rays_per_degree_from(points, sensor);
-    estimate_lines_at(points, sensor, density, params)
+    let k = dense::run_length(rays_per_degree_from(points, sensor), params);
+    lines_in_runs(points, sensor, k, params)
 }
 
-/// How many consecutive rays [`estimate_lines`] averages for each line fit of a scan of
-/// `points` (seen from `sensor`): 1 for a scan at the density and noise the line window is made
-/// for, more for a denser or noisier one ([`dense`]).
-pub fn line_run_length(
+/// [`estimate_lines`] with the run length `k` already chosen ([`dense::run_length`]): through
+/// every ray (`k` = 1), else through the means of runs of `k` rays
+/// ([`dense::lines_from_runs`]).
+pub(crate) fn lines_in_runs(
     points: &[Point2<f64>],
     sensor: &Point2<f64>,
-    params: &NormalParams,
-) -> usize {
-    dense::run_length(rays_per_degree_from(points, sensor), params)
-}
-
-/// [`estimate_lines`] for a scan of `rays_per_degree` already known: through every ray, or
-/// for a scan denser than `params.max_rays_per_degree` or noisier than the window is made for
-/// (`params.range_sigma`) through the means of runs of rays ([`dense::lines_from_runs`]).
-pub(crate) fn estimate_lines_at(
-    points: &[Point2<f64>],
-    sensor: &Point2<f64>,
-    rays_per_degree: f64,
+    k: usize,
     params: &NormalParams,
 ) -> Vec<Option<Line>> {
-    match dense::run_length(rays_per_degree, params) {
-        1 => lines_through(points, sensor, params),
+    match k {
+        0 | 1 => lines_through(points, sensor, params),
         k => dense::lines_from_runs(points, sensor, k, params),
     }
 }

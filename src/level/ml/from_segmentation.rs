@@ -25,7 +25,7 @@ use crate::level::failure::within_wall_angle;
 use crate::level::grid::PoseGrid;
 use crate::level::patches::Patch;
 use crate::level::up::{UpSolution, mahalanobis2};
-use crate::level::{FailCause, LevelEstimate, LevelParams, SurfaceKind, failure};
+use crate::level::{FailCause, LevelEstimate, LevelParams, NoiseSource, SurfaceKind, failure};
 use crate::scan::Scan;
 use nalgebra::Vector2;
 
@@ -102,7 +102,7 @@ fn final_estimate(
     let grid = est.grid.as_ref()?;
     let groups = patch_groups(&est.patches, start, params, est.range_sigma);
     let stated = match est.noise_source {
-        crate::level::NoiseSource::Stated => scans,
+        NoiseSource::Stated => scans,
         _ => &[],
     };
     let (index, points) = grid_points(grid, stated, est.range_sigma, params.min_sigma);

@@ -12,11 +12,12 @@ mod trigger;
 use super::correlative::CorrelativeScratch;
 pub use super::covariance::CovarianceParams;
 use super::covariance::{fuse, inflation, rays_per_degree, rotate_into};
+use super::dense::LineRuns;
 use super::deskew::RayTiming;
 use super::icp::{IcpResult, icp};
 use super::map::VoxelMap;
 pub use super::params::{CheckParams, Coarse, MatcherParams, Mode, OdometryPrior, RangeParams};
-use super::reference::{Line, NormalParams, ScanReference, estimate_lines_at};
+use super::reference::{Line, NormalParams, ScanReference, lines_in_runs};
 pub use super::report::{FallbackReason, MatchReport, MatchStatus};
 use crate::geometry::Pose2;
 use crate::scan::Scan;
@@ -99,6 +100,8 @@ pub struct Matcher {
     /// The current scan's local lines (`estimate_lines` from its own frame's origin), fitted
     /// once per scan for every use: the sliding test, the map, the keyframe, the way back.
     lines: Vec<Option<Line>>,
+    /// How those lines were fitted (runs of rays for a dense or noisy scan).
+    line_runs: LineRuns,
 }
 
 impl Matcher {
@@ -116,7 +119,17 @@ impl Matcher {
             odometry_check: odometry_check::OdometryCheck::default(),
             built: None,
             lines: Vec::new(),
+            line_runs: LineRuns {
+                length: 1,
+                for_noise: false,
+            },
         }
+    }
+
+    /// How the last scan's local lines were fitted: through runs of how many rays, and whether
+    /// its range noise made them longer than its density did.
+    pub fn line_runs(&self) -> LineRuns {
+        self.line_runs
     }
 
     /// The metascan map so far (empty in pairwise mode).
@@ -147,7 +160,9 @@ impl Matcher {
             range_sigma: range_sigma.unwrap_or(self.params.normals.range_sigma),
             ..self.params.normals
         };
-        self.lines = estimate_lines_at(points, &Point2::origin(), self.rays_per_degree, &normals);
+        self.line_runs = LineRuns::of(self.rays_per_degree, &normals);
+        let k = self.line_runs.length;
+        self.lines = lines_in_runs(points, &Point2::origin(), k, &normals);
         let report = match self.previous {
             None => self.first(points, odometry),
             Some((prev_estimate, prev_odometry)) => match self.params.mode {
